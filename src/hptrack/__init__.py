@@ -1,0 +1,8 @@
+"""hptrack: hierarchical planning for long-horizon multi-target tracking with one UAV.
+
+Implements Yuan, Moon, Cao and Scherer, "Hierarchical Planning for Long-Horizon Multi-Target
+Tracking Under Target Motion Uncertainty" (the paper in ``shared/paper``). SI units throughout:
+metres, seconds, metres per second.
+"""
+
+__version__ = "0.1.0"
