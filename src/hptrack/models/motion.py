@@ -30,7 +30,7 @@ ProcessNoiseForm = Literal["continuous", "paper_text"]
 def noise_blocks(q: float, steps: float, tau: float, c_per_step: float) -> tuple:
     """Accumulated process noise after ``steps`` steps, per axis: ``(Qpp, Qpv, Qvv)``.
 
-    ``c_per_step`` is the lower-right per-step block over ``q`` (``tau`` or ``1``).
+    ``steps`` may be a scalar or an array (element-wise). ``c_per_step`` is the lower-right per-step block over ``q`` (``tau`` or ``1``).
     """
     k = steps
     s1 = k * (k - 1.0) / 2.0
@@ -88,18 +88,24 @@ class ConstantVelocityModel:
         return np.block([[qpp * eye, qpv * eye], [qpv * eye, qvv * eye]])
 
     def predict(self, means: np.ndarray, covariances: np.ndarray, q: np.ndarray | float,
-                steps: float = 1) -> tuple[np.ndarray, np.ndarray]:
+                steps: np.ndarray | float = 1) -> tuple[np.ndarray, np.ndarray]:
         """Predict stacked beliefs ``(n, 4)``, ``(n, 4, 4)`` over ``steps`` steps in closed form.
 
-        ``q`` is one noise intensity per target (or one for all), in m^2/s^3.
+        ``q`` (m^2/s^3) and ``steps`` may be scalars or one value per target.
         """
-        f = self.transition(steps)
-        q = np.broadcast_to(np.asarray(q, dtype=float), (means.shape[0],))
-        qpp, qpv, qvv = noise_blocks(1.0, float(steps), self.time_step, self.c_per_step)
-        eye = np.eye(2)
-        unit_noise = np.block([[qpp * eye, qpv * eye], [qpv * eye, qvv * eye]])
-        new_means = means @ f.T
-        new_covs = f @ covariances @ f.T + q[:, None, None] * unit_noise
+        n = means.shape[0]
+        q = np.broadcast_to(np.asarray(q, dtype=float), (n,))
+        steps = np.broadcast_to(np.asarray(steps, dtype=float), (n,))
+        f = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+        f[:, 0, 2] = f[:, 1, 3] = steps * self.time_step
+        qpp, qpv, qvv = (q * b for b in noise_blocks(1.0, steps, self.time_step,
+                                                      self.c_per_step))
+        noise = np.zeros((n, 4, 4))
+        for i, j, block in ((0, 0, qpp), (1, 1, qpp), (2, 2, qvv), (3, 3, qvv),
+                            (0, 2, qpv), (2, 0, qpv), (1, 3, qpv), (3, 1, qpv)):
+            noise[:, i, j] = block
+        new_means = np.einsum("nij,nj->ni", f, means)
+        new_covs = f @ covariances @ f.transpose(0, 2, 1) + noise
         return new_means, new_covs
 
     def sample_motion(self, states: np.ndarray, q: np.ndarray, rng: np.random.Generator

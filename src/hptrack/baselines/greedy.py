@@ -1,0 +1,66 @@
+"""The ``greedy`` reference planner: chase the most uncertain reachable target, one at a time.
+
+A simple, sensible policy without look-ahead, the floor every tree-search planner must beat:
+
+1. Pick the target whose position uncertainty (``log det Sigma^xy``) would be largest when the
+   agent reaches its belief mean, among the targets it can reach inside the remaining budget and
+   has not given up on.
+2. Fly straight at the target's current belief mean (pure pursuit at ``v_a``).
+3. Once the target is measured, its uncertainty drops and step 1 picks the next one; with a
+   single target it simply keeps following it.
+4. If the agent reaches the belief mean without measuring the target, it gives up on it; when
+   every target has been given up on, the list is cleared.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hptrack.models.beliefs import position_logdet
+from hptrack.sim.interface import MissionSpec, Observation
+
+
+class GreedyPlanner:
+    """Most-uncertain-reachable-target pursuit (module docstring)."""
+
+    name = "greedy"
+
+    def reset(self, mission: MissionSpec, observation: Observation,
+              rng: np.random.Generator) -> None:
+        self._mission = mission
+        self._target: int | None = None
+        self._given_up = np.zeros(mission.n_targets, dtype=bool)
+
+    def _reach_times(self, obs: Observation) -> np.ndarray:
+        """Time to reach each belief mean flying straight at full speed (conservative), s."""
+        distance = np.hypot(*(obs.means[:, :2] - obs.agent_position).T)
+        closing = self._mission.agent_speed - np.hypot(obs.means[:, 2], obs.means[:, 3])
+        return distance / closing
+
+    def _choose(self, obs: Observation) -> int:
+        reach = self._reach_times(obs)
+        candidates = (~self._given_up) & (reach <= obs.remaining_budget)
+        if not candidates.any():
+            self._given_up[:] = False
+            candidates = reach <= obs.remaining_budget
+        if not candidates.any():
+            return int(np.argmin(reach))
+        predicted = self._mission.motion.predict(obs.means, obs.covariances,
+                                                 self._mission.process_noise,
+                                                 reach / self._mission.time_step)[1]
+        score = np.where(candidates, position_logdet(predicted), -np.inf)
+        return int(np.argmax(score))
+
+    def act(self, observation: Observation) -> np.ndarray:
+        obs = observation
+        if self._target is not None and obs.detected[self._target]:
+            self._given_up[:] = False
+            self._target = None
+        if self._target is not None:
+            mean = obs.means[self._target, :2]
+            if np.hypot(*(mean - obs.agent_position)) < self._mission.step_length:
+                self._given_up[self._target] = True
+                self._target = None
+        if self._target is None:
+            self._target = self._choose(obs)
+        return obs.means[self._target, :2].copy()

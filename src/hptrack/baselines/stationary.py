@@ -1,0 +1,20 @@
+"""The ``stationary`` reference planner: the agent stays where it starts (the floor of floors)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hptrack.sim.interface import MissionSpec, Observation
+
+
+class StationaryPlanner:
+    """Hovers at the start position for the whole mission."""
+
+    name = "stationary"
+
+    def reset(self, mission: MissionSpec, observation: Observation,
+              rng: np.random.Generator) -> None:
+        self._home = observation.agent_position.copy()
+
+    def act(self, observation: Observation) -> np.ndarray:
+        return self._home

@@ -1,0 +1,27 @@
+"""Planner registry: names to factories, so the simulator and the CLI never import a planner.
+
+Each factory takes keyword options (the planner's parameters) and returns a fresh
+:class:`~hptrack.sim.interface.Planner`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from hptrack.baselines.greedy import GreedyPlanner
+from hptrack.baselines.stationary import StationaryPlanner
+from hptrack.sim.interface import Planner
+
+PLANNERS: dict[str, Callable[..., Planner]] = {
+    "stationary": StationaryPlanner,
+    "greedy": GreedyPlanner,
+}
+
+
+def make_planner(name: str, **options) -> Planner:
+    """Build the planner registered as ``name`` with ``options``."""
+    try:
+        factory = PLANNERS[name]
+    except KeyError:
+        raise ValueError(f"unknown planner {name!r}; choose from {sorted(PLANNERS)}") from None
+    return factory(**options)

@@ -1,0 +1,56 @@
+"""Random scenarios with the paper's distributions (Sec. V-A; notes "Random scenarios").
+
+Per target: position mean uniform in [-1000, 1000] m per axis, velocity mean uniform in
+[-3, 3] m/s per axis, position variances uniform in [500, 2000] m^2, correlation uniform in
+[-0.8, 0.8], velocity variances uniform in [0.25, 0.5] (m/s)^2, q uniform in [1e-4, 5e-4].
+The *homogeneous* setting (comparison with ARVI and A*) draws one q and one covariance per
+scenario; the *heterogeneous* setting draws everything per target.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hptrack.scenario.model import AgentSpec, Scenario, TargetSpec
+
+POSITION_RANGE_M = (-1000.0, 1000.0)
+VELOCITY_RANGE_MPS = (-3.0, 3.0)
+POSITION_VARIANCE_RANGE_M2 = (500.0, 2000.0)
+CORRELATION_RANGE = (-0.8, 0.8)
+VELOCITY_VARIANCE_RANGE = (0.25, 0.5)
+PROCESS_NOISE_RANGE = (1e-4, 5e-4)
+
+
+def random_prior(rng: np.random.Generator) -> tuple[np.ndarray, float]:
+    """One prior covariance ``(4, 4)`` and one ``q`` drawn from the paper's distributions."""
+    var_x, var_y = rng.uniform(*POSITION_VARIANCE_RANGE_M2, size=2)
+    rho = rng.uniform(*CORRELATION_RANGE)
+    var_vx, var_vy = rng.uniform(*VELOCITY_VARIANCE_RANGE, size=2)
+    cov = np.diag([var_x, var_y, var_vx, var_vy])
+    cov[0, 1] = cov[1, 0] = rho * np.sqrt(var_x * var_y)
+    return cov, float(rng.uniform(*PROCESS_NOISE_RANGE))
+
+
+def random_mean(rng: np.random.Generator) -> np.ndarray:
+    """One prior mean ``[x, y, vx, vy]``."""
+    return np.concatenate([rng.uniform(*POSITION_RANGE_M, size=2),
+                           rng.uniform(*VELOCITY_RANGE_MPS, size=2)])
+
+
+def random_scenario(n_targets: int, seed: int, homogeneous: bool = False,
+                    agent: AgentSpec | None = None, **scenario_fields) -> Scenario:
+    """The paper's random scenario with ``n_targets`` targets, fully determined by ``seed``.
+
+    True initial states are left out: the simulator draws them from the prior with the seed.
+    """
+    if n_targets < 1:
+        raise ValueError(f"n_targets must be at least 1, got {n_targets}")
+    rng = np.random.default_rng(np.random.SeedSequence(seed))
+    shared = random_prior(rng) if homogeneous else None
+    targets = []
+    for i in range(n_targets):
+        mean = random_mean(rng)
+        cov, q = shared if shared is not None else random_prior(rng)
+        targets.append(TargetSpec(id=f"t{i + 1}", mean=tuple(mean), covariance=tuple(map(tuple, cov)),
+                                  process_noise=q))
+    return Scenario(seed=seed, agent=agent or AgentSpec(), targets=targets, **scenario_fields)
