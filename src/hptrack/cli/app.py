@@ -129,6 +129,15 @@ def list_planners() -> None:
         console.print(name)
 
 
+def _register_commands() -> None:
+    from hptrack.cli import benchmark
+
+    benchmark.register(app)
+
+
+_register_commands()
+
+
 def main() -> None:
     """Entry point of the ``hptrack`` script."""
     app()

@@ -111,7 +111,8 @@ class Scenario(BaseModel):
         return ConstantVelocityModel(self.time_step, self.process_noise_form)
 
     def sensor_model(self) -> PositionMeasurementModel:
-        return PositionMeasurementModel(self.agent.measurement_noise_std, self.agent.sensor_diameter)
+        return PositionMeasurementModel(self.agent.measurement_noise_std,
+                                        self.agent.sensor_diameter)
 
     def mission_spec(self) -> MissionSpec:
         """The static facts a planner may use."""

@@ -51,6 +51,6 @@ def random_scenario(n_targets: int, seed: int, homogeneous: bool = False,
     for i in range(n_targets):
         mean = random_mean(rng)
         cov, q = shared if shared is not None else random_prior(rng)
-        targets.append(TargetSpec(id=f"t{i + 1}", mean=tuple(mean), covariance=tuple(map(tuple, cov)),
-                                  process_noise=q))
+        targets.append(TargetSpec(id=f"t{i + 1}", mean=tuple(mean),
+                                  covariance=tuple(map(tuple, cov)), process_noise=q))
     return Scenario(seed=seed, agent=agent or AgentSpec(), targets=targets, **scenario_fields)

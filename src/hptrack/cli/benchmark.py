@@ -1,0 +1,141 @@
+"""``hptrack benchmark``: the paper's multi-target comparison, resumable, on K workers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from hptrack.cli.common import clean_errors, console, parse_options, write_json
+
+
+def _int_list(text: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise ValueError(f"expected comma-separated integers, got {text!r}") from None
+    if not values or min(values) < 1:
+        raise ValueError(f"expected positive integers, got {text!r}")
+    return values
+
+
+def benchmark(
+    targets: Annotated[str, typer.Option(help="Numbers of targets, comma-separated.")
+                       ] = "2,3,4,5,6",
+    scenarios: Annotated[int, typer.Option(min=1, help="Scenarios per number of targets.")
+                         ] = 100,
+    planners: Annotated[str, typer.Option(help="Planner names, comma-separated.")
+                        ] = "mcts,greedy,stationary",
+    homogeneous: Annotated[bool, typer.Option(
+        "--homogeneous/--heterogeneous", help="Shared q and prior (the ARVI/A* setting).")
+                           ] = True,
+    first_seed: Annotated[int, typer.Option(min=0, help="First scenario seed.")] = 0,
+    iterations: Annotated[int | None, typer.Option(help="Tree-search iterations per decision.")
+                          ] = None,
+    time_limit: Annotated[float | None, typer.Option(help="Planning seconds per decision.")
+                          ] = None,
+    option: Annotated[list[str] | None, typer.Option(
+        "--option", "-o", help="Planner option PLANNER.KEY=VALUE.")] = None,
+    workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
+    db: Annotated[Path, typer.Option(help="SQLite results file (resumable).")
+                  ] = Path("results/benchmark.db"),
+    out: Annotated[Path, typer.Option(help="Folder for tables and figures.")
+                   ] = Path("results/benchmark"),
+    json_path: Annotated[Path | None, typer.Option("--json", help="Write a JSON summary.")
+                         ] = None,
+    figure_planners: Annotated[str | None, typer.Option(
+        help="Planners drawn side by side on the first scenario (default: all).")] = None,
+) -> None:
+    """Run the multi-target benchmark (paper Tables II-III); results are stored as they finish."""
+    from hptrack.experiments.benchmark import BenchmarkConfig, run_benchmark, summarise
+    from hptrack.experiments.store import ResultStore
+    from hptrack.registry import PLANNERS
+
+    with clean_errors():
+        if iterations is not None and time_limit is not None:
+            raise ValueError("give --iterations or --time-limit, not both")
+        names = tuple(p.strip() for p in planners.split(",") if p.strip())
+        for name in names:
+            if name not in PLANNERS:
+                raise ValueError(f"unknown planner {name!r}; choose from {sorted(PLANNERS)}")
+        per_planner: dict = {}
+        for key, value in parse_options(option).items():
+            planner, sep, name = key.partition(".")
+            if not sep:
+                raise ValueError(f"--option expects PLANNER.KEY=VALUE, got {key!r}")
+            per_planner.setdefault(planner, {})[name] = value
+        effort = {"iterations": iterations} if iterations is not None else (
+            {"time_limit": time_limit} if time_limit is not None else {})
+        config = BenchmarkConfig(planners=names, target_counts=_int_list(targets),
+                                 scenarios=scenarios, homogeneous=homogeneous,
+                                 first_seed=first_seed, effort=effort, options=per_planner)
+        store = ResultStore(db)
+        with Progress(TextColumn("[bold]benchmark"), BarColumn(), MofNCompleteColumn(),
+                      TimeElapsedColumn(), TextColumn("{task.description}"),
+                      console=console) as progress:
+            task = progress.add_task("", total=None)
+
+            def on_done(row, finished, total):
+                progress.update(task, completed=finished, total=total,
+                                description=f"{row.key.planner} n={row.key.n_targets} "
+                                            f"seed={row.key.seed}: U={row.uncertainty:.2f}")
+
+            ran = run_benchmark(config, store, workers=workers, on_done=on_done)
+        keys = set(config.keys())
+        rows = [r for r in store.rows() if r.key in keys]
+        store.close()
+        console.print(f"{ran} episodes run now, {len(rows)} in the table ({db})")
+        _write_report(config, rows, out, figure_planners)
+        if json_path:
+            summary = summarise(rows)
+            write_json(json_path, {p: {str(n): c for n, c in by_n.items()}
+                                   for p, by_n in summary.items()})
+
+
+def _write_report(config, rows, out: Path, figure_planners: str | None) -> None:
+    from matplotlib.figure import Figure
+    from rich.markdown import Markdown
+
+    from hptrack.experiments.benchmark import scenario_for
+    from hptrack.experiments.report import markdown_tables, write_csv
+    from hptrack.registry import make_planner
+    from hptrack.sim.episode import run_episode
+    from hptrack.viz.benchmark import plot_uncertainty_boxes
+    from hptrack.viz.mission import plot_mission
+
+    out.mkdir(parents=True, exist_ok=True)
+    paper = (("ARVI (paper)", "A* with heuristic (paper)", "hierarchical, homogeneous (paper)")
+             if config.homogeneous else
+             ("ADFQ (paper)", "hierarchical, heterogeneous (paper)"))
+    text = (f"Setting: {config.setting}; planning effort: {config.effort_label}; "
+            f"{config.scenarios} scenarios per n from seed {config.first_seed}.\n\n"
+            + markdown_tables(rows, paper))
+    (out / "table.md").write_text(text)
+    write_csv(rows, out / "episodes.csv")
+    console.print(Markdown(text))
+    counts = sorted({r.key.n_targets for r in rows})
+    if counts:
+        fig = Figure(figsize=(4.0 * len(counts), 4.0))
+        for i, n in enumerate(counts):
+            plot_uncertainty_boxes(fig.add_subplot(1, len(counts), i + 1), rows, n)
+        fig.tight_layout()
+        fig.savefig(out / "uncertainty_boxes.png", dpi=120)
+    names = ([p.strip() for p in figure_planners.split(",")] if figure_planners
+             else list(config.planners))
+    first = config.keys()[0]
+    fig = Figure(figsize=(6.5 * len(names), 6.0))
+    for i, name in enumerate(names):
+        key = type(first)(name, first.n_targets, first.seed, first.setting, first.effort)
+        record = run_episode(scenario_for(key),
+                             make_planner(name, **config.planner_options(name)))
+        plot_mission(fig.add_subplot(1, len(names), i + 1), record)
+    fig.tight_layout()
+    fig.savefig(out / "trajectories.png", dpi=110)
+    console.print(f"tables and figures written to {out}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add the ``benchmark`` command to ``app``."""
+    app.command("benchmark")(benchmark)
