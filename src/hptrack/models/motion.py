@@ -30,7 +30,8 @@ ProcessNoiseForm = Literal["continuous", "paper_text"]
 def noise_blocks(q: float, steps: float, tau: float, c_per_step: float) -> tuple:
     """Accumulated process noise after ``steps`` steps, per axis: ``(Qpp, Qpv, Qvv)``.
 
-    ``steps`` may be a scalar or an array (element-wise). ``c_per_step`` is the lower-right per-step block over ``q`` (``tau`` or ``1``).
+    ``steps`` may be a scalar or an array (element-wise). ``c_per_step`` is the lower-right
+    per-step block over ``q`` (``tau`` or ``1``).
     """
     k = steps
     s1 = k * (k - 1.0) / 2.0
