@@ -8,13 +8,21 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from hptrack.baselines.arvi import ArviPlanner
+from hptrack.baselines.astar import AStarPlanner
 from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.baselines.stationary import StationaryPlanner
+from hptrack.coverage.subtask import CoveragePlanner
+from hptrack.planning.hierarchical import HierarchicalPlanner
 from hptrack.sim.interface import Planner
 
 PLANNERS: dict[str, Callable[..., Planner]] = {
+    "mcts": HierarchicalPlanner,
     "stationary": StationaryPlanner,
     "greedy": GreedyPlanner,
+    "coverage": CoveragePlanner,
+    "arvi": ArviPlanner.from_options,
+    "astar": AStarPlanner.from_options,
 }
 
 

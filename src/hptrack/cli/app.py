@@ -130,9 +130,10 @@ def list_planners() -> None:
 
 
 def _register_commands() -> None:
-    from hptrack.cli import benchmark
+    from hptrack.cli import benchmark, coverage
 
     benchmark.register(app)
+    coverage.register(app)
 
 
 _register_commands()

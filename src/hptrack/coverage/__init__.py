@@ -1,0 +1,41 @@
+"""Coverage sub-task (paper Sec. IV-A, IV-B): interception, shifting spiral, outcome estimator.
+
+Compiled kernels for the tree search: :func:`intercept_time`, :func:`intercept_steps`,
+:func:`coverage_outcome` (and :func:`spiral_phases` for the path). Python objects for planners:
+:class:`CoverageSubtask`, :class:`CoveragePlanner`, :func:`estimate_coverage`.
+"""
+
+from hptrack.coverage.estimator import (
+    CoverageEstimate,
+    CoverageSettings,
+    coverage_cdf,
+    coverage_outcome,
+    estimate_coverage,
+)
+from hptrack.coverage.intercept import (
+    Intercept,
+    intercept_path,
+    intercept_steps,
+    intercept_time,
+    plan_intercept,
+)
+from hptrack.coverage.spiral import ShiftingSpiral, ellipse_axes, spiral_phases
+from hptrack.coverage.subtask import CoveragePlanner, CoverageSubtask
+
+__all__ = [
+    "CoverageEstimate",
+    "CoveragePlanner",
+    "CoverageSettings",
+    "CoverageSubtask",
+    "Intercept",
+    "ShiftingSpiral",
+    "coverage_cdf",
+    "coverage_outcome",
+    "ellipse_axes",
+    "estimate_coverage",
+    "intercept_path",
+    "intercept_steps",
+    "intercept_time",
+    "plan_intercept",
+    "spiral_phases",
+]

@@ -13,17 +13,24 @@ measured from the start of the coverage. When the remaining budget ends first, e
 truncated at the budget's end.
 
 :func:`coverage_outcome` is the compiled kernel used by the tree search: O(t_cutoff) arithmetic
-with the covariance in closed form, no allocation.
+with the covariance as polynomials in the step count (closed form), one root and one exponential
+per step, no allocation. :func:`estimate_coverage` is its validated
+Python wrapper, returning a :class:`CoverageEstimate` in seconds with the CDF.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numba
 import numpy as np
 
-from hptrack.models.motion import position_covariance_after
+from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm, position_covariance_after
+from hptrack.sim.interface import MissionSpec
+
+MAX_COVERAGE_STEPS = 10_000_000
+"""Cap on ``t_cutoff`` when no budget is given; reaching it means the belief does not grow."""
 
 
 @numba.njit(cache=True)
@@ -32,6 +39,26 @@ def _covered_ratio(cov, q, k, tau, c_per_step, speed, diameter):
     sxx, sxy, syy = position_covariance_after(cov, q, k, tau, c_per_step)
     area = speed * diameter * k * tau + math.pi * 0.25 * diameter * diameter
     return area / math.sqrt(sxx * syy - sxy * sxy)
+
+
+@numba.njit(cache=True)
+def _position_polynomials(cov, q, tau, c_per_step):
+    """``Sigma^xy`` after ``k`` steps as polynomials in ``k`` (Eq. (1) in closed form, the same
+    as :func:`~hptrack.models.motion.position_covariance_after`): ``sxx = x0 + x1 k + x2 k^2 +
+    x3 k^3``, ``syy`` likewise with ``y0, y1, y2, x3``, ``sxy = c0 + c1 k + c2 k^2``.
+
+    The accumulated position noise ``q (k a + tau b (k^2 - k) + tau^2 c (2k^3 - 3k^2 + k) / 6)``
+    (``a = tau^3/3``, ``b = tau^2/2``, ``c = c_per_step``) is expanded in powers of ``k``.
+    """
+    a = tau * tau * tau / 3.0
+    b = tau * tau / 2.0
+    c = c_per_step
+    n1 = q * (a - tau * b + tau * tau * c / 6.0)
+    n2 = q * (tau * b - tau * tau * c / 2.0)
+    n3 = q * tau * tau * c / 3.0
+    return (cov[0, 0], 2.0 * tau * cov[0, 2] + n1, tau * tau * cov[2, 2] + n2,
+            cov[1, 1], 2.0 * tau * cov[1, 3] + n1, tau * tau * cov[3, 3] + n2,
+            cov[0, 1], tau * (cov[0, 3] + cov[2, 1]), tau * tau * cov[2, 3], n3)
 
 
 @numba.njit(cache=True)
@@ -46,25 +73,39 @@ def coverage_outcome(cov: np.ndarray, q: float, tau: float, c_per_step: float, s
         c_per_step: lower-right per-step ``Q`` block over ``q`` (``tau`` or ``1``).
         speed: agent speed ``v_a``, m/s.
         diameter: sensor footprint diameter ``w``, m.
-        max_steps: coverage steps left in the budget (truncates ``t_cutoff``).
+        max_steps: coverage steps left in the budget (truncates ``t_cutoff``); negative when the
+            budget ends before the coverage starts.
 
     Returns:
         ``(cutoff_steps, p_find, expected_steps)``: ``t_cutoff`` in steps, ``p_max`` and
-        ``E[T_find]`` in steps from the start of the coverage.
+        ``E[T_find]`` in steps from the start of the coverage; ``(0, 0, 0)`` when
+        ``max_steps < 0``.
     """
-    two_pi = 2.0 * math.pi
+    if max_steps < 0:
+        return 0.0, 0.0, 0.0
+    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = _position_polynomials(cov, q, tau, c_per_step)
+    area0 = math.pi * 0.25 * diameter * diameter  # S_cover(k) = area0 + k area1
+    area1 = speed * diameter * tau
+    inv_two_pi = 1.0 / (2.0 * math.pi)
     k = 0
-    ratio = _covered_ratio(cov, q, 0.0, tau, c_per_step, speed, diameter)
-    p = -math.expm1(-ratio / two_pi)
+    area = area0
+    det = x0 * y0 - c0 * c0
     cdf_sum = 0.0  # sum_{j<k} P_cdf(j)
     while k < max_steps:
-        next_ratio = _covered_ratio(cov, q, k + 1.0, tau, c_per_step, speed, diameter)
-        if next_ratio <= ratio:
+        n = k + 1.0
+        sxx = x0 + n * (x1 + n * (x2 + n * x3))
+        syy = y0 + n * (y1 + n * (y2 + n * x3))
+        sxy = c0 + n * (c1 + n * c2)
+        next_det = sxx * syy - sxy * sxy
+        next_area = area + area1
+        # ratio(k + 1) <= ratio(k), ratio = S_cover / sqrt(det), without roots or divisions
+        if next_area * next_area * det <= area * area * next_det:
             break
-        cdf_sum += p
+        cdf_sum -= math.expm1(-area * inv_two_pi / math.sqrt(det))
         k += 1
-        ratio = next_ratio
-        p = -math.expm1(-ratio / two_pi)
+        area = next_area
+        det = next_det
+    p = -math.expm1(-area * inv_two_pi / math.sqrt(det))
     # E[T | T <= K] = sum_k k (P(k) - P(k-1)) / P(K) = (K P(K) - sum_{j<K} P(j)) / P(K)
     expected = (k * p - cdf_sum) / p
     return float(k), p, expected
@@ -79,3 +120,143 @@ def coverage_cdf(cov: np.ndarray, q: float, tau: float, c_per_step: float, speed
         ratio = _covered_ratio(cov, q, float(k), tau, c_per_step, speed, diameter)
         out[k] = -math.expm1(-ratio / (2.0 * math.pi))
     return out
+
+
+@dataclass(frozen=True)
+class CoverageSettings:
+    """The agent and model facts a coverage sub-task depends on.
+
+    Attributes:
+        time_step: ``tau``, s.
+        speed: agent speed ``v_a``, m/s.
+        sensor_diameter: footprint diameter ``w``, m.
+        process_noise_form: the ``Q`` form (notes "Targets").
+    """
+
+    time_step: float = 0.5
+    speed: float = 30.0
+    sensor_diameter: float = 100.0
+    process_noise_form: ProcessNoiseForm = "continuous"
+
+    def __post_init__(self) -> None:
+        for name in ("time_step", "speed", "sensor_diameter"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        if self.process_noise_form not in ("continuous", "paper_text"):
+            raise ValueError(f"unknown process_noise_form {self.process_noise_form!r}")
+
+    @classmethod
+    def from_mission(cls, mission: MissionSpec) -> CoverageSettings:
+        """The settings of a mission."""
+        return cls(mission.time_step, mission.agent_speed, mission.sensor.sensor_diameter,
+                   mission.motion.process_noise_form)
+
+    @property
+    def motion(self) -> ConstantVelocityModel:
+        """The target motion model (Eq. (1))."""
+        return ConstantVelocityModel(self.time_step, self.process_noise_form)
+
+    @property
+    def step_length(self) -> float:
+        """``v_a tau``, m."""
+        return self.speed * self.time_step
+
+
+@dataclass(frozen=True, eq=False)
+class CoverageEstimate:
+    """Estimated outcome of one spiral coverage (Sec. IV-B).
+
+    Attributes:
+        cutoff_steps: ``t_cutoff`` in steps from the start of the coverage (truncated by the
+            budget when ``budget_limited``).
+        p_find: ``p_max = P_cdf(t_cutoff)``; 0 when the budget ends before the coverage starts.
+        expected_time: ``E[T_find]`` given the target is found by ``t_cutoff``, s from the start
+            of the coverage.
+        cdf: ``P_cdf(k)`` for ``k = 0 .. cutoff_steps`` (empty when the coverage never starts).
+        time_step: ``tau``, s.
+        budget_limited: whether the remaining budget ended before the unconstrained ``t_cutoff``.
+    """
+
+    cutoff_steps: int
+    p_find: float
+    expected_time: float
+    cdf: np.ndarray
+    time_step: float
+    budget_limited: bool
+
+    @property
+    def cutoff_time(self) -> float:
+        """``t_cutoff`` in s from the start of the coverage."""
+        return self.cutoff_steps * self.time_step
+
+    @property
+    def expected_steps(self) -> float:
+        """``E[T_find]`` in steps."""
+        return self.expected_time / self.time_step
+
+
+def check_state_covariance(covariance: np.ndarray) -> np.ndarray:
+    """A finite, symmetric, positive semi-definite 4x4 covariance whose 2x2 position block is
+    positive definite, as a float array.
+
+    Raises:
+        ValueError: naming what is wrong.
+    """
+    cov = np.asarray(covariance, dtype=float)
+    if cov.shape != (4, 4) or not np.all(np.isfinite(cov)):
+        raise ValueError(f"covariance must be a finite 4x4 matrix, got {cov.tolist()}")
+    scale = max(float(np.max(np.abs(cov))), 1.0)
+    if np.max(np.abs(cov - cov.T)) > 1e-9 * scale:
+        raise ValueError(f"covariance is not symmetric: {cov.tolist()}")
+    if np.min(np.linalg.eigvalsh(cov)) < -1e-9 * scale:
+        raise ValueError(f"covariance is not positive semi-definite: {cov.tolist()}")
+    det = cov[0, 0] * cov[1, 1] - cov[0, 1] * cov[1, 0]
+    if not (cov[0, 0] > 0.0 and det > 1e-12 * cov[0, 0] * cov[1, 1]):
+        raise ValueError("position covariance is not positive definite "
+                         f"({cov[:2, :2].tolist()} m^2): the belief ellipse is degenerate")
+    return cov
+
+
+def estimate_coverage(covariance: np.ndarray, q: float, settings: CoverageSettings,
+                      remaining_time: float | None = None) -> CoverageEstimate:
+    """Estimate the outcome of a spiral coverage starting from ``covariance`` (Sec. IV-B).
+
+    Args:
+        covariance: 4x4 belief covariance when the coverage starts (m, m/s).
+        q: process noise intensity, m^2/s^3.
+        settings: agent speed, footprint, time step and ``Q`` form.
+        remaining_time: budget left when the coverage starts, s; ``None`` for no budget. When it
+            ends before ``t_cutoff`` the estimate is ``P_cdf`` at the budget's end; when it is
+            negative the coverage never starts and ``p_find = 0``.
+
+    Raises:
+        ValueError: bad covariance, ``q`` or ``remaining_time``, or (without a budget) a belief
+            that does not grow, so that ``P_cdf`` never stops rising.
+    """
+    cov = check_state_covariance(covariance)
+    if not (math.isfinite(q) and q >= 0.0):
+        raise ValueError(f"process noise q must be a non-negative finite number, got {q!r}")
+    tau = settings.time_step
+    c_per_step = settings.motion.c_per_step
+    if remaining_time is None:
+        max_steps = MAX_COVERAGE_STEPS
+    elif math.isnan(remaining_time):
+        raise ValueError("remaining_time is NaN")
+    elif remaining_time < 0.0:
+        return CoverageEstimate(0, 0.0, 0.0, np.zeros(0), tau, True)
+    else:
+        max_steps = min(math.floor(remaining_time / tau + 1e-9), MAX_COVERAGE_STEPS)
+    cutoff, p_find, expected = coverage_outcome(cov, float(q), tau, c_per_step, settings.speed,
+                                                settings.sensor_diameter, max_steps)
+    cutoff = int(cutoff)
+    limited = cutoff == max_steps and _covered_ratio(
+        cov, float(q), cutoff + 1.0, tau, c_per_step, settings.speed,
+        settings.sensor_diameter) > _covered_ratio(cov, float(q), float(cutoff), tau, c_per_step,
+                                                   settings.speed, settings.sensor_diameter)
+    if limited and remaining_time is None:
+        raise ValueError(f"P_cdf still rises after {MAX_COVERAGE_STEPS} steps: the belief does "
+                         "not grow (zero velocity variance and q = 0?), so t_cutoff is undefined")
+    cdf = coverage_cdf(cov, float(q), tau, c_per_step, settings.speed, settings.sensor_diameter,
+                       cutoff + 1)
+    return CoverageEstimate(cutoff, float(p_find), float(expected) * tau, cdf, tau, bool(limited))

@@ -1,4 +1,5 @@
-"""Interception of a moving belief mean (paper Sec. IV-C "Node Expansion"; notes "Coverage sub-task").
+"""Interception of a moving belief mean (paper Sec. IV-C, "Node Expansion"; notes "Coverage
+sub-task").
 
 Before the shifting spiral of Sec. IV-A starts, the agent flies in a straight line at its full
 speed ``v_a`` to the point where the belief mean, moving at the estimated velocity ``v_hat``, can
@@ -70,7 +71,7 @@ def intercept_steps(agent_x: float, agent_y: float, mean_x: float, mean_y: float
     return int(math.ceil(t / tau - CEIL_SLACK))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Intercept:
     """A planned intercept flight.
 

@@ -1,0 +1,180 @@
+"""A* with an information heuristic as a step-level baseline.
+
+Schlotfeldt, Atanasov, Pappas, "Maximum Information Bounds for Planning Active Sensing
+Trajectories", IROS 2019 (the seed paper's reference 8968147), with the seed paper's
+modification (Sec. V-B): the step cost is the change of the total uncertainty
+``sum_i log det Sigma_i^xy`` and the heuristic is changed to match. Set-up and defaults:
+``shared/notes/baselines.md``.
+
+Best-first search over the tree of motion-primitive sequences (the one ARVI searches), on the
+deterministic covariance sequences of :mod:`hptrack.baselines.information`: ``g`` is the
+accumulated step cost and ``h`` the :class:`~hptrack.baselines.information.RiccatiBound` lower
+bound on the cost still to come, so ``f = g + h`` is admissible and the first complete
+horizon-length node popped is optimal. With the difference cost the costs telescope and ``f`` is
+the bound on the total ``log det`` at the end of the horizon. Ties in ``f`` go to the
+lexicographically smallest control sequence, hover (control 0) first, so a search in which
+nothing is reachable hovers. There is no duplicate pruning (the reference library has none).
+
+Per-decision effort is bounded deterministically by ``max_expansions`` and optionally by
+``time_limit_s``; when either binds, the plan is the most promising open node's sequence
+(least ``f``), padded with hover.
+"""
+
+from __future__ import annotations
+
+import heapq
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numba
+import numpy as np
+
+from hptrack.baselines.controls import HOVER, DecisionStats, PrimitiveParams, PrimitivePlanner
+from hptrack.baselines.information import (
+    CostKind,
+    RiccatiBound,
+    bound_children,
+    mean_positions,
+    rollout_children,
+)
+from hptrack.models.beliefs import position_logdet
+
+if TYPE_CHECKING:
+    from hptrack.sim.interface import MissionSpec, Observation
+
+
+@dataclass(frozen=True)
+class AStarParams(PrimitiveParams):
+    """A* parameters (defaults: ``shared/notes/baselines.md`` and the README's timing table).
+
+    Attributes:
+        horizon: planning horizon in motion primitives (count; 6 x 5 s = 30 s).
+        max_expansions: most node expansions per decision (count), the deterministic bound.
+        heuristic_weight: factor on ``h`` (dimensionless; 1 keeps the search optimal).
+        time_limit_s: optional wall time per decision, s; ``None`` for none (reproducible).
+        cost: step cost, ``"difference"`` (seed paper) or ``"sum"`` (original A*).
+    """
+
+    horizon: int = 6
+    max_expansions: int = 2000
+    heuristic_weight: float = 1.0
+    time_limit_s: float | None = None
+    cost: CostKind = "difference"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.horizon < 1 or self.max_expansions < 1 or self.heuristic_weight < 0:
+            raise ValueError("horizon and max_expansions must be >= 1, heuristic_weight >= 0")
+
+
+@numba.njit(cache=True)
+def _expand_node(node, first, positions, covariances, uncertainty, g, levels, parents, controls,
+                 f, step_displacements, all_means, n_steps, horizon, difference, weight,
+                 process_noise, tau, c_per_step, noise_variance, radius, step_length, maps_a,
+                 maps_g, maps_h):
+    """Expand ``node`` into the node slots ``first .. first + C - 1`` and write their ``f``."""
+    n_controls = step_displacements.shape[0]
+    level = levels[node]
+    last = first + n_controls
+    rollout_children(positions[node:node + 1], covariances[node:node + 1],
+                     np.arange(n_controls), step_displacements,
+                     all_means[level * n_steps:(level + 1) * n_steps + 1], process_noise, tau,
+                     c_per_step, noise_variance, radius, True, covariances[first:last],
+                     uncertainty[first:last])
+    for c in range(n_controls):
+        j = first + c
+        positions[j, 0] = positions[node, 0] + n_steps * step_displacements[c, 0]
+        positions[j, 1] = positions[node, 1] + n_steps * step_displacements[c, 1]
+        step = uncertainty[j] - uncertainty[node] if difference else uncertainty[j]
+        g[j] = g[node] + step
+        levels[j] = level + 1
+        parents[j] = node
+        controls[j] = c
+        f[c] = g[j]
+    if level + 1 == horizon:
+        return
+    if difference:
+        boundaries = np.array([horizon * n_steps])
+    else:
+        boundaries = np.arange(level + 2, horizon + 1) * n_steps
+    bounds = np.zeros((n_controls, boundaries.shape[0]))
+    bound_children(positions[first:last], covariances[first:last], (level + 1) * n_steps,
+                   boundaries, all_means, process_noise, tau, c_per_step, step_length, radius,
+                   maps_a, maps_g, maps_h, bounds)
+    for c in range(n_controls):
+        h = bounds[c, 0] - uncertainty[first + c] if difference else np.sum(bounds[c])
+        f[c] += weight * h
+
+
+class AStarPlanner(PrimitivePlanner):
+    """A* over motion primitives (``--planner astar``); see the module docstring."""
+
+    name = "astar"
+    params_type = AStarParams
+    params: AStarParams
+    option_aliases = {"time_limit": "time_limit_s", "iterations": "max_expansions"}
+
+    def reset(self, mission: MissionSpec, observation: Observation,
+              rng: np.random.Generator) -> None:
+        """Start a mission: precompute the heuristic's Riccati maps for the horizon."""
+        super().reset(mission, observation, rng)
+        self.bound = RiccatiBound(self.spec, self.params.horizon * self.params.control_steps)
+
+    def search(self, observation: Observation) -> tuple[np.ndarray, DecisionStats]:
+        """A* from ``observation``: the optimal sequence, or the best open one if capped."""
+        start = time.perf_counter()
+        params, spec = self.params, self.spec
+        horizon = self.horizon_primitives(observation, params.horizon)
+        k = params.control_steps
+        n_controls = self.step_displacements.shape[0]
+        means = mean_positions(np.asarray(observation.means, dtype=float), spec.time_step_s,
+                               horizon * k)
+        difference = params.cost == "difference"
+        capacity = 1 + n_controls * params.max_expansions
+        n_targets = observation.covariances.shape[0]
+        positions = np.empty((capacity, 2))
+        covariances = np.empty((capacity, n_targets, 4, 4))
+        uncertainty, g = np.empty(capacity), np.empty(capacity)
+        levels, parents, controls = (np.empty(capacity, dtype=np.int64) for _ in range(3))
+        positions[0] = observation.agent_position
+        covariances[0] = observation.covariances
+        uncertainty[0] = float(np.sum(position_logdet(covariances[0])))
+        g[0], levels[0], parents[0], controls[0] = 0.0, 0, -1, HOVER
+        boundaries = np.array([horizon * k]) if difference else k * np.arange(1, horizon + 1)
+        root_bounds = self.bound.lower_bounds(positions[:1], covariances[:1], 0, boundaries,
+                                              means)[0]
+        h = root_bounds[0] - uncertainty[0] if difference else root_bounds.sum()
+        f = np.empty(n_controls)
+        # Entries (f, sequence code, node): the code orders sequences lexicographically with
+        # hover first and a prefix before its extensions, so ties in f prefer hover.
+        radix = n_controls + 1
+        heap = [(params.heuristic_weight * float(h), 0, 0)]
+        n_nodes, expansions, capped = 1, 0, False
+        while True:
+            _, code, node = heapq.heappop(heap)
+            level = int(levels[node])
+            if level == horizon:
+                break
+            if expansions >= params.max_expansions or (
+                    params.time_limit_s is not None
+                    and time.perf_counter() - start >= params.time_limit_s):
+                capped = True
+                break
+            expansions += 1
+            _expand_node(node, n_nodes, positions, covariances, uncertainty, g, levels, parents,
+                         controls, f, self.step_displacements, means, k, horizon, difference,
+                         params.heuristic_weight, spec.process_noise, spec.time_step_s,
+                         spec.c_per_step, spec.noise_variance_m2, spec.sensor_radius_m,
+                         spec.step_length_m, self.bound.maps_a, self.bound.maps_g,
+                         self.bound.maps_h)
+            place = radix ** (horizon - 1 - level)
+            for c, f_child in enumerate(f.tolist()):
+                heapq.heappush(heap, (f_child, code + (c + 1) * place, n_nodes + c))
+            n_nodes += n_controls
+        plan = np.full(horizon, HOVER, dtype=np.int64)
+        cost = float(g[node])
+        for depth in range(int(levels[node]), 0, -1):
+            plan[depth - 1] = controls[node]
+            node = int(parents[node])
+        return plan, DecisionStats(observation.step, 0.0, expansions, 1, capped, cost)

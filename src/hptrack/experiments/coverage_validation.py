@@ -1,0 +1,408 @@
+"""The estimator-accuracy experiment: the paper's first table and its CDF figure (Sec. V-A).
+
+Protocol (notes "Estimator validation"): for each random single-target case and each departure
+delay ``t_d``, the agent waits ``t_d`` at its start, intercepts the belief mean and flies the
+shifting spiral until ``t_cutoff`` (Secs. IV-A, IV-B). The agent path and the estimate are fixed;
+``runs`` target trajectories are sampled from the prior and the motion model, and each is checked
+for detection (``|target - agent| <= w/2``) at every step from departure. Detections during the
+intercept flight count at coverage time 0. Empirical ``P_find`` is the fraction detected by
+``t_cutoff``; empirical ``E[T_find]`` is the mean detection time of those found, in seconds from
+the start of the coverage, the same clock as the estimate. ``MAPE = mean |est - emp| / emp * 100``.
+
+Two variants are recorded for the write-up: the sensor switched off during the intercept flight
+(only detections on the spiral count), and times measured from departure instead of from the
+start of the coverage (the estimate then adds the intercept flight).
+
+Sampling: no detection is checked while the agent waits, so the true state at departure is drawn
+exactly from the belief propagated ``t_d`` (Eq. (1) in closed form); from there trajectories are
+advanced step by step, all runs at once, with the process noise drawn in blocks of steps and runs
+dropped once detected. Randomness: the case ``i`` is drawn from ``SeedSequence(seed,
+spawn_key=(i, 0))`` and its Monte Carlo for a delay of ``d`` steps from ``spawn_key=(i, 1 + d)``,
+so every number depends only on ``(seed, case, delay)``, whatever the worker count or order.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from hptrack.coverage.estimator import CoverageEstimate, CoverageSettings, estimate_coverage
+from hptrack.coverage.intercept import intercept_path, plan_intercept
+from hptrack.coverage.spiral import ShiftingSpiral
+from hptrack.scenario.random import random_mean, random_prior
+
+PAPER_MAPE = {"0": (3.58, 5.18), "100": (2.46, 3.42), "200": (5.46, 3.73)}
+"""The paper's Table I: ``delay -> (MAPE(P_find), MAPE(E[T_find]))`` in percent."""
+BLOCK_STEPS = 64
+"""Steps of process noise drawn at a time for all runs still undetected."""
+CASES_FILE = "cases.csv"
+CONFIG_FILE = "config.json"
+
+CASE_FIELDS = (
+    "case", "delay", "mean_x", "mean_y", "vel_x", "vel_y", "var_x", "var_y", "cov_xy", "var_vx",
+    "var_vy", "q", "intercept_time", "t_cutoff", "est_p_find", "emp_p_find",
+    "est_expected_time", "emp_expected_time", "emp_found_in_flight", "emp_p_find_spiral_only",
+    "emp_expected_time_spiral_only", "est_time_from_departure", "emp_time_from_departure",
+)
+
+
+@dataclass(frozen=True)
+class ValidationConfig:
+    """Settings of the experiment (defaults: the paper's protocol).
+
+    Attributes:
+        cases: number of random single-target cases.
+        runs: sampled target trajectories per case and delay.
+        delays: departure delays ``t_d``, s (whole time steps).
+        seed: root seed.
+        settings: agent, sensor and model settings.
+    """
+
+    cases: int = 1000
+    runs: int = 10000
+    delays: tuple[float, ...] = (0.0, 100.0, 200.0)
+    seed: int = 0
+    settings: CoverageSettings = field(default_factory=CoverageSettings)
+
+    def __post_init__(self) -> None:
+        if self.cases < 1 or self.runs < 1:
+            raise ValueError(f"cases and runs must be positive, got {self.cases}, {self.runs}")
+        if not self.delays:
+            raise ValueError("give at least one delay")
+        for delay in self.delays:
+            self.delay_steps(delay)
+
+    def delay_steps(self, delay: float) -> int:
+        """The delay in whole steps; raises if it is negative or not a whole number of steps."""
+        steps = delay / self.settings.time_step
+        if not (math.isfinite(delay) and delay >= 0.0 and abs(steps - round(steps)) < 1e-9):
+            raise ValueError(f"delay {delay!r} s is not a non-negative whole number of "
+                             f"{self.settings.time_step:g} s steps")
+        return round(steps)
+
+    def identity(self) -> dict:
+        """Everything that determines a case's rows (``cases`` excluded, so runs can extend)."""
+        return {"runs": self.runs, "delays": [float(d) for d in self.delays], "seed": self.seed,
+                "settings": asdict(self.settings), "block_steps": BLOCK_STEPS}
+
+
+@dataclass(frozen=True, eq=False)
+class CoverageCase:
+    """One random single-target case: prior ``mean`` (4,), ``covariance`` (4, 4) and ``q``."""
+
+    index: int
+    mean: np.ndarray
+    covariance: np.ndarray
+    q: float
+
+
+def draw_case(index: int, seed: int) -> CoverageCase:
+    """Case ``index`` of the experiment with root ``seed`` (the paper's distributions)."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(index, 0)))
+    mean = random_mean(rng)
+    covariance, q = random_prior(rng)
+    return CoverageCase(index, mean, covariance, q)
+
+
+@dataclass(frozen=True, eq=False)
+class CoveragePlan:
+    """The fixed agent path and estimate of one case and delay.
+
+    Attributes:
+        mean: ``(4,)`` belief mean at departure.
+        covariance: ``(4, 4)`` belief covariance at departure.
+        intercept_steps: whole steps of the intercept flight ``n``.
+        estimate: the coverage estimate from the covariance at the start of the coverage.
+        path: ``(n + t_cutoff + 1, 2)`` agent positions from departure to ``t_cutoff``, m.
+    """
+
+    mean: np.ndarray
+    covariance: np.ndarray
+    intercept_steps: int
+    estimate: CoverageEstimate
+    path: np.ndarray
+
+
+def plan_coverage(case: CoverageCase, delay_steps: int, settings: CoverageSettings,
+                  agent_position: np.ndarray | None = None) -> CoveragePlan:
+    """Wait ``delay_steps`` at ``agent_position`` (default the origin), intercept, spiral."""
+    agent = np.zeros(2) if agent_position is None else np.asarray(agent_position, dtype=float)
+    motion = settings.motion
+    means, covs = motion.predict(case.mean[None], case.covariance[None], case.q, delay_steps)
+    mean, cov = means[0], covs[0]
+    intercept = plan_intercept(agent, mean[:2], mean[2:], settings.speed, settings.time_step,
+                               settings.sensor_diameter)
+    start_cov = motion.predict(mean[None], cov[None], case.q, intercept.steps)[1][0]
+    estimate = estimate_coverage(start_cov, case.q, settings)
+    spiral = ShiftingSpiral(intercept.start, mean[2:], start_cov[:2, :2], settings.speed,
+                            settings.time_step, settings.sensor_diameter)
+    path = np.concatenate([intercept_path(agent, intercept, settings.step_length),
+                           spiral.positions(estimate.cutoff_steps + 1)[1:]])
+    return CoveragePlan(mean, cov, intercept.steps, estimate, path)
+
+
+@numba.njit(cache=True)
+def _advance_block(states, active, noise, path, first_step, flight_steps, chol, tau,
+                   radius2, first_any, first_spiral):
+    """Advance the ``active`` runs through steps ``first_step ..`` with ``noise`` and record
+    detections; a run stops at its first detection on the spiral (step >= ``flight_steps``)."""
+    l11, l21, l22 = chol
+    for a in range(active.shape[0]):
+        i = active[a]
+        x, y, vx, vy = states[i, 0], states[i, 1], states[i, 2], states[i, 3]
+        for t in range(noise.shape[1]):
+            z = noise[a, t]
+            x += tau * vx + l11 * z[0]
+            vx += l21 * z[0] + l22 * z[1]
+            y += tau * vy + l11 * z[2]
+            vy += l21 * z[2] + l22 * z[3]
+            j = first_step + t
+            dx = x - path[j, 0]
+            dy = y - path[j, 1]
+            if dx * dx + dy * dy <= radius2:
+                if first_any[i] < 0:
+                    first_any[i] = j
+                if j >= flight_steps:
+                    first_spiral[i] = j
+                    break
+        states[i, 0], states[i, 1], states[i, 2], states[i, 3] = x, y, vx, vy
+
+
+def first_detections(plan: CoveragePlan, q: float, settings: CoverageSettings, runs: int,
+                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Monte Carlo of the fixed plan: for each of ``runs`` sampled trajectories, the first step
+    (from departure) at which the target is detected, and the first such step on the spiral
+    (``>= n``); ``-1`` when not detected by ``t_cutoff``.
+    """
+    states = rng.multivariate_normal(plan.mean, plan.covariance, size=runs, method="cholesky")
+    unit = settings.motion.process_noise(1.0, 1)[[0, 2]][:, [0, 2]]  # one axis: [[pp, pv], [., vv]]
+    l_unit = np.linalg.cholesky(unit) * math.sqrt(q)
+    chol = (float(l_unit[0, 0]), float(l_unit[1, 0]), float(l_unit[1, 1]))
+    radius2 = (0.5 * settings.sensor_diameter) ** 2
+    n = plan.intercept_steps
+    first_any = np.full(runs, -1, dtype=np.int64)
+    first_spiral = np.full(runs, -1, dtype=np.int64)
+    hit = np.sum((states[:, :2] - plan.path[0]) ** 2, axis=1) <= radius2
+    first_any[hit] = 0
+    if n == 0:
+        first_spiral[hit] = 0
+    active = np.flatnonzero(first_spiral < 0)
+    total = plan.path.shape[0]
+    step = 1
+    while step < total and active.size:
+        block = min(BLOCK_STEPS, total - step)
+        noise = rng.standard_normal((active.size, block, 4))
+        _advance_block(states, active, noise, plan.path, step, n, chol, settings.time_step,
+                       radius2, first_any, first_spiral)
+        active = active[first_spiral[active] < 0]
+        step += block
+    return first_any, first_spiral
+
+
+def _mean_or_nan(values: np.ndarray) -> float:
+    return float(np.mean(values)) if values.size else math.nan
+
+
+def case_rows(case: CoverageCase, config: ValidationConfig,
+              keep_times: bool = False) -> tuple[list[dict], dict]:
+    """Plan, estimate and simulate every delay of one case.
+
+    Returns:
+        the per-delay rows (keys :data:`CASE_FIELDS`, times in s) and, with ``keep_times``, per
+        delay the estimated CDF and the empirical coverage times of detection (s, NaN if missed).
+    """
+    s = config.settings
+    rows, times = [], {}
+    for delay in config.delays:
+        d = config.delay_steps(delay)
+        plan = plan_coverage(case, d, s)
+        rng = np.random.default_rng(
+            np.random.SeedSequence(config.seed, spawn_key=(case.index, 1 + d)))
+        first_any, first_spiral = first_detections(plan, case.q, s, config.runs, rng)
+        n, est = plan.intercept_steps, plan.estimate
+        found = first_any >= 0
+        coverage_time = np.maximum(first_any[found] - n, 0) * s.time_step
+        spiral_found = first_spiral >= 0
+        rows.append({
+            "case": case.index, "delay": float(delay),
+            "mean_x": case.mean[0], "mean_y": case.mean[1],
+            "vel_x": case.mean[2], "vel_y": case.mean[3],
+            "var_x": case.covariance[0, 0], "var_y": case.covariance[1, 1],
+            "cov_xy": case.covariance[0, 1], "var_vx": case.covariance[2, 2],
+            "var_vy": case.covariance[3, 3], "q": case.q,
+            "intercept_time": n * s.time_step, "t_cutoff": est.cutoff_time,
+            "est_p_find": est.p_find, "emp_p_find": float(np.mean(found)),
+            "est_expected_time": est.expected_time,
+            "emp_expected_time": _mean_or_nan(coverage_time),
+            "emp_found_in_flight": float(np.mean(found & (first_any < n))),
+            "emp_p_find_spiral_only": float(np.mean(spiral_found)),
+            "emp_expected_time_spiral_only": _mean_or_nan(
+                (first_spiral[spiral_found] - n) * s.time_step),
+            "est_time_from_departure": n * s.time_step + est.expected_time,
+            "emp_time_from_departure": _mean_or_nan(first_any[found] * s.time_step),
+        })
+        if keep_times:
+            detection = np.full(config.runs, math.nan)
+            detection[found] = coverage_time
+            times[f"{delay:g}"] = {"estimated_cdf": est.cdf, "detection_times": detection,
+                                   "time_step": s.time_step}
+    return rows, times
+
+
+def _run_case(index: int, config: ValidationConfig) -> list[dict]:
+    return case_rows(draw_case(index, config.seed), config)[0]
+
+
+def _ape(est: np.ndarray, emp: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.abs(est - emp) / emp * 100.0
+
+
+def summarise(rows: Sequence[dict], delays: Sequence[float]) -> dict[str, dict[str, float]]:
+    """MAPE per delay (percent), with the number of cases and the two variants of the module
+    docstring. Cases whose empirical value is 0 or undefined are left out of that MAPE."""
+    out = {}
+    for delay in delays:
+        sel = [r for r in rows if float(r["delay"]) == float(delay)]
+
+        def col(name: str, sel: list[dict] = sel) -> np.ndarray:
+            return np.array([float(r[name]) for r in sel])
+
+        def mape(est: np.ndarray, emp: np.ndarray) -> float:
+            ape = _ape(est, emp)
+            ape = ape[np.isfinite(ape)]
+            return float(np.mean(ape)) if ape.size else math.nan
+
+        out[f"{delay:g}"] = {
+            "cases": len(sel),
+            "mape_p_find": mape(col("est_p_find"), col("emp_p_find")),
+            "mape_expected_time": mape(col("est_expected_time"), col("emp_expected_time")),
+            "mape_p_find_spiral_only": mape(col("est_p_find"), col("emp_p_find_spiral_only")),
+            "mape_expected_time_spiral_only": mape(col("est_expected_time"),
+                                                   col("emp_expected_time_spiral_only")),
+            "mape_time_from_departure": mape(col("est_time_from_departure"),
+                                             col("emp_time_from_departure")),
+            "mean_est_p_find": float(np.mean(col("est_p_find"))) if sel else math.nan,
+            "mean_emp_p_find": float(np.mean(col("emp_p_find"))) if sel else math.nan,
+            "mean_est_expected_time": float(np.mean(col("est_expected_time"))) if sel
+            else math.nan,
+            "mean_emp_expected_time": float(np.nanmean(col("emp_expected_time"))) if sel
+            else math.nan,
+            "mean_found_in_flight": float(np.mean(col("emp_found_in_flight"))) if sel
+            else math.nan,
+        }
+    return out
+
+
+def read_rows(path: Path) -> list[dict]:
+    """The per-case rows already in ``path`` (empty if it does not exist)."""
+    if not path.exists():
+        return []
+    with path.open(newline="") as f:
+        return [{k: float(v) if k != "case" else int(v) for k, v in row.items()}
+                for row in csv.DictReader(f)]
+
+
+def _check_config(out_dir: Path, config: ValidationConfig) -> None:
+    path = out_dir / CONFIG_FILE
+    identity = config.identity()
+    if path.exists():
+        stored = json.loads(path.read_text())
+        if stored != identity:
+            raise ValueError(f"{out_dir} holds results of another configuration ({stored}); "
+                             "use another --out folder")
+    else:
+        path.write_text(json.dumps(identity, indent=2) + "\n")
+
+
+def run_validation(config: ValidationConfig, out_dir: Path, workers: int = 1,
+                   on_case: Callable[[int, int], None] | None = None) -> list[dict]:
+    """Run (or resume) the experiment, appending each finished case's rows to
+    ``out_dir/cases.csv``; cases already there are skipped.
+
+    Args:
+        config: the protocol.
+        out_dir: results folder (created).
+        workers: worker processes (1 runs in this process).
+        on_case: called as ``on_case(done, total)`` after each case (progress bars).
+
+    Returns:
+        All rows of cases ``0 .. cases - 1``, sorted by case and delay.
+    """
+    out_dir.mkdir(parents=True, exist_ok=True)
+    _check_config(out_dir, config)
+    csv_path = out_dir / CASES_FILE
+    rows = [r for r in read_rows(csv_path) if r["case"] < config.cases]
+    per_case: dict[int, int] = {}
+    for r in rows:
+        per_case[r["case"]] = per_case.get(r["case"], 0) + 1
+    complete = {c for c, count in per_case.items() if count == len(config.delays)}
+    rows = [r for r in rows if r["case"] in complete]
+    todo = [i for i in range(config.cases) if i not in complete]
+    new_file = not csv_path.exists() or len(complete) == 0
+    with csv_path.open("w" if new_file else "a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=CASE_FIELDS)
+        if new_file:
+            writer.writeheader()
+            for r in rows:
+                writer.writerow(r)
+
+        def record(case_rows_: list[dict]) -> None:
+            writer.writerows(case_rows_)
+            f.flush()
+            rows.extend(case_rows_)
+            if on_case is not None:
+                on_case(len(rows) // len(config.delays), config.cases)
+
+        if on_case is not None:
+            on_case(len(complete), config.cases)
+        if workers <= 1:
+            for i in todo:
+                record(_run_case(i, config))
+        else:
+            with ProcessPoolExecutor(max_workers=workers) as pool:
+                futures = [pool.submit(_run_case, i, config) for i in todo]
+                for future in as_completed(futures):
+                    record(future.result())
+    return sorted(rows, key=lambda r: (r["case"], r["delay"]))
+
+
+def table_markdown(summary: dict[str, dict[str, float]], wall_time: float | None = None) -> str:
+    """The MAPE table (percent) beside the paper's Table I, as Markdown."""
+    lines = ["| t_d (s) | cases | MAPE(P_find) | paper | MAPE(E[T_find]) | paper |",
+             "|---|---|---|---|---|---|"]
+    for delay, s in summary.items():
+        paper = PAPER_MAPE.get(delay)
+        p_p, p_t = (f"{paper[0]:.2f} %", f"{paper[1]:.2f} %") if paper else ("-", "-")
+        lines.append(f"| {delay} | {s['cases']} | {s['mape_p_find']:.2f} % | {p_p} | "
+                     f"{s['mape_expected_time']:.2f} % | {p_t} |")
+    if wall_time is not None:
+        lines.append("")
+        lines.append(f"Wall time: {wall_time:.0f} s.")
+    return "\n".join(lines) + "\n"
+
+
+def write_reports(summary: dict[str, dict[str, float]], out_dir: Path,
+                  wall_time: float | None = None) -> None:
+    """``mape.md`` (the table) and ``mape.csv`` (every summary figure per delay)."""
+    (out_dir / "mape.md").write_text(table_markdown(summary, wall_time))
+    keys = ["delay", *next(iter(summary.values())).keys()]
+    with (out_dir / "mape.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=keys)
+        writer.writeheader()
+        for delay, s in summary.items():
+            writer.writerow({"delay": delay, **s})
+
+
+def mape_json(summary: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
+    """``{"0": {"mape_p_find": .., "mape_expected_time": ..}, ...}`` (percent)."""
+    return {d: {"mape_p_find": s["mape_p_find"], "mape_expected_time": s["mape_expected_time"]}
+            for d, s in summary.items()}

@@ -1,0 +1,116 @@
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+import typer
+from typer.testing import CliRunner
+
+from hptrack.cli.coverage import register
+from hptrack.coverage.estimator import CoverageSettings
+from hptrack.experiments.coverage_validation import (
+    CASES_FILE,
+    ValidationConfig,
+    draw_case,
+    first_detections,
+    plan_coverage,
+    read_rows,
+    run_validation,
+    summarise,
+)
+
+app = typer.Typer()
+register(app)
+runner = CliRunner()
+
+
+def test_command_runs_end_to_end_and_resumes(tmp_path):
+    out = tmp_path / "val"
+    args = ["validate-coverage", "--cases", "3", "--runs", "300", "--delays", "0,100",
+            "--seed", "5", "--out", str(out), "--json", str(tmp_path / "mape.json")]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "MAPE" in result.output and "3.58" in result.output  # the paper's figure alongside
+    mape = json.loads((tmp_path / "mape.json").read_text())
+    assert set(mape) == {"0", "100"}
+    for values in mape.values():
+        assert set(values) == {"mape_p_find", "mape_expected_time"}
+        assert all(math.isfinite(v) and v >= 0 for v in values.values())
+    assert (out / "cdf-case-0.png").read_bytes()[:4] == b"\x89PNG"
+    assert "| 100 | 3 |" in (out / "mape.md").read_text()
+    first = read_rows(out / CASES_FILE)
+    assert sorted((r["case"], r["delay"]) for r in first) == [
+        (c, d) for c in range(3) for d in (0.0, 100.0)]
+    # Resume with more cases: the three done are kept as they are, one case is added.
+    result = runner.invoke(app, args[:2] + ["4"] + args[3:])
+    assert result.exit_code == 0, result.output
+    rows = read_rows(out / CASES_FILE)
+    assert len(rows) == 8 and rows[:6] == first
+    # Another configuration in the same folder is refused.
+    result = runner.invoke(app, args[:4] + ["301"] + args[5:])
+    assert result.exit_code == 2 and "another configuration" in result.output
+
+
+def test_bad_options_exit_with_one_line(tmp_path):
+    result = runner.invoke(app, ["validate-coverage", "--delays", "0,0.3", "--out",
+                                 str(tmp_path)])
+    assert result.exit_code == 2 and "whole number" in result.output
+    result = runner.invoke(app, ["validate-coverage", "--delays", "a,b", "--out", str(tmp_path)])
+    assert result.exit_code == 2 and "--delays" in result.output
+
+
+def test_rows_do_not_depend_on_workers_or_order(tmp_path):
+    config = ValidationConfig(cases=3, runs=200, delays=(0.0, 200.0), seed=9)
+    one = run_validation(config, tmp_path / "one", workers=1)
+    two = run_validation(config, tmp_path / "two", workers=2)
+    assert one == two
+    with (tmp_path / "one" / CASES_FILE).open() as f:
+        assert len(list(csv.DictReader(f))) == 6
+
+
+def test_detection_in_the_intercept_flight_counts_at_coverage_time_zero():
+    settings = CoverageSettings()
+    case = draw_case(0, 0)
+    plan = plan_coverage(case, 0, settings)
+    n = plan.intercept_steps
+    first_any, first_spiral = first_detections(plan, case.q, settings, 3000,
+                                               np.random.default_rng(1))
+    in_flight = (first_any >= 0) & (first_any < n)
+    assert in_flight.mean() > 0.3  # the flight ends on the belief mean
+    # a run found in flight is followed on to its first detection on the spiral
+    assert np.all((first_spiral[in_flight] >= n) | (first_spiral[in_flight] == -1))
+    assert np.all(first_spiral[~in_flight & (first_any >= 0)] == first_any[~in_flight &
+                                                                         (first_any >= 0)])
+    assert first_any.max() <= n + plan.estimate.cutoff_steps
+
+
+def test_simulated_detections_match_an_independent_step_by_step_simulation():
+    settings = CoverageSettings()
+    case = draw_case(3, 0)
+    plan = plan_coverage(case, 100 * 2, settings)
+    first_any, _ = first_detections(plan, case.q, settings, 4000, np.random.default_rng(2))
+    # Reference: the model's own sampler, one step at a time, 4000 runs at once.
+    rng = np.random.default_rng(3)
+    states = rng.multivariate_normal(plan.mean, plan.covariance, size=4000)
+    found = np.zeros(4000, dtype=bool)
+    for j in range(plan.path.shape[0]):
+        if j:
+            states = settings.motion.sample_motion(states, np.full(4000, case.q), rng)
+        found |= np.hypot(*(states[:, :2] - plan.path[j]).T) <= 50.0
+    assert np.mean(first_any >= 0) == pytest.approx(found.mean(), abs=0.03)
+
+
+def test_mape_is_mean_absolute_percentage_error_against_the_empirical_value():
+    rows = [dict(delay=0.0, est_p_find=0.9, emp_p_find=1.0, est_expected_time=2.0,
+                 emp_expected_time=4.0, emp_p_find_spiral_only=1.0,
+                 emp_expected_time_spiral_only=4.0, est_time_from_departure=10.0,
+                 emp_time_from_departure=8.0, emp_found_in_flight=0.5),
+            dict(delay=0.0, est_p_find=0.6, emp_p_find=0.5, est_expected_time=3.0,
+                 emp_expected_time=0.0, emp_p_find_spiral_only=0.5,
+                 emp_expected_time_spiral_only=math.nan, est_time_from_departure=10.0,
+                 emp_time_from_departure=10.0, emp_found_in_flight=0.1)]
+    s = summarise(rows, [0.0])["0"]
+    assert s["mape_p_find"] == pytest.approx((10.0 + 20.0) / 2)
+    assert s["mape_expected_time"] == pytest.approx(50.0)  # emp = 0 is left out
+    assert s["mape_time_from_departure"] == pytest.approx(12.5)
