@@ -15,9 +15,17 @@ the bound on the total ``log det`` at the end of the horizon. Ties in ``f`` go t
 lexicographically smallest control sequence, hover (control 0) first, so a search in which
 nothing is reachable hovers. There is no duplicate pruning (the reference library has none).
 
-Per-decision effort is bounded deterministically by ``max_expansions`` and optionally by
-``time_limit_s``; when either binds, the plan is the most promising open node's sequence
-(least ``f``), padded with hover.
+Each expansion (the rollouts of all controls and their bounds) is one compiled call; only the
+priority queue is Python. Per-decision effort is bounded deterministically by
+``max_expansions`` and optionally by ``time_limit_s``; when either binds, the plan is the most
+promising open node's sequence (least ``f``), padded with hover.
+
+Behaviour to expect: the difference cost judges a plan only by the uncertainty at the end of
+the horizon, which values a measurement of a second target late in the horizon as much as an
+early one. Between a tracked target and a second one within reach, the optimal plan therefore
+often stays first and leaves later, and replanning after every primitive postpones the switch
+again; A* leaves only once a few more measurements of the tracked target are worth less than an
+earlier arrival at the other, so it dwells far longer on one target than ARVI does.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ from hptrack.planning.mcts import DEFAULT_EXPLORATION, SearchResult, search
 from hptrack.planning.mdp import PlanningProblem
 from hptrack.sim.interface import MissionSpec, Observation
 
-DEFAULT_ITERATIONS = 20_000
+DEFAULT_ITERATIONS = 100_000
 """Simulations per tree search when neither ``iterations`` nor ``time_limit`` is given."""
 
 
