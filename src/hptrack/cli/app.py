@@ -22,7 +22,7 @@ app = typer.Typer(help="Hierarchical planning for long-horizon multi-target trac
 scenario_app = typer.Typer(help="Create and check scenario files.", no_args_is_help=True)
 app.add_typer(scenario_app, name="scenario")
 
-DEFAULT_PLANNER = "greedy"
+DEFAULT_PLANNER = "mcts"
 
 
 def _load_or_random(path: Path | None, random: bool, targets: int, seed: int | None,

@@ -327,7 +327,7 @@ def run_simulations(tree, model, memo, root_cov, root_si, root_sf, fixed, explor
     return n_simulations
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ActionStats:
     """The actions of one state node and their statistics (arrays of equal length).
 
@@ -356,7 +356,7 @@ class ActionStats:
         return int(self.actions[visited[np.argmax(self.values[visited])]])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SearchResult:
     """The outcome of :func:`search`.
 
@@ -372,6 +372,7 @@ class SearchResult:
         elapsed: wall time of the search, s.
         state_nodes: state nodes in the tree.
         action_nodes: action nodes in the tree.
+        tree_bytes: memory held by the tree's arrays (allocated capacity), bytes.
     """
 
     best_action: int | None
@@ -383,6 +384,7 @@ class SearchResult:
     elapsed: float
     state_nodes: int
     action_nodes: int
+    tree_bytes: int
 
     @property
     def best_after_find(self) -> int | None:
@@ -484,4 +486,5 @@ def _result(tree: Tree, fixed: int, stopped_by: str, elapsed: float) -> SearchRe
     return SearchResult(
         best_action=root.best, root=root, after_find=after_find, after_miss=after_miss,
         simulations=int(tree.counts[2]), stopped_by=stopped_by, elapsed=elapsed,
-        state_nodes=int(tree.counts[0]), action_nodes=int(tree.counts[1]))
+        state_nodes=int(tree.counts[0]), action_nodes=int(tree.counts[1]),
+        tree_bytes=sum(array.nbytes for array in tree))

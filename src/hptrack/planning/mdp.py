@@ -29,8 +29,9 @@ spiral coverage from the covariance predicted to step ``t + n_i``. The coverage 
 and ``E[T_find]``, truncated to the ``N - t - n_i`` steps left (budget truncation). The action
 is available only when ``n_i < N - t``. Outcomes:
 
-* find, probability ``p_find = p_max``: the sub-task lasts ``n_i + round(E[T_find])`` steps; the
-  target's belief becomes the posterior of a position measurement (noise ``R``) at that step;
+* find, probability ``p_find = p_max``: the sub-task lasts ``n_i + round(E[T_find])`` steps
+  (nearest step, halves up); the target's belief becomes the posterior of a position measurement
+  (noise ``R``) at that step;
 * miss, probability ``1 - p_max``: it lasts ``n_i + t_cutoff`` steps and the target leaves the
   action list.
 
@@ -114,7 +115,7 @@ class Memo(NamedTuple):
     expected: np.ndarray
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PlanningProblem:
     """The root state of a search (paper Sec. IV-C-2) and the model it is planned with.
 

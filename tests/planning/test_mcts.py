@@ -1,0 +1,179 @@
+"""The tree search (paper Algorithm 1) on small problems whose answer is known."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from hptrack.planning import PlanningProblem, search
+from hptrack.planning.mcts import grow_tree, new_tree, run_simulations
+from hptrack.planning.mdp import (
+    apply_outcome,
+    expand_action,
+    is_available,
+    new_memo,
+    new_work,
+    terminal_value,
+)
+
+TAU = 0.5
+
+
+def prior(var_x=1500.0, var_y=1000.0, rho=0.3):
+    cov = np.diag([var_x, var_y, 0.3, 0.4])
+    cov[0, 1] = cov[1, 0] = rho * math.sqrt(var_x * var_y)
+    return cov
+
+
+def two_targets(budget=400.0, **kw):
+    """Target 0 near the agent, target 1 5 km away on the other side: pursuing the near one
+    first wins (found after a short flight, then the long trip) by more than 3 in E[U]."""
+    means = np.array([[300.0, 0.0, 0.0, 0.5], [-5000.0, 0.0, 0.0, -0.5]])
+    return PlanningProblem(np.zeros(2), means, np.array([prior(), prior(900.0, 2000.0, -0.5)]),
+                           np.array([3e-4, 2e-4]), budget, TAU, TAU, 30.0, 100.0,
+                           10.0 * np.eye(2), **kw)
+
+
+def six_targets(seed=0, **kw):
+    rng = np.random.default_rng(seed)
+    means = np.hstack([rng.uniform(-1000, 1000, (6, 2)), rng.uniform(-3, 3, (6, 2))])
+    covs = np.array([prior(*rng.uniform(500, 2000, 2), rng.uniform(-0.8, 0.8))
+                     for _ in range(6)])
+    return PlanningProblem(np.zeros(2), means, covs, rng.uniform(1e-4, 5e-4, 6), 900.0, TAU,
+                           TAU, 30.0, 100.0, 10.0 * np.eye(2), **kw)
+
+
+def expectimax(problem, first=None):
+    """Exact values ``-E[U]`` of the root's actions under the optimal policy (small MDPs), or
+    with ``first = (action, found)`` of the actions after that first sub-task."""
+    model = problem.model()
+    memo = new_memo(problem.n_targets, problem.n_steps)
+    work = new_work()
+
+    def value(state):
+        si, sf, cov, step = state
+        actions = [a for a in range(problem.n_targets) if is_available(model, si, sf, a)]
+        if not actions:
+            return terminal_value(model, cov, step), {}
+        q = {a: action_value(state, a) for a in actions}
+        return max(q.values()), q
+
+    def action_value(state, a):
+        _, p, find_steps, miss_steps = expand_action(model, memo, *state, a, work)
+        total = 0.0
+        for found, prob, steps in ((True, p, find_steps), (False, 1.0 - p, miss_steps)):
+            if prob > 0.0:
+                child = tuple(x.copy() for x in state)
+                apply_outcome(model, *child, a, found, steps, work)
+                total += prob * value(child)[0]
+        return total
+
+    state = problem.root_state()
+    if first is not None:
+        _, _, find_steps, miss_steps = expand_action(model, memo, *state, first[0], work)
+        apply_outcome(model, *state, first[0], first[1], find_steps if first[1] else miss_steps,
+                      work)
+    return value(state)[1]
+
+
+def test_ucb_picks_the_clearly_better_order():
+    exact = expectimax(two_targets())
+    assert exact[0] > exact[1] + 3.0
+    result = search(two_targets(), iterations=3000, seed=0)
+    assert result.best_action == 0
+    assert result.root.actions.tolist() == [0, 1]
+    assert result.root.visits.sum() == result.simulations - 1  # the first one rolls out
+    assert result.root.visits[0] > result.root.visits[1]
+
+
+def test_replanning_returns_one_action_per_outcome():
+    result = search(two_targets(current_action=0), iterations=3000, seed=1)
+    assert result.best_action == 0
+    assert result.root.actions.tolist() == [0]
+    assert result.root.visits.tolist() == [result.simulations - 1]
+    # after finding target 0 both targets remain (0 again = follow it to the end); after a
+    # miss only target 1 is left
+    assert result.after_find.actions.tolist() == [0, 1]
+    assert result.after_miss.actions.tolist() == [1]
+    assert result.best_after_find in (0, 1)
+    assert result.best_after_miss == 1
+    assert result.after_find.visits.sum() + result.after_miss.visits.sum() <= result.simulations
+    exact = expectimax(two_targets(), first=(0, True))
+    assert result.best_after_find == max(exact, key=exact.get)
+
+
+def test_replanning_with_six_targets():
+    result = search(replace(six_targets(3), current_action=2), iterations=5000, seed=2)
+    for stats in (result.after_find, result.after_miss):
+        assert stats.visits.sum() > 0
+        visited = stats.visits > 0
+        assert stats.best == stats.actions[visited][np.argmax(stats.values[visited])]
+    assert 2 in result.after_find.actions
+    assert 2 not in result.after_miss.actions
+
+
+def test_same_seed_and_iterations_give_the_same_plan():
+    a = search(six_targets(), iterations=1500, seed=7)
+    b = search(six_targets(), iterations=1500, seed=7)
+    c = search(six_targets(), iterations=1500, seed=8)
+    assert a.best_action == b.best_action
+    for name in ("actions", "visits", "values", "p_find", "find_steps", "miss_steps"):
+        np.testing.assert_array_equal(getattr(a.root, name), getattr(b.root, name))
+    assert (a.state_nodes, a.action_nodes) == (b.state_nodes, b.action_nodes)
+    assert not np.array_equal(a.root.visits, c.root.visits)
+    gen = search(six_targets(), iterations=200, seed=np.random.default_rng(4))
+    assert gen.root.visits.tolist() == search(six_targets(), iterations=200,
+                                              seed=np.random.default_rng(4)).root.visits.tolist()
+
+
+def test_tree_is_independent_of_chunking_and_initial_capacity():
+    problem = six_targets(1)
+    model = problem.model()
+    si, sf, cov, _ = problem.root_state()
+
+    def run(chunks, capacity):
+        tree = new_tree(12345, capacity)
+        memo = new_memo(6, problem.n_steps)
+        for n in chunks:
+            while n:
+                n -= run_simulations(tree, model, memo, cov, si, sf, -1, 0.5, n)
+                if n:
+                    tree = grow_tree(tree, 6)
+        return tree
+
+    one = run([900], 1024)
+    many = run([1, 7, 92, 300, 500], 2)
+    assert many.s_first.shape[0] < one.s_first.shape[0] * 4
+    for x, y in zip(one, many, strict=True):
+        n = min(x.shape[0], y.shape[0]) if x.ndim else None
+        np.testing.assert_array_equal(x[:n], y[:n])
+
+
+def test_time_limit_and_iteration_limit():
+    timed = search(six_targets(), time_limit=0.3, seed=0)
+    assert timed.stopped_by == "time_limit"
+    assert timed.elapsed >= 0.3 and timed.simulations > 0
+    both = search(six_targets(), iterations=50, time_limit=60.0, seed=0)
+    assert (both.stopped_by, both.simulations) == ("iterations", 50)
+    with pytest.raises(ValueError, match="iterations, time_limit"):
+        search(six_targets())
+    with pytest.raises(ValueError, match="cannot be carried out"):
+        search(two_targets(budget=10.0, current_action=1), iterations=10)
+
+
+def test_no_available_action_gives_no_plan():
+    result = search(two_targets(budget=5.0), iterations=20, seed=0)
+    assert result.best_action is None
+    assert result.root.actions.size == 0
+    assert result.state_nodes == 1
+
+
+def test_values_are_minus_uncertainty_at_the_end():
+    """With one target left and one action, every simulation ends in the follow or the miss
+    branch; the root's value is the p_find-weighted mean of their -U."""
+    problem = two_targets(available=[True, False])
+    result = search(problem, iterations=400, seed=3)
+    exact = expectimax(problem)
+    assert result.root.actions.tolist() == [0]
+    assert result.root.values[0] == pytest.approx(exact[0], abs=0.5)
