@@ -47,6 +47,8 @@ def benchmark(
                          ] = None,
     figure_planners: Annotated[str | None, typer.Option(
         help="Planners drawn side by side on the first scenario (default: all).")] = None,
+    figure_targets: Annotated[int | None, typer.Option(
+        help="Number of targets of the figure's scenario (default: the largest).")] = None,
 ) -> None:
     """Run the multi-target benchmark (paper Tables II-III); results are stored as they finish."""
     from hptrack.experiments.benchmark import BenchmarkConfig, run_benchmark, summarise
@@ -87,19 +89,21 @@ def benchmark(
         rows = [r for r in store.rows() if r.key in keys]
         store.close()
         console.print(f"{ran} episodes run now, {len(rows)} in the table ({db})")
-        _write_report(config, rows, out, figure_planners)
+        _write_report(config, rows, out, figure_planners, figure_targets)
         if json_path:
             summary = summarise(rows)
             write_json(json_path, {p: {str(n): c for n, c in by_n.items()}
                                    for p, by_n in summary.items()})
 
 
-def _write_report(config, rows, out: Path, figure_planners: str | None) -> None:
+def _write_report(config, rows, out: Path, figure_planners: str | None,
+                  figure_targets: int | None) -> None:
     from matplotlib.figure import Figure
     from rich.markdown import Markdown
 
     from hptrack.experiments.benchmark import scenario_for
     from hptrack.experiments.report import markdown_tables, write_csv
+    from hptrack.experiments.store import EpisodeKey
     from hptrack.registry import make_planner
     from hptrack.sim.episode import run_episode
     from hptrack.viz.benchmark import plot_uncertainty_boxes
@@ -124,10 +128,10 @@ def _write_report(config, rows, out: Path, figure_planners: str | None) -> None:
         fig.savefig(out / "uncertainty_boxes.png", dpi=120)
     names = ([p.strip() for p in figure_planners.split(",")] if figure_planners
              else list(config.planners))
-    first = config.keys()[0]
+    n_figure = figure_targets or max(config.target_counts)
     fig = Figure(figsize=(6.5 * len(names), 6.0))
     for i, name in enumerate(names):
-        key = type(first)(name, first.n_targets, first.seed, first.setting, first.effort)
+        key = EpisodeKey(name, n_figure, config.first_seed, config.setting, config.effort_label)
         record = run_episode(scenario_for(key),
                              make_planner(name, **config.planner_options(name)))
         plot_mission(fig.add_subplot(1, len(names), i + 1), record)
