@@ -6,6 +6,7 @@ Each factory takes keyword options (the planner's parameters) and returns a fres
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 
 from hptrack.baselines.arvi import ArviPlanner
@@ -32,4 +33,11 @@ def make_planner(name: str, **options) -> Planner:
         factory = PLANNERS[name]
     except KeyError:
         raise ValueError(f"unknown planner {name!r}; choose from {sorted(PLANNERS)}") from None
+    params = inspect.signature(factory).parameters.values()
+    if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        accepted = {p.name for p in params}
+        unknown = sorted(set(options) - accepted)
+        if unknown:
+            raise ValueError(f"planner {name!r} takes no option {', '.join(unknown)}; "
+                             f"its options: {sorted(accepted) or 'none'}")
     return factory(**options)

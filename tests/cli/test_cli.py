@@ -54,3 +54,15 @@ def test_unknown_planner_and_missing_input_are_clean_errors():
     assert result.exit_code == 2 and "unknown planner 'nope'" in result.output
     result = runner.invoke(app, ["simulate"])
     assert result.exit_code == 2 and "--random" in result.output
+
+
+def test_planner_options_are_checked_by_name_and_type():
+    result = runner.invoke(app, ["simulate", "--random", "--planner", "greedy",
+                                 "--iterations", "5"])
+    assert result.exit_code == 2 and "planner 'greedy' takes no option iterations" in result.output
+    result = runner.invoke(app, ["simulate", "--random", "--planner", "mcts", "-o", "explore=2"])
+    assert result.exit_code == 2 and "'exploration'" in result.output
+    result = runner.invoke(app, ["simulate", "--random", "--planner", "arvi", "-o",
+                                 "horizon=abc"])
+    assert result.exit_code == 2 and "ArviParams.horizon" in result.output
+    assert "'abc'" in result.output

@@ -75,16 +75,20 @@ def params_from_options(params_type: type[P], options: dict[str, Any]) -> P:
     values = {}
     for key, value in options.items():
         default = defaults[key]
-        if isinstance(default, tuple):
-            items = value.split(",") if isinstance(value, str) else value
-            value = tuple(float(v) for v in items)
-        elif isinstance(value, str) and not isinstance(default, str):
-            if value.lower() == "none":
-                value = None
-            elif isinstance(default, int):
-                value = int(value)
-            else:
-                value = float(value)
+        try:
+            if isinstance(default, tuple):
+                items = value.split(",") if isinstance(value, str) else value
+                value = tuple(float(v) for v in items)
+            elif isinstance(value, str) and not isinstance(default, str):
+                if value.lower() == "none":
+                    value = None
+                elif isinstance(default, int):
+                    value = int(value)
+                else:
+                    value = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{params_type.__name__}.{key}: cannot read {value!r} as the type "
+                             f"of its default {default!r}") from None
         values[key] = value
     return params_type(**values)
 
