@@ -1,43 +1,65 @@
-"""Planner registry: names to factories, so the simulator and the CLI never import a planner.
+"""Planner registry: names to planner classes and their settings, so that the simulator and the
+CLI never import a planner.
 
-Each factory takes keyword options (the planner's parameters) and returns a fresh
-:class:`~hptrack.sim.interface.Planner`.
+Each entry builds a fresh :class:`~hptrack.interface.Planner` from validated settings
+(:mod:`hptrack.settings`).
 """
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
-from hptrack.baselines.arvi import ArviPlanner
-from hptrack.baselines.astar import AStarPlanner
+from hptrack.baselines.arvi import ArviPlanner, ArviSettings
+from hptrack.baselines.astar import AStarPlanner, AStarSettings
+from hptrack.baselines.coverage import CoveragePlanner, CoverageSettings
 from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.baselines.stationary import StationaryPlanner
-from hptrack.coverage.subtask import CoveragePlanner
-from hptrack.planning.hierarchical import HierarchicalPlanner
-from hptrack.sim.interface import Planner
+from hptrack.interface import InputError, Planner
+from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
+from hptrack.settings import NoSettings, PlannerSettings
 
-PLANNERS: dict[str, Callable[..., Planner]] = {
-    "mcts": HierarchicalPlanner,
-    "stationary": StationaryPlanner,
-    "greedy": GreedyPlanner,
-    "coverage": CoveragePlanner,
-    "arvi": ArviPlanner.from_options,
-    "astar": AStarPlanner.from_options,
+
+@dataclass(frozen=True)
+class PlannerEntry:
+    """A registered planner: its settings model and the factory that takes them."""
+
+    settings_type: type[PlannerSettings]
+    factory: Callable[[Any], Planner]
+    summary: str
+
+
+PLANNERS: dict[str, PlannerEntry] = {
+    "mcts": PlannerEntry(MctsSettings, HierarchicalPlanner,
+                         "the paper's hierarchical planner (MCTS over coverage sub-tasks)"),
+    "stationary": PlannerEntry(NoSettings, StationaryPlanner, "stays at its start"),
+    "greedy": PlannerEntry(NoSettings, GreedyPlanner,
+                           "chases the most uncertain reachable target"),
+    "coverage": PlannerEntry(CoverageSettings, CoveragePlanner,
+                             "pursues one target (-o target=ID) with coverage sub-tasks"),
+    "arvi": PlannerEntry(ArviSettings, ArviPlanner, "Anytime Reduced Value Iteration"),
+    "astar": PlannerEntry(AStarSettings, AStarPlanner, "A* with an information heuristic"),
 }
 
 
-def make_planner(name: str, **options) -> Planner:
-    """Build the planner registered as ``name`` with ``options``."""
+def planner_entry(name: str) -> PlannerEntry:
+    """The entry of ``name``, or an :class:`~hptrack.interface.InputError` listing the names."""
     try:
-        factory = PLANNERS[name]
+        return PLANNERS[name]
     except KeyError:
-        raise ValueError(f"unknown planner {name!r}; choose from {sorted(PLANNERS)}") from None
-    params = inspect.signature(factory).parameters.values()
-    if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
-        accepted = {p.name for p in params}
-        unknown = sorted(set(options) - accepted)
-        if unknown:
-            raise ValueError(f"planner {name!r} takes no option {', '.join(unknown)}; "
-                             f"its options: {sorted(accepted) or 'none'}")
-    return factory(**options)
+        raise InputError(f"unknown planner {name!r}; choose from "
+                         f"{', '.join(sorted(PLANNERS))}") from None
+
+
+def planner_settings(name: str, options: dict[str, Any] | None = None) -> PlannerSettings:
+    """Validated settings of planner ``name`` from ``options`` (one-line errors)."""
+    return planner_entry(name).settings_type.from_options(name, options)
+
+
+def make_planner(name: str, settings: PlannerSettings | dict[str, Any] | None = None) -> Planner:
+    """A fresh planner ``name`` with ``settings`` (a settings object or raw options)."""
+    entry = planner_entry(name)
+    if not isinstance(settings, PlannerSettings):
+        settings = entry.settings_type.from_options(name, settings)
+    return entry.factory(settings)

@@ -6,14 +6,20 @@ from typer.testing import CliRunner
 
 from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.cli.app import app
-from hptrack.planning.hierarchical import HierarchicalPlanner
+from hptrack.interface import InputError
+from hptrack.planning import hierarchical
+from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.scenario import random_scenario
 from hptrack.sim.episode import run_episode
 
 
+def mcts(**options):
+    return HierarchicalPlanner(MctsSettings(**options))
+
+
 def test_conditional_plan_is_followed_and_misses_leave_the_list():
     record = run_episode(random_scenario(3, seed=2, homogeneous=True),
-                         HierarchicalPlanner(iterations=2000))
+                         mcts(iterations=2000))
     log = record.info["subtasks"]
     assert len(log) >= 3
     assert len(record.info["searches"]) >= len(log)
@@ -35,8 +41,8 @@ def test_conditional_plan_is_followed_and_misses_leave_the_list():
 
 def test_same_seed_same_mission():
     scenario = random_scenario(3, seed=5, homogeneous=True)
-    a = run_episode(scenario, HierarchicalPlanner(iterations=1000))
-    b = run_episode(scenario, HierarchicalPlanner(iterations=1000))
+    a = run_episode(scenario, mcts(iterations=1000))
+    b = run_episode(scenario, mcts(iterations=1000))
     np.testing.assert_array_equal(a.agent_path, b.agent_path)
     assert a.uncertainty == b.uncertainty
 
@@ -46,16 +52,51 @@ def test_mcts_beats_greedy_on_twenty_three_target_scenarios():
     u_mcts, u_greedy = [], []
     for seed in range(20):
         scenario = random_scenario(3, seed=seed, homogeneous=True)
-        u_mcts.append(run_episode(scenario, HierarchicalPlanner(iterations=2000)).uncertainty)
+        u_mcts.append(run_episode(scenario, mcts(iterations=2000)).uncertainty)
         u_greedy.append(run_episode(scenario, GreedyPlanner()).uncertainty)
     assert np.mean(u_mcts) < np.mean(u_greedy) - 10.0
 
 
-def test_invalid_effort_is_refused():
-    with pytest.raises(ValueError, match="iterations"):
-        HierarchicalPlanner(iterations=0)
-    with pytest.raises(ValueError, match="time_limit"):
-        HierarchicalPlanner(time_limit=-1.0)
+@pytest.mark.parametrize("option, value, message", [
+    ("iterations", 0, "planner 'mcts': option iterations must be >= 1, got 0"),
+    ("iterations", "abc", "planner 'mcts': option iterations must be an integer, got 'abc'"),
+    ("time_limit", -1.0, "planner 'mcts': option time_limit must be > 0, got -1.0"),
+    ("exploration", -1, "planner 'mcts': option exploration must be > 0, got -1"),
+    ("exploration", "nan", "planner 'mcts': option exploration must be a finite number, got 'nan'"),
+    ("exploration", float("inf"), "option exploration must be a finite number"),
+])
+def test_invalid_settings_are_refused_naming_planner_option_and_value(option, value, message):
+    with pytest.raises(InputError) as err:
+        MctsSettings.from_options("mcts", {option: value})
+    assert message in str(err.value)
+
+
+def test_settings_default_effort_and_identity():
+    default = MctsSettings()
+    assert (default.iterations, default.time_limit) == (100_000, None)
+    assert MctsSettings.from_options("mcts", {"iterations": "100000"}) == default
+    timed = MctsSettings(time_limit=1.0)
+    assert (timed.iterations, timed.time_limit) == (None, 1.0)
+    assert default.canonical() == '{"exploration":0.5,"iterations":100000,"time_limit":null}'
+    assert default.digest() != timed.digest()
+    assert MctsSettings.from_options("mcts", default.as_json()) == default
+
+
+def test_timed_runs_warm_the_kernels_before_the_first_search(monkeypatch):
+    """The first timed search of a process must not pay the kernels' loading: reset runs a
+    tiny search first (once per process)."""
+    calls = []
+    monkeypatch.setattr(hierarchical, "_warmed", False)
+    real = hierarchical.search
+    monkeypatch.setattr(hierarchical, "search",
+                        lambda *a, **k: calls.append(k.get("iterations")) or real(*a, **k))
+    scenario = random_scenario(2, seed=0).model_copy(update={"budget": 20.0})
+    run_episode(scenario, mcts(time_limit=0.05))
+    assert calls[:2] == [64, 64]  # the warm-up's two searches (first plan, re-plan)
+    assert hierarchical._warmed
+    calls.clear()
+    run_episode(scenario, mcts(time_limit=0.05))
+    assert 64 not in calls
 
 
 def test_simulate_command_with_mcts(tmp_path):

@@ -1,4 +1,5 @@
-"""The tree search (paper Algorithm 1) on small problems whose answer is known."""
+"""The tree search (paper Algorithm 1) on the sub-task MDP, on small problems whose answer is
+known (the search on toy MDPs with exact answers: ``test_search_toys.py``)."""
 
 import math
 from dataclasses import replace
@@ -7,8 +8,10 @@ import numpy as np
 import pytest
 
 from hptrack.planning import PlanningProblem, search
-from hptrack.planning.mcts import grow_tree, new_tree, run_simulations
-from hptrack.planning.mdp import (
+from hptrack.planning.rollout import UniformRandom
+from hptrack.planning.search import run_simulations
+from hptrack.planning.subtask_mdp import (
+    SubtaskEnv,
     apply_outcome,
     expand_action,
     is_available,
@@ -16,6 +19,7 @@ from hptrack.planning.mdp import (
     new_work,
     terminal_value,
 )
+from hptrack.planning.tree import grow_tree, new_tree
 
 TAU = 0.5
 
@@ -47,32 +51,30 @@ def six_targets(seed=0, **kw):
 def expectimax(problem, first=None):
     """Exact values ``-E[U]`` of the root's actions under the optimal policy (small MDPs), or
     with ``first = (action, found)`` of the actions after that first sub-task."""
-    model = problem.model()
-    memo = new_memo(problem.n_targets, problem.n_steps)
+    env = SubtaskEnv(problem.model(), new_memo(problem.n_targets, problem.n_steps))
     work = new_work()
 
     def value(state):
-        si, sf, cov, step = state
-        actions = [a for a in range(problem.n_targets) if is_available(model, si, sf, a)]
+        actions = [a for a in range(problem.n_targets) if is_available(env, state, a)]
         if not actions:
-            return terminal_value(model, cov, step), {}
+            return terminal_value(env, state), {}
         q = {a: action_value(state, a) for a in actions}
         return max(q.values()), q
 
     def action_value(state, a):
-        _, p, find_steps, miss_steps = expand_action(model, memo, *state, a, work)
+        p, find_steps, miss_steps = expand_action(env, state, a, work)
         total = 0.0
         for found, prob, steps in ((True, p, find_steps), (False, 1.0 - p, miss_steps)):
             if prob > 0.0:
                 child = tuple(x.copy() for x in state)
-                apply_outcome(model, *child, a, found, steps, work)
+                apply_outcome(env, child, a, found, steps, work)
                 total += prob * value(child)[0]
         return total
 
     state = problem.root_state()
     if first is not None:
-        _, _, find_steps, miss_steps = expand_action(model, memo, *state, first[0], work)
-        apply_outcome(model, *state, first[0], first[1], find_steps if first[1] else miss_steps,
+        _, find_steps, miss_steps = expand_action(env, state, first[0], work)
+        apply_outcome(env, state, first[0], first[1], find_steps if first[1] else miss_steps,
                       work)
     return value(state)[1]
 
@@ -130,14 +132,16 @@ def test_same_seed_and_iterations_give_the_same_plan():
 def test_tree_is_independent_of_chunking_and_initial_capacity():
     problem = six_targets(1)
     model = problem.model()
-    si, sf, cov, _ = problem.root_state()
+    root = problem.root_state()
 
     def run(chunks, capacity):
         tree = new_tree(12345, capacity)
-        memo = new_memo(6, problem.n_steps)
+        env = SubtaskEnv(model, new_memo(6, problem.n_steps))
+        state = tuple(a.copy() for a in root)
         for n in chunks:
             while n:
-                n -= run_simulations(tree, model, memo, cov, si, sf, -1, 0.5, n)
+                n -= run_simulations(tree, env, root, state, new_work(), UniformRandom(), 6,
+                                     problem.n_steps + 2, -1, 0.5, n)
                 if n:
                     tree = grow_tree(tree, 6)
         return tree

@@ -8,17 +8,16 @@ import pytest
 from hptrack.coverage.estimator import coverage_outcome
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.motion import ConstantVelocityModel
-from hptrack.planning.mdp import (
+from hptrack.planning.subtask_mdp import (
     I_LAST,
     I_MASK,
     I_STEP,
     PlanningProblem,
+    SubtaskEnv,
     apply_outcome,
     expand_action,
-    follow_covariance,
-    grow_covariance,
+    intercept_of,
     is_available,
-    measurement_update,
     new_memo,
     new_work,
     terminal_value,
@@ -45,15 +44,14 @@ def predict(cov, q, k, c_per_step=TAU):
     """Eq. (1) one step at a time."""
     form = "continuous" if c_per_step == TAU else "paper_text"
     model = ConstantVelocityModel(TAU, form)
-    f, qq = model.transition(1), model.process_noise(q, 1)
+    f, qq = model.transition(), model.process_noise(q)
     for _ in range(k):
         cov = f @ cov @ f.T + qq
     return cov
 
 
 def kalman(cov):
-    sensor = PositionMeasurementModel()
-    object.__setattr__(sensor, "noise_covariance", R)
+    sensor = PositionMeasurementModel(R)
     return sensor.update(np.zeros((1, 4)), cov[None], np.zeros((1, 2)))[1][0]
 
 
@@ -76,60 +74,10 @@ def hand_estimate(cov, q, max_steps):
 
 
 def setup(problem):
-    si, sf, cov, step = problem.root_state()
-    return problem.model(), new_memo(problem.n_targets, problem.n_steps), si, sf, cov, step
-
-
-@pytest.mark.parametrize("c_per_step", [TAU, 1.0])
-@pytest.mark.parametrize("k", [0, 1, 2, 7, 333, 1800])
-def test_closed_form_growth_equals_step_by_step(c_per_step, k):
-    cov = prior()
-    cov[0, 2] = cov[2, 0] = 2.0
-    cov[1, 2] = cov[2, 1] = -1.0
-    out = np.empty((4, 4))
-    grow_covariance(cov, 4e-4, k, TAU, c_per_step, out)
-    np.testing.assert_allclose(out, predict(cov, 4e-4, k, c_per_step), rtol=1e-11, atol=1e-9)
-
-
-@pytest.mark.parametrize("k", [1, 13, 1800])
-def test_noise_sums_match_the_notes(k):
-    """Default Q: q [[T^3/3, T^2/2], [T^2/2, T]] per axis; printed Q: the s1, s2 formula."""
-    q, t = 2e-4, k * TAU
-    s1, s2 = k * (k - 1) / 2, k * (k - 1) * (2 * k - 1) / 6
-    for c_per_step, (pp, pv, vv) in (
-            (TAU, (q * t**3 / 3, q * t**2 / 2, q * t)),
-            (1.0, (q * (k * TAU**3 / 3 + TAU**3 * s1 + TAU**2 * s2),
-                   q * (k * TAU**2 / 2 + TAU * s1), q * k))):
-        out = np.empty((4, 4))
-        grow_covariance(np.zeros((4, 4)), q, k, TAU, c_per_step, out)
-        np.testing.assert_allclose([out[0, 0], out[1, 1], out[0, 2], out[3, 1], out[2, 2]],
-                                   [pp, pp, pv, pv, vv], rtol=1e-12)
-        np.testing.assert_allclose(out, predict(np.zeros((4, 4)), q, k, c_per_step), rtol=1e-9,
-                                   atol=1e-15)
-
-
-def test_measurement_update_equals_joseph_form():
-    cov = predict(prior(), 3e-4, 400)
-    out = np.empty((4, 4))
-    measurement_update(cov, R, out)
-    np.testing.assert_allclose(out, kalman(cov), rtol=1e-9, atol=1e-12)
-    measurement_update(cov, R, cov)  # in place
-    np.testing.assert_array_equal(cov, out)
-
-
-@pytest.mark.parametrize("c_per_step", [TAU, 1.0])
-@pytest.mark.parametrize("steps", [1, 2, 10, 600, 1800])
-def test_follow_equals_riccati_step_by_step(c_per_step, steps):
-    problem = make_problem([[0, 0, 1, 1]], [prior()], c_per_step=c_per_step)
-    model = problem.model()
-    start = kalman(predict(prior(), 3e-4, 250, c_per_step))
-    expected = start
-    for _ in range(steps):
-        expected = kalman(predict(expected, 3e-4, 1, c_per_step))
-    out = np.empty((4, 4))
-    follow_covariance(model, 0, start, steps, out, new_work())
-    np.testing.assert_allclose(out, expected, rtol=1e-9, atol=1e-12)
-    assert model.follow_len[0] < 1000  # the table stops at the steady state
+    """``env``, the root state and its arrays ``(si, sf, cov, step)`` (views of the state)."""
+    state = problem.root_state()
+    env = SubtaskEnv(problem.model(), new_memo(problem.n_targets, problem.n_steps))
+    return env, state, *state
 
 
 def test_interception_and_budget_truncation_by_hand():
@@ -139,24 +87,24 @@ def test_interception_and_budget_truncation_by_hand():
     truncates the second one only."""
     covs = [prior(), prior(2000.0, 2000.0, 0.0, (0.5, 0.5))]
     problem = make_problem([[1000, 0, 0, 0], [1000, 0, 3, 0]], covs, budget=100.0)
-    model, memo, si, sf, cov, step = setup(problem)
+    env, state, si, sf, cov, step = setup(problem)
     assert problem.n_steps == 200
-    got = [expand_action(model, memo, si, sf, cov, step, a, new_work()) for a in (0, 1)]
+    got = [expand_action(env, state, a, new_work()) for a in (0, 1)]
     for a, ic in ((0, 67), (1, 75)):
         k, p, expected = hand_estimate(predict(covs[a], 3e-4, ic), 3e-4, 200 - ic)
-        assert got[a][0] == ic
-        assert got[a][1] == pytest.approx(p, rel=1e-12)
-        assert got[a][2:] == (ic + round(expected), ic + k)
-    assert got[0][3] == 187
-    assert got[1][3] == 200
+        assert intercept_of(env.model, sf, a, 0) == ic
+        assert got[a][0] == pytest.approx(p, rel=1e-12)
+        assert got[a][1:] == (ic + round(expected), ic + k)
+    assert got[0][2] == 187
+    assert got[1][2] == 200
 
 
 def test_unavailable_actions():
     problem = make_problem([[3000, 0, 0, 0], [100, 0, 31, 0], [100, 0, 0, 0]],
                            [prior()] * 3, budget=100.0, available=[True, True, False])
-    model, _, si, sf, _, _ = setup(problem)
+    env, state, *_ = setup(problem)
     # 3000 m takes exactly 200 steps: no coverage step left; faster than the agent; missed
-    assert [is_available(model, si, sf, a) for a in range(3)] == [False, False, False]
+    assert [is_available(env, state, a) for a in range(3)] == [False, False, False]
 
 
 def test_find_miss_and_terminal_transitions_by_hand():
@@ -164,11 +112,12 @@ def test_find_miss_and_terminal_transitions_by_hand():
     covs = [prior(), prior(700.0, 1200.0, -0.3, (0.25, 0.5))]
     means = np.array([[600.0, 800.0, 2.0, -1.0], [-500.0, 0.0, 0.0, 1.5]])
     problem = make_problem(means, covs)
-    model, memo, si, sf, cov, step = setup(problem)
+    env, state, si, sf, cov, step = setup(problem)
+    model = env.model
     work = new_work()
-    ic, p, find_steps, miss_steps = expand_action(model, memo, si, sf, cov, step, 0, work)
+    p, find_steps, miss_steps = expand_action(env, state, 0, work)
     # find target 0: its belief is the posterior of a measurement at the end of the sub-task
-    apply_outcome(model, si, sf, cov, step, 0, True, find_steps, work)
+    apply_outcome(env, state, 0, True, find_steps, work)
     t1 = find_steps
     assert (si[I_STEP], si[I_MASK], si[I_LAST]) == (t1, 0b11, 0)
     np.testing.assert_allclose(sf, means[0, :2] + means[0, 2:] * t1 * TAU, rtol=1e-12)
@@ -176,7 +125,8 @@ def test_find_miss_and_terminal_transitions_by_hand():
     np.testing.assert_array_equal(cov[1], covs[1])  # grows implicitly from its base
     assert list(step) == [t1, 0]
     # pursue target 1 from target 0's estimated position (no memo: 1 is still at its base)
-    ic1, p1, find1, miss1 = expand_action(model, memo, si, sf, cov, step, 1, work)
+    ic1 = intercept_of(model, sf, 1, si[I_STEP])
+    p1, find1, miss1 = expand_action(env, state, 1, work)
     t_start = t1 + ic1
     k, p_hand, expected = hand_estimate(predict(covs[1], q, t_start), q, model.n_steps - t_start)
     d, v = means[1, :2] + means[1, 2:] * t1 * TAU - sf, means[1, 2:]
@@ -186,7 +136,7 @@ def test_find_miss_and_terminal_transitions_by_hand():
     assert (p1, find1, miss1) == (pytest.approx(p_hand, rel=1e-12), ic1 + round(expected),
                                   ic1 + k)
     # miss target 1: it leaves the action list, nothing found
-    apply_outcome(model, si, sf, cov, step, 1, False, miss1, work)
+    apply_outcome(env, state, 1, False, miss1, work)
     t2 = t1 + miss1
     assert (si[I_STEP], si[I_MASK], si[I_LAST]) == (t2, 0b01, -1)
     np.testing.assert_allclose(sf, means[1, :2] + means[1, 2:] * t2 * TAU, rtol=1e-12)
@@ -194,54 +144,54 @@ def test_find_miss_and_terminal_transitions_by_hand():
     # -U at the end of the budget: every belief grown from its base
     expected_u = sum(np.linalg.slogdet(predict(c, q, model.n_steps - s)[:2, :2])[1]
                      for c, s in ((kalman(predict(covs[0], q, t1)), t1), (covs[1], 0)))
-    assert terminal_value(model, cov, step) == pytest.approx(-expected_u, rel=1e-12)
+    assert terminal_value(env, state) == pytest.approx(-expected_u, rel=1e-12)
 
 
 def test_intercept_of_a_moving_mean_from_a_later_state():
     """After 100 steps (50 s) the fleeing mean is at 1150 m: the agent at the origin needs
     1150 / 27 s = 42.59 s -> 86 steps."""
     problem = make_problem([[1000, 0, 3, 0], [0, 0, 0, 0]], [prior(), prior()])
-    model, memo, si, sf, cov, step = setup(problem)
-    si[I_STEP] = 100
-    assert expand_action(model, memo, si, sf, cov, step, 0, new_work())[0] == 86
+    env, state, si, sf, cov, step = setup(problem)
+    assert intercept_of(env.model, sf, 0, 100) == 86
 
 
 def test_follow_to_the_end_after_a_find():
     q = 3e-4
     problem = make_problem([[900, 0, 1, 1], [0, 900, 0, 0]], [prior(), prior()])
-    model, memo, si, sf, cov, step = setup(problem)
+    env, state, si, sf, cov, step = setup(problem)
+    model = env.model
     work = new_work()
-    _, _, find_steps, _ = expand_action(model, memo, si, sf, cov, step, 0, work)
-    apply_outcome(model, si, sf, cov, step, 0, True, find_steps, work)
+    _, find_steps, _ = expand_action(env, state, 0, work)
+    apply_outcome(env, state, 0, True, find_steps, work)
     left = model.n_steps - find_steps
-    assert expand_action(model, memo, si, sf, cov, step, 0, work) == (0, 1.0, left, left)
-    apply_outcome(model, si, sf, cov, step, 0, True, left, work)
+    assert expand_action(env, state, 0, work) == (1.0, left, left)
+    apply_outcome(env, state, 0, True, left, work)
     expected = kalman(predict(prior(), q, find_steps))
     for _ in range(left):
         expected = kalman(predict(expected, q, 1))
     assert si[I_STEP] == model.n_steps
     np.testing.assert_allclose(cov[0], expected, rtol=1e-9, atol=1e-12)
-    assert not any(is_available(model, si, sf, a) for a in range(2))
+    assert not any(is_available(env, state, a) for a in range(2))
 
 
 def test_a_sub_task_lasts_at_least_one_step():
     """Agent on a tiny belief: no intercept, the target is found at once (P_cdf = 1, E = 0)."""
     tiny = np.diag([1.0, 1.0, 0.01, 0.01])
     problem = make_problem([[0, 0, 0, 0]], [tiny])
-    model, memo, si, sf, cov, step = setup(problem)
+    env, state, *_ = setup(problem)
     cutoff, p, expected = coverage_outcome(tiny, 3e-4, TAU, TAU, SPEED, W, 1800)
     assert (p, expected) == (1.0, 0.0)
-    assert expand_action(model, memo, si, sf, cov, step, 0, new_work()) == (0, 1.0, 1, cutoff)
+    assert expand_action(env, state, 0, new_work()) == (1.0, 1, cutoff)
 
 
 def test_memo_gives_the_same_expansion():
     problem = make_problem([[400, -300, 1, 0], [-800, 100, 0, 2]], [prior(), prior()])
-    model, memo, si, sf, cov, step = setup(problem)
-    first = [expand_action(model, memo, si, sf, cov, step, a, new_work()) for a in (0, 1)]
-    assert (memo.cutoff >= 0).sum() == 2
-    again = [expand_action(model, memo, si, sf, cov, step, a, new_work()) for a in (0, 1)]
-    fresh = [expand_action(model, new_memo(2, model.n_steps), si, sf, cov, step, a, new_work())
-             for a in (0, 1)]
+    env, state, *_ = setup(problem)
+    first = [expand_action(env, state, a, new_work()) for a in (0, 1)]
+    assert (env.memo.cutoff >= 0).sum() == 2
+    again = [expand_action(env, state, a, new_work()) for a in (0, 1)]
+    other = SubtaskEnv(env.model, new_memo(2, env.model.n_steps))
+    fresh = [expand_action(other, state, a, new_work()) for a in (0, 1)]
     assert first == again == fresh
 
 

@@ -5,7 +5,7 @@ Active Information Gathering", IEEE RA-L 2018, built on Reduced Value Iteration 
 "Information acquisition with sensing robots: algorithms and error bounds", ICRA 2014), with the
 seed paper's modification (Sec. V-B): the step cost is the change of the total uncertainty, so
 the cost of a plan is the total ``log det Sigma^xy`` at the end of the horizon minus the one now.
-Set-up and defaults: ``shared/notes/baselines.md``.
+Set-up and defaults: ``docs/baselines.md``.
 
 One pass is a forward search, level by level over the horizon, on the deterministic covariance
 sequences of :mod:`hptrack.baselines.information`. Every kept node of a level is expanded with
@@ -29,12 +29,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Annotated, Self
 
 import numba
 import numpy as np
+from pydantic import Field, model_validator
 
-from hptrack.baselines.controls import DecisionStats, PrimitiveParams, PrimitivePlanner
+from hptrack.baselines.controls import DecisionStats, PrimitivePlanner, PrimitiveSettings, Schedule
 from hptrack.baselines.information import (
     CostKind,
     child_covariances,
@@ -46,15 +47,14 @@ from hptrack.baselines.information import (
 from hptrack.models.beliefs import position_logdet
 
 if TYPE_CHECKING:
-    from hptrack.sim.interface import Observation
+    from hptrack.interface import Observation
 
 _MAX_GRID_CELLS = 512
 """Largest number of pruning-grid cells per axis (the cells grow beyond ``delta`` if needed)."""
 
 
-@dataclass(frozen=True)
-class ArviParams(PrimitiveParams):
-    """ARVI parameters (defaults: ``shared/notes/baselines.md`` and the README's timing table).
+class ArviSettings(PrimitiveSettings):
+    """ARVI settings (defaults: ``docs/baselines.md`` and the README's timing table).
 
     Attributes:
         horizon: planning horizon in motion primitives (count; 12 x 5 s = 60 s).
@@ -71,21 +71,22 @@ class ArviParams(PrimitiveParams):
         cost: step cost, ``"difference"`` (seed paper) or ``"sum"`` (original ARVI).
     """
 
-    horizon: int = 12
-    delta_schedule_m: tuple[float, ...] = (math.inf, 150.0, 100.0, 75.0, 50.0)
-    epsilon_schedule: tuple[float, ...] = (math.inf,)
-    max_nodes_per_level: int = 2000
-    time_limit_s: float | None = None
+    horizon: Annotated[int, Field(ge=1, le=1000)] = 12
+    delta_schedule_m: Schedule = (
+        math.inf, 150.0, 100.0, 75.0, 50.0)
+    epsilon_schedule: Schedule = (math.inf,)
+    max_nodes_per_level: Annotated[int, Field(ge=1)] = 2000
+    time_limit_s: Annotated[float | None, Field(gt=0.0)] = None
     cost: CostKind = "difference"
 
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.horizon < 1 or self.max_nodes_per_level < 1 or not self.delta_schedule_m:
-            raise ValueError("horizon, max_nodes_per_level and the schedule must be non-empty")
+    effort_fields = {"time_limit": "time_limit_s"}
+
+    @model_validator(mode="after")
+    def _schedules(self) -> Self:
         if len(self.epsilon_schedule) not in (1, len(self.delta_schedule_m)):
-            raise ValueError("epsilon_schedule needs one value or one per delta")
-        if min(self.delta_schedule_m) < 0 or min(self.epsilon_schedule) < 0:
-            raise ValueError("delta and epsilon must be >= 0")
+            raise ValueError("option epsilon_schedule needs one value or one per "
+                             f"delta_schedule_m entry, got {list(self.epsilon_schedule)}")
+        return self
 
     def passes(self) -> list[tuple[float, float]]:
         """``(delta_m, epsilon)`` of each anytime pass, in order."""
@@ -201,19 +202,19 @@ class ArviPlanner(PrimitivePlanner):
     """ARVI over motion primitives (``--planner arvi``); see the module docstring."""
 
     name = "arvi"
-    params_type = ArviParams
-    params: ArviParams
+    settings_type = ArviSettings
+    settings: ArviSettings
 
     def search(self, observation: Observation) -> tuple[np.ndarray, DecisionStats]:
         """Run the anytime schedule from ``observation``; the best plan over all passes."""
         start = time.perf_counter()
-        horizon = self.horizon_primitives(observation, self.params.horizon)
-        means = mean_positions(np.asarray(observation.means, dtype=float), self.spec.time_step_s,
-                               horizon * self.params.control_steps)
+        horizon = self.horizon_primitives(observation, self.settings.horizon)
+        means = mean_positions(np.asarray(observation.means, dtype=float), self.mission.time_step,
+                               horizon * self.settings.control_steps)
         best: PassResult | None = None
         expanded, passes, capped = 0, 0, False
-        for delta, epsilon in self.params.passes():
-            limit = self.params.time_limit_s
+        for delta, epsilon in self.settings.passes():
+            limit = self.settings.time_limit_s
             if passes and limit is not None and time.perf_counter() - start >= limit:
                 break
             result = self.run_pass(observation, means, horizon, delta, epsilon)
@@ -233,7 +234,7 @@ class ArviPlanner(PrimitivePlanner):
         ``means`` are the predicted mean positions of every sub-step of the ``horizon``
         primitives (:func:`~hptrack.baselines.information.mean_positions`).
         """
-        k = self.params.control_steps
+        k = self.settings.control_steps
         n_controls = self.step_displacements.shape[0]
         positions = np.asarray(observation.agent_position, dtype=float)[None, :]
         covariances = np.asarray(observation.covariances, dtype=float)[None]
@@ -246,22 +247,22 @@ class ArviPlanner(PrimitivePlanner):
             level_means = means[level * k:(level + 1) * k + 1]
             if math.isinf(epsilon):
                 child_pos, child_unc = expand_uncertainty(
-                    self.spec, self.step_displacements, level_means, positions, covariances)
+                    self.mission, self.step_displacements, level_means, positions, covariances)
                 child_covs = None
             else:
                 child_pos, child_covs, child_unc = expand(
-                    self.spec, self.step_displacements, level_means, positions, covariances)
+                    self.mission, self.step_displacements, level_means, positions, covariances)
             expanded += positions.shape[0]
             child_costs = np.repeat(costs, n_controls) + step_costs(
-                np.repeat(uncertainty, n_controls), child_unc, self.params.cost)
+                np.repeat(uncertainty, n_controls), child_unc, self.settings.cost)
             if level == horizon - 1:
                 keep = np.array([int(np.argmin(child_costs))])
             else:
                 keep, level_capped = prune(child_pos, child_costs, child_covs, delta_m, epsilon,
-                                           self.params.max_nodes_per_level)
+                                           self.settings.max_nodes_per_level)
                 capped |= level_capped
                 covariances = (child_covs[keep] if child_covs is not None else child_covariances(
-                    self.spec, self.step_displacements, level_means, positions, covariances,
+                    self.mission, self.step_displacements, level_means, positions, covariances,
                     keep))
             parents.append(keep // n_controls)
             controls.append(keep % n_controls)

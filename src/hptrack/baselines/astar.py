@@ -4,7 +4,7 @@ Schlotfeldt, Atanasov, Pappas, "Maximum Information Bounds for Planning Active S
 Trajectories", IROS 2019 (the seed paper's reference 8968147), with the seed paper's
 modification (Sec. V-B): the step cost is the change of the total uncertainty
 ``sum_i log det Sigma_i^xy`` and the heuristic is changed to match. Set-up and defaults:
-``shared/notes/baselines.md``.
+``docs/baselines.md``.
 
 Best-first search over the tree of motion-primitive sequences (the one ARVI searches), on the
 deterministic covariance sequences of :mod:`hptrack.baselines.information`: ``g`` is the
@@ -32,13 +32,13 @@ from __future__ import annotations
 
 import heapq
 import time
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Annotated
 
 import numba
 import numpy as np
+from pydantic import Field
 
-from hptrack.baselines.controls import HOVER, DecisionStats, PrimitiveParams, PrimitivePlanner
+from hptrack.baselines.controls import HOVER, DecisionStats, PrimitivePlanner, PrimitiveSettings
 from hptrack.baselines.information import (
     CostKind,
     RiccatiBound,
@@ -49,12 +49,11 @@ from hptrack.baselines.information import (
 from hptrack.models.beliefs import position_logdet
 
 if TYPE_CHECKING:
-    from hptrack.sim.interface import MissionSpec, Observation
+    from hptrack.interface import MissionSpec, Observation
 
 
-@dataclass(frozen=True)
-class AStarParams(PrimitiveParams):
-    """A* parameters (defaults: ``shared/notes/baselines.md`` and the README's timing table).
+class AStarSettings(PrimitiveSettings):
+    """A* settings (defaults: ``docs/baselines.md`` and the README's timing table).
 
     Attributes:
         horizon: planning horizon in motion primitives (count; 6 x 5 s = 30 s).
@@ -64,23 +63,20 @@ class AStarParams(PrimitiveParams):
         cost: step cost, ``"difference"`` (seed paper) or ``"sum"`` (original A*).
     """
 
-    horizon: int = 6
-    max_expansions: int = 2000
-    heuristic_weight: float = 1.0
-    time_limit_s: float | None = None
+    horizon: Annotated[int, Field(ge=1, le=100)] = 6
+    max_expansions: Annotated[int, Field(ge=1, le=10_000_000)] = 2000
+    heuristic_weight: Annotated[float, Field(ge=0.0)] = 1.0
+    time_limit_s: Annotated[float | None, Field(gt=0.0)] = None
     cost: CostKind = "difference"
 
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.horizon < 1 or self.max_expansions < 1 or self.heuristic_weight < 0:
-            raise ValueError("horizon and max_expansions must be >= 1, heuristic_weight >= 0")
+    effort_fields = {"iterations": "max_expansions", "time_limit": "time_limit_s"}
 
 
 @numba.njit(cache=True)
 def _expand_node(node, first, positions, covariances, uncertainty, g, levels, parents, controls,
                  f, step_displacements, all_means, n_steps, horizon, difference, weight,
-                 process_noise, tau, c_per_step, noise_variance, radius, step_length, maps_a,
-                 maps_g, maps_h):
+                 process_noise, tau, c_per_step, noise, radius, step_length, maps_a,
+                 maps_g, maps_h, maps_len):
     """Expand ``node`` into the node slots ``first .. first + C - 1`` and write their ``f``."""
     n_controls = step_displacements.shape[0]
     level = levels[node]
@@ -88,7 +84,7 @@ def _expand_node(node, first, positions, covariances, uncertainty, g, levels, pa
     rollout_children(positions[node:node + 1], covariances[node:node + 1],
                      np.arange(n_controls), step_displacements,
                      all_means[level * n_steps:(level + 1) * n_steps + 1], process_noise, tau,
-                     c_per_step, noise_variance, radius, True, covariances[first:last],
+                     c_per_step, noise, radius, True, covariances[first:last],
                      uncertainty[first:last])
     for c in range(n_controls):
         j = first + c
@@ -108,8 +104,8 @@ def _expand_node(node, first, positions, covariances, uncertainty, g, levels, pa
         boundaries = np.arange(level + 2, horizon + 1) * n_steps
     bounds = np.zeros((n_controls, boundaries.shape[0]))
     bound_children(positions[first:last], covariances[first:last], (level + 1) * n_steps,
-                   boundaries, all_means, process_noise, tau, c_per_step, step_length, radius,
-                   maps_a, maps_g, maps_h, bounds)
+                   boundaries, all_means, process_noise, tau, c_per_step, noise, step_length,
+                   radius, maps_a, maps_g, maps_h, maps_len, bounds)
     for c in range(n_controls):
         h = bounds[c, 0] - uncertainty[first + c] if difference else np.sum(bounds[c])
         f[c] += weight * h
@@ -119,24 +115,23 @@ class AStarPlanner(PrimitivePlanner):
     """A* over motion primitives (``--planner astar``); see the module docstring."""
 
     name = "astar"
-    params_type = AStarParams
-    params: AStarParams
-    option_aliases = {"time_limit": "time_limit_s", "iterations": "max_expansions"}
+    settings_type = AStarSettings
+    settings: AStarSettings
 
     def reset(self, mission: MissionSpec, observation: Observation,
               rng: np.random.Generator) -> None:
         """Start a mission: precompute the heuristic's Riccati maps for the horizon."""
         super().reset(mission, observation, rng)
-        self.bound = RiccatiBound(self.spec, self.params.horizon * self.params.control_steps)
+        self.bound = RiccatiBound(mission, self.settings.horizon * self.settings.control_steps)
 
     def search(self, observation: Observation) -> tuple[np.ndarray, DecisionStats]:
         """A* from ``observation``: the optimal sequence, or the best open one if capped."""
         start = time.perf_counter()
-        params, spec = self.params, self.spec
+        params, mission = self.settings, self.mission
         horizon = self.horizon_primitives(observation, params.horizon)
         k = params.control_steps
         n_controls = self.step_displacements.shape[0]
-        means = mean_positions(np.asarray(observation.means, dtype=float), spec.time_step_s,
+        means = mean_positions(np.asarray(observation.means, dtype=float), mission.time_step,
                                horizon * k)
         difference = params.cost == "difference"
         capacity = 1 + n_controls * params.max_expansions
@@ -172,10 +167,10 @@ class AStarPlanner(PrimitivePlanner):
             expansions += 1
             _expand_node(node, n_nodes, positions, covariances, uncertainty, g, levels, parents,
                          controls, f, self.step_displacements, means, k, horizon, difference,
-                         params.heuristic_weight, spec.process_noise, spec.time_step_s,
-                         spec.c_per_step, spec.noise_variance_m2, spec.sensor_radius_m,
-                         spec.step_length_m, self.bound.maps_a, self.bound.maps_g,
-                         self.bound.maps_h)
+                         params.heuristic_weight, mission.process_noise, mission.time_step,
+                         mission.c_per_step, np.ascontiguousarray(mission.measurement_noise),
+                         mission.sensor_radius, mission.step_length, self.bound.maps_a,
+                         self.bound.maps_g, self.bound.maps_h, self.bound.maps_len)
             place = radix ** (horizon - 1 - level)
             for c, f_child in enumerate(f.tolist()):
                 heapq.heappush(heap, (f_child, code + (c + 1) * place, n_nodes + c))

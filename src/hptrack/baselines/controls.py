@@ -1,11 +1,11 @@
 """Discrete motion primitives and the step-level planner base of the ARVI and A* baselines.
 
-The control set of ``shared/notes/baselines.md``: ``n_headings`` headings at full speed plus
+The control set of ``docs/baselines.md``: ``n_headings`` headings at full speed plus
 hover, each held for ``control_steps`` simulator steps (default 10 steps = 5 s = 150 m at
 30 m/s). Control 0 is hover, so index order is the planners' tie-break (hover first); heading
 ``k`` points at ``2 pi (k - 1) / n_headings`` from the x axis, counter-clockwise.
 
-:class:`PrimitivePlanner` implements the simulator's :class:`~hptrack.sim.interface.Planner`
+:class:`PrimitivePlanner` implements the simulator's :class:`~hptrack.interface.Planner`
 protocol for any planner that chooses sequences of primitives over a receding horizon: it asks
 the subclass for a plan at a primitive boundary, executes the first ``replan_period`` primitives
 of it and turns each into one waypoint per simulator step.
@@ -18,14 +18,15 @@ import math
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Self, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar
 
 import numpy as np
+from pydantic import AfterValidator, BeforeValidator, Field
 
-from hptrack.baselines.information import RolloutSpec
+from hptrack.settings import PlannerSettings
 
 if TYPE_CHECKING:
-    from hptrack.sim.interface import MissionSpec, Observation
+    from hptrack.interface import MissionSpec, Observation
 
 HOVER = 0
 """Index of the hover control in every control set."""
@@ -39,9 +40,29 @@ def step_directions(n_headings: int) -> np.ndarray:
     return np.vstack([np.zeros((1, 2)), headings])
 
 
-@dataclass(frozen=True)
-class PrimitiveParams:
-    """Parameters shared by the step-level planners.
+def _schedule(value: Any) -> Any:
+    """A comma-separated text (from ``-o``) or a single number as a tuple of numbers."""
+    if isinstance(value, str):
+        return tuple(part.strip() for part in value.split(",") if part.strip())
+    if isinstance(value, int | float):
+        return (value,)
+    return value
+
+
+def _no_nan(values: tuple[float, ...]) -> tuple[float, ...]:
+    if any(math.isnan(v) for v in values):
+        raise ValueError(f"must not contain NaN, got {values}")
+    return values
+
+
+NonNegativeOrInf = Annotated[float, Field(ge=0.0, allow_inf_nan=True)]
+Schedule = Annotated[tuple[NonNegativeOrInf, ...], BeforeValidator(_schedule),
+                     AfterValidator(_no_nan), Field(min_length=1)]
+"""A tuple of non-negative numbers (``inf`` allowed); ``-o`` takes them comma-separated."""
+
+
+class PrimitiveSettings(PlannerSettings):
+    """Settings shared by the step-level planners.
 
     Attributes:
         control_steps: simulator steps per motion primitive (count; 10 steps of 0.5 s = 5 s).
@@ -49,57 +70,9 @@ class PrimitiveParams:
         replan_period: primitives executed from each plan before replanning (count).
     """
 
-    control_steps: int = 10
-    n_headings: int = 8
-    replan_period: int = 1
-
-    def __post_init__(self) -> None:
-        if self.control_steps < 1 or self.n_headings < 1 or self.replan_period < 1:
-            raise ValueError("control_steps, n_headings and replan_period must be >= 1")
-
-
-P = TypeVar("P", bound=PrimitiveParams)
-
-
-def params_from_options(params_type: type[P], options: dict[str, Any]) -> P:
-    """Build ``params_type`` from keyword options; strings (from a CLI) are parsed by field.
-
-    A string becomes the type of the field's default: ``int``, ``float``, a comma-separated
-    ``tuple`` of floats, ``"none"`` for ``None`` (a float otherwise), or stays a string; a
-    sequence (a YAML list) for a tuple field becomes a tuple of floats.
-    """
-    defaults = {f.name: f.default for f in dataclasses.fields(params_type)}
-    unknown = set(options) - set(defaults)
-    if unknown:
-        raise ValueError(f"unknown {params_type.__name__} options: {sorted(unknown)}")
-    values = {}
-    for key, value in options.items():
-        default = defaults[key]
-        try:
-            if isinstance(default, tuple):
-                items = value.split(",") if isinstance(value, str) else value
-                value = tuple(float(v) for v in items)
-            elif isinstance(value, str) and not isinstance(default, str):
-                if value.lower() == "none":
-                    value = None
-                elif isinstance(default, int):
-                    value = int(value)
-                else:
-                    value = float(value)
-        except (TypeError, ValueError):
-            raise ValueError(f"{params_type.__name__}.{key}: cannot read {value!r} as the type "
-                             f"of its default {default!r}") from None
-        values[key] = value
-    return params_type(**values)
-
-
-def _json_safe(value: Any) -> Any:
-    """``value`` with non-finite floats as strings and tuples as lists (strict JSON)."""
-    if isinstance(value, tuple | list):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
-    return value
+    control_steps: Annotated[int, Field(ge=1, le=10_000)] = 10
+    n_headings: Annotated[int, Field(ge=1, le=360)] = 8
+    replan_period: Annotated[int, Field(ge=1, le=10_000)] = 1
 
 
 @dataclass(frozen=True)
@@ -133,32 +106,20 @@ class PrimitivePlanner(ABC):
     """
 
     name: str
-    params_type: type[PrimitiveParams] = PrimitiveParams
-    option_aliases: dict[str, str] = {"time_limit": "time_limit_s"}
-    """Generic option names of the CLI (``--time-limit``), mapped to parameter names."""
+    settings_type: ClassVar[type[PrimitiveSettings]] = PrimitiveSettings
 
-    def __init__(self, params: PrimitiveParams | None = None) -> None:
-        self.params = self.params_type() if params is None else params
+    def __init__(self, settings: PrimitiveSettings | None = None) -> None:
+        self.settings = self.settings_type() if settings is None else settings
         self.decisions: list[DecisionStats] = []
         self._plan = np.zeros(0, dtype=np.int64)
         self._executed = 0
         self._sub_step = 0
 
-    @classmethod
-    def from_options(cls, **options: Any) -> Self:
-        """The planner with parameters from keyword options (see :func:`params_from_options`).
-
-        The registry's factory; ``option_aliases`` translates the CLI's generic names.
-        """
-        options = {cls.option_aliases.get(key, key): value for key, value in options.items()}
-        return cls(params_from_options(cls.params_type, options))
-
     def reset(self, mission: MissionSpec, observation: Observation,
               rng: np.random.Generator) -> None:
         """Start a mission (the searches are deterministic; ``rng`` is unused)."""
         self.mission = mission
-        self.spec = RolloutSpec.from_mission(mission)
-        self.step_displacements = mission.step_length * step_directions(self.params.n_headings)
+        self.step_displacements = mission.step_length * step_directions(self.settings.n_headings)
         self.decisions = []
         self._plan = np.zeros(0, dtype=np.int64)
         self._executed = 0
@@ -167,7 +128,7 @@ class PrimitivePlanner(ABC):
     def horizon_primitives(self, observation: Observation, horizon: int) -> int:
         """``horizon`` cut to the primitives that start before the budget ends (at least 1)."""
         remaining_steps = self.mission.n_steps - observation.step
-        return max(1, min(horizon, -(-remaining_steps // self.params.control_steps)))
+        return max(1, min(horizon, -(-remaining_steps // self.settings.control_steps)))
 
     @abstractmethod
     def search(self, observation: Observation) -> tuple[np.ndarray, DecisionStats]:
@@ -175,10 +136,8 @@ class PrimitivePlanner(ABC):
 
     def episode_info(self) -> dict:
         """Planning effort over the mission so far (stored with the episode record)."""
-        info: dict[str, Any] = {
-            "decisions": len(self.decisions),
-            "params": {k: _json_safe(v) for k, v in dataclasses.asdict(self.params).items()},
-        }
+        info: dict[str, Any] = {"settings": self.settings.as_json(),
+                                "decisions": len(self.decisions)}
         if self.decisions:
             times = [d.planning_time_s for d in self.decisions]
             info |= {"mean_decision_s": float(np.mean(times)),
@@ -191,7 +150,7 @@ class PrimitivePlanner(ABC):
     def act(self, observation: Observation) -> np.ndarray:
         """Waypoint ``(2,)`` in m: one full-speed step along the current primitive."""
         if self._sub_step == 0 and (self._executed >= min(len(self._plan),
-                                                           self.params.replan_period)):
+                                                           self.settings.replan_period)):
             start = time.perf_counter()
             plan, stats = self.search(observation)
             stats = dataclasses.replace(stats, step=observation.step,
@@ -201,7 +160,7 @@ class PrimitivePlanner(ABC):
             self._executed = 0
         control = self._plan[self._executed]
         self._sub_step += 1
-        if self._sub_step == self.params.control_steps:
+        if self._sub_step == self.settings.control_steps:
             self._sub_step = 0
             self._executed += 1
         position = np.asarray(observation.agent_position, dtype=float)

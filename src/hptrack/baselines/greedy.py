@@ -17,13 +17,17 @@ from __future__ import annotations
 import numpy as np
 
 from hptrack.models.beliefs import position_logdet
-from hptrack.sim.interface import MissionSpec, Observation
+from hptrack.interface import MissionSpec, Observation
+from hptrack.settings import NoSettings
 
 
 class GreedyPlanner:
     """Most-uncertain-reachable-target pursuit (module docstring)."""
 
     name = "greedy"
+
+    def __init__(self, settings: NoSettings | None = None) -> None:
+        self.settings = settings or NoSettings()
 
     def reset(self, mission: MissionSpec, observation: Observation,
               rng: np.random.Generator) -> None:
@@ -46,8 +50,7 @@ class GreedyPlanner:
         if not candidates.any():
             return int(np.argmin(reach))
         predicted = self._mission.motion.predict(obs.means, obs.covariances,
-                                                 self._mission.process_noise,
-                                                 reach / self._mission.time_step)[1]
+                                                 self._mission.process_noise, reach)[1]
         score = np.where(candidates, position_logdet(predicted), -np.inf)
         return int(np.argmax(score))
 
@@ -64,3 +67,6 @@ class GreedyPlanner:
         if self._target is None:
             self._target = self._choose(obs)
         return obs.means[self._target, :2].copy()
+
+    def episode_info(self) -> dict:
+        return {"settings": self.settings.as_json()}

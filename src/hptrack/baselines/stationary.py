@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from hptrack.sim.interface import MissionSpec, Observation
+from hptrack.interface import MissionSpec, Observation
+from hptrack.settings import NoSettings
 
 
 class StationaryPlanner:
@@ -12,9 +13,15 @@ class StationaryPlanner:
 
     name = "stationary"
 
+    def __init__(self, settings: NoSettings | None = None) -> None:
+        self.settings = settings or NoSettings()
+
     def reset(self, mission: MissionSpec, observation: Observation,
               rng: np.random.Generator) -> None:
         self._home = observation.agent_position.copy()
 
     def act(self, observation: Observation) -> np.ndarray:
         return self._home
+
+    def episode_info(self) -> dict:
+        return {"settings": self.settings.as_json()}

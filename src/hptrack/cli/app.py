@@ -1,19 +1,48 @@
-"""``hptrack`` command line: thin typer commands over the library, rendered with rich."""
+"""``hptrack`` command line: thin typer commands over the library, rendered with rich.
+
+:func:`main` is the entry point: bad input (an :class:`~hptrack.interface.InputError` or a
+command-line usage error) is one line on stderr and exit code 2; any other exception is a bug:
+its traceback, a line asking to report it, and exit code 1.
+"""
 
 from __future__ import annotations
 
+import math
+import sys
+import traceback
 from pathlib import Path
 from typing import Annotated
 
+import click
 import matplotlib
+import numpy as np
 import typer
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.markup import escape
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 from rich.table import Table
 
-from hptrack.cli.common import clean_errors, console, parse_options, write_json
+from hptrack import __version__
+from hptrack.cli.common import (
+    SETTING_HELP,
+    check_output_path,
+    check_seed,
+    console,
+    error_console,
+    planner_settings_for,
+    write_json,
+)
+from hptrack.interface import InputError
 from hptrack.registry import PLANNERS, make_planner
 from hptrack.scenario import Scenario, load_scenario, random_scenario, save_scenario
-from hptrack.sim.episode import run_episode
+from hptrack.scenario.model import MAX_STEPS
+from hptrack.sim.episode import record_bytes, run_episode
 
 matplotlib.use("Agg")
 
@@ -23,14 +52,36 @@ scenario_app = typer.Typer(help="Create and check scenario files.", no_args_is_h
 app.add_typer(scenario_app, name="scenario")
 
 DEFAULT_PLANNER = "mcts"
+MAX_RECORD_BYTES = 2 * 2**30
+"""Largest episode record ``simulate`` keeps in memory (a larger one is refused up front)."""
+
+
+def _version(value: bool) -> None:
+    if value:
+        console.print(f"hptrack {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
+                                                help="Print the version and exit.")] = False
+          ) -> None:
+    """Hierarchical planning for long-horizon multi-target tracking with one UAV."""
+
+
+def draw_seed() -> int:
+    """A fresh seed from the operating system's entropy (printed so that a run can be repeated)."""
+    return int(np.random.SeedSequence().generate_state(1, np.uint32)[0])
 
 
 def _load_or_random(path: Path | None, random: bool, targets: int, seed: int | None,
                     homogeneous: bool) -> Scenario:
     if (path is None) == (not random):
-        raise ValueError("give either a SCENARIO file or --random")
+        raise InputError("give either a SCENARIO file or --random")
     if random:
-        return random_scenario(targets, seed=0 if seed is None else seed, homogeneous=homogeneous)
+        if not 1 <= targets <= 62:
+            raise InputError(f"--targets must be between 1 and 62, got {targets}")
+        return random_scenario(targets, seed=seed, homogeneous=homogeneous)
     scenario = load_scenario(path)
     return scenario if seed is None else scenario.with_seed(seed)
 
@@ -41,58 +92,77 @@ def simulate(
                                                          help="Scenario YAML file.")] = None,
     random: Annotated[bool, typer.Option("--random", help="Use a random scenario.")] = False,
     targets: Annotated[int, typer.Option(help="Targets in a --random scenario.")] = 4,
-    homogeneous: Annotated[bool, typer.Option(help="Shared q and prior (--random).")] = False,
+    homogeneous: Annotated[bool, typer.Option("--homogeneous/--heterogeneous",
+                                              help=SETTING_HELP)] = False,
     planner: Annotated[str, typer.Option(help=f"One of: {', '.join(PLANNERS)}.")] = (
         DEFAULT_PLANNER),
-    seed: Annotated[int | None, typer.Option(help="Seed (overrides the file's).")] = None,
+    seed: Annotated[int | None, typer.Option(
+        help="Seed (overrides the file's); with --random and no seed one is drawn and printed.")
+                    ] = None,
     iterations: Annotated[int | None, typer.Option(help="Tree-search iterations per decision.")
                           ] = None,
     time_limit: Annotated[float | None, typer.Option(help="Planning seconds per decision.")
                           ] = None,
-    option: Annotated[list[str] | None, typer.Option("--option", "-o",
-                                                     help="Planner option KEY=VALUE.")] = None,
+    option: Annotated[list[str] | None, typer.Option(
+        "--option", "-o", help="Planner option KEY=VALUE (or PLANNER.KEY=VALUE).")] = None,
     json_path: Annotated[Path | None, typer.Option("--json", help="Write a JSON summary.")
                          ] = None,
     plot: Annotated[Path | None, typer.Option(help="Write the mission figure (PNG).")] = None,
     record_path: Annotated[Path | None, typer.Option("--record",
                                                      help="Save the episode (.npz).")] = None,
+    belief_stride: Annotated[int, typer.Option(
+        help="Store the beliefs every this many steps (the last is always stored).")] = 1,
 ) -> None:
     """Plan and simulate one mission; print the per-target summary and U."""
-    with clean_errors():
-        scenario = _load_or_random(scenario_path, random, targets, seed, homogeneous)
-        options = parse_options(option)
-        if iterations is not None:
-            options["iterations"] = iterations
-        if time_limit is not None:
-            options["time_limit"] = time_limit
-        agent = make_planner(planner, **options)
-        with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TimeElapsedColumn(),
-                      console=console, transient=True) as progress:
-            task = progress.add_task(f"{planner} mission", total=None)
-            record = run_episode(scenario, agent,
-                                 on_step=lambda k, n: progress.update(task, completed=k, total=n))
-        _print_summary(record)
-        if json_path:
-            write_json(json_path, record.summary())
-        if record_path:
-            record.save(record_path)
-        if plot:
-            from hptrack.viz.mission import save_mission_figure
+    check_seed(seed)
+    if belief_stride < 1:
+        raise InputError(f"--belief-stride must be a positive integer, got {belief_stride}")
+    for path, name in ((json_path, "--json"), (plot, "--plot"), (record_path, "--record")):
+        check_output_path(path, name)
+    drawn = random and seed is None
+    if drawn:
+        seed = draw_seed()
+    scenario = _load_or_random(scenario_path, random, targets, seed, homogeneous)
+    settings = planner_settings_for((planner,), option, iterations, time_limit)[planner]
+    need = record_bytes(len(scenario.targets), scenario.n_steps, belief_stride)
+    if need > MAX_RECORD_BYTES:
+        stride = math.ceil(belief_stride * need / MAX_RECORD_BYTES)
+        raise InputError(f"the mission of {scenario.n_steps:,} steps needs about "
+                         f"{need / 2**30:.1f} GiB for its record; use --belief-stride {stride} "
+                         f"or more, or a shorter budget (at most {MAX_STEPS:,} steps)")
+    if drawn:
+        console.print(f"seed {seed} (drawn; pass --seed {seed} to repeat this mission)")
+    agent = make_planner(planner, settings)
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TextColumn("steps"), TimeElapsedColumn(), TextColumn("left"),
+                  TimeRemainingColumn(), console=console, transient=True) as progress:
+        task = progress.add_task(escape(f"{planner} mission"), total=scenario.n_steps)
+        record = run_episode(scenario, agent, belief_stride=belief_stride,
+                             on_step=lambda k, n: progress.update(task, completed=k))
+    if not math.isfinite(record.uncertainty):
+        raise RuntimeError(f"the mission ended with a non-finite U ({record.uncertainty})")
+    _print_summary(record)
+    if json_path:
+        write_json(json_path, {**record.summary(), "scenario_seed": scenario.seed,
+                               "seed_drawn": drawn})
+    if record_path:
+        record.save(record_path)
+    if plot:
+        from hptrack.viz.mission import save_mission_figure
 
-            plot.parent.mkdir(parents=True, exist_ok=True)
-            save_mission_figure(record, str(plot))
-            console.print(f"figure written to {plot}")
+        save_mission_figure(record, str(plot))
+        console.print(f"figure written to {escape(str(plot))}")
 
 
 def _print_summary(record) -> None:
-    table = Table(title=f"{record.planner} mission, seed {record.seed}, "
-                        f"{record.times[-1]:.0f} s")
+    table = Table(title=escape(f"{record.planner} mission, seed {record.seed}, "
+                               f"{record.times[-1]:.0f} s"))
     table.add_column("target")
     table.add_column("final log det Σxy", justify="right")
     table.add_column("detections (steps)", justify="right")
     for tid, logdet, count in zip(record.target_ids, record.per_target_logdet,
                                   record.detection_counts(), strict=True):
-        table.add_row(tid, f"{logdet:.3f}", str(int(count)))
+        table.add_row(escape(tid), f"{logdet:.3f}", str(int(count)))
     table.add_section()
     table.add_row("U", f"{record.uncertainty:.3f}", str(int(record.detections.sum())))
     console.print(table)
@@ -102,31 +172,34 @@ def _print_summary(record) -> None:
 def scenario_random(
     targets: Annotated[int, typer.Option(help="Number of targets.")],
     seed: Annotated[int, typer.Option(help="Seed; fixes every drawn value.")] = 0,
-    homogeneous: Annotated[bool, typer.Option(help="One q and one prior for all targets.")
-                           ] = False,
+    homogeneous: Annotated[bool, typer.Option("--homogeneous/--heterogeneous",
+                                              help=SETTING_HELP)] = False,
     output: Annotated[Path, typer.Option("--output", "-o", help="YAML file to write.")] = Path(
         "scenario.yaml"),
 ) -> None:
     """Write the paper's random scenario (Sec. V) to a YAML file."""
-    with clean_errors():
-        save_scenario(random_scenario(targets, seed=seed, homogeneous=homogeneous), output)
-        console.print(f"{targets}-target scenario (seed {seed}) written to {output}")
+    check_seed(seed)
+    if not 1 <= targets <= 62:
+        raise InputError(f"--targets must be between 1 and 62, got {targets}")
+    check_output_path(output, "--output")
+    save_scenario(random_scenario(targets, seed=seed, homogeneous=homogeneous), output)
+    console.print(f"{targets}-target scenario (seed {seed}) written to {escape(str(output))}")
 
 
 @scenario_app.command("check")
 def scenario_check(path: Annotated[Path, typer.Argument(help="Scenario YAML file.")]) -> None:
     """Validate a scenario file."""
-    with clean_errors():
-        scenario = load_scenario(path)
-        console.print(f"{path}: valid, {len(scenario.targets)} targets, "
-                      f"{scenario.budget:g} s budget")
+    scenario = load_scenario(path)
+    console.print(f"{escape(str(path))}: valid, {len(scenario.targets)} targets, "
+                  f"{scenario.budget:g} s budget")
 
 
 @app.command("planners")
 def list_planners() -> None:
     """List the registered planners."""
-    for name in PLANNERS:
-        console.print(name)
+    for name, entry in PLANNERS.items():
+        console.print(f"{name}: {entry.summary}; options: "
+                      f"{', '.join(entry.settings_type.model_fields) or 'none'}")
 
 
 def _register_commands() -> None:
@@ -139,6 +212,31 @@ def _register_commands() -> None:
 _register_commands()
 
 
-def main() -> None:
-    """Entry point of the ``hptrack`` script."""
-    app()
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``hptrack`` script (exit codes: 0 done, 1 a bug, 2 bad input)."""
+    try:
+        code = app(args=argv, prog_name="hptrack", standalone_mode=False)
+    except click.exceptions.UsageError as err:
+        error_console.print(f"[bold red]error:[/] {escape(err.format_message())}",
+                            highlight=False, soft_wrap=True)
+        sys.exit(2)
+    except InputError as err:
+        message = " ".join(str(err).split())
+        error_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False,
+                            soft_wrap=True)
+        sys.exit(2)
+    except (KeyboardInterrupt, click.exceptions.Abort):
+        error_console.print("interrupted", highlight=False)
+        sys.exit(130)
+    except click.exceptions.Exit as err:
+        sys.exit(err.exit_code)
+    except Exception:
+        traceback.print_exc()
+        error_console.print("[bold red]This is a bug in hptrack, not a problem with your input: "
+                            "please report it with the traceback above.[/]", highlight=False)
+        sys.exit(1)
+    sys.exit(code if isinstance(code, int) else 0)
+
+
+if __name__ == "__main__":
+    main()

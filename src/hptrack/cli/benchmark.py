@@ -8,16 +8,25 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from hptrack.cli.common import clean_errors, console, parse_options, write_json
+from hptrack.cli.common import (
+    SETTING_HELP,
+    check_output_dir,
+    check_seed,
+    check_output_path,
+    console,
+    planner_settings_for,
+    write_json,
+)
+from hptrack.interface import InputError
 
 
-def _int_list(text: str) -> tuple[int, ...]:
+def _int_list(text: str, option: str) -> tuple[int, ...]:
     try:
         values = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
-        raise ValueError(f"expected comma-separated integers, got {text!r}") from None
-    if not values or min(values) < 1:
-        raise ValueError(f"expected positive integers, got {text!r}")
+        raise InputError(f"{option} expects comma-separated integers, got {text!r}") from None
+    if not values or min(values) < 1 or max(values) > 62:
+        raise InputError(f"{option} expects integers between 1 and 62, got {text!r}")
     return values
 
 
@@ -28,17 +37,17 @@ def benchmark(
                          ] = 100,
     planners: Annotated[str, typer.Option(help="Planner names, comma-separated.")
                         ] = "mcts,greedy,stationary",
-    homogeneous: Annotated[bool, typer.Option(
-        "--homogeneous/--heterogeneous", help="Shared q and prior (the ARVI/A* setting).")
-                           ] = True,
-    first_seed: Annotated[int, typer.Option(min=0, help="First scenario seed.")] = 0,
+    homogeneous: Annotated[bool, typer.Option("--homogeneous/--heterogeneous",
+                                              help=SETTING_HELP)] = False,
+    first_seed: Annotated[int, typer.Option(help="First scenario seed.")] = 0,
     iterations: Annotated[int | None, typer.Option(help="Tree-search iterations per decision.")
                           ] = None,
     time_limit: Annotated[float | None, typer.Option(help="Planning seconds per decision.")
                           ] = None,
     option: Annotated[list[str] | None, typer.Option(
-        "--option", "-o", help="Planner option PLANNER.KEY=VALUE.")] = None,
-    workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
+        "--option", "-o", help="Planner option PLANNER.KEY=VALUE (KEY=VALUE with one planner).")
+                      ] = None,
+    workers: Annotated[int, typer.Option(help="Worker processes.")] = 1,
     db: Annotated[Path, typer.Option(help="SQLite results file (resumable).")
                   ] = Path("results/benchmark.db"),
     out: Annotated[Path, typer.Option(help="Folder for tables and figures.")
@@ -53,47 +62,47 @@ def benchmark(
     """Run the multi-target benchmark (paper Tables II-III); results are stored as they finish."""
     from hptrack.experiments.benchmark import BenchmarkConfig, run_benchmark, summarise
     from hptrack.experiments.store import ResultStore
-    from hptrack.registry import PLANNERS
+    from hptrack.registry import planner_entry
 
-    with clean_errors():
-        if iterations is not None and time_limit is not None:
-            raise ValueError("give --iterations or --time-limit, not both")
-        names = tuple(p.strip() for p in planners.split(",") if p.strip())
-        for name in names:
-            if name not in PLANNERS:
-                raise ValueError(f"unknown planner {name!r}; choose from {sorted(PLANNERS)}")
-        per_planner: dict = {}
-        for key, value in parse_options(option).items():
-            planner, sep, name = key.partition(".")
-            if not sep:
-                raise ValueError(f"--option expects PLANNER.KEY=VALUE, got {key!r}")
-            per_planner.setdefault(planner, {})[name] = value
-        effort = {"iterations": iterations} if iterations is not None else (
-            {"time_limit": time_limit} if time_limit is not None else {})
-        config = BenchmarkConfig(planners=names, target_counts=_int_list(targets),
-                                 scenarios=scenarios, homogeneous=homogeneous,
-                                 first_seed=first_seed, effort=effort, options=per_planner)
-        store = ResultStore(db)
-        with Progress(TextColumn("[bold]benchmark"), BarColumn(), MofNCompleteColumn(),
-                      TimeElapsedColumn(), TextColumn("{task.description}"),
-                      console=console) as progress:
-            task = progress.add_task("", total=None)
+    check_seed(first_seed, "--first-seed")
+    if scenarios < 1:
+        raise InputError(f"--scenarios must be a positive integer, got {scenarios}")
+    if workers < 1:
+        raise InputError(f"--workers must be a positive integer, got {workers}")
+    if iterations is not None and time_limit is not None:
+        raise InputError("give --iterations or --time-limit, not both")
+    names = tuple(dict.fromkeys(p.strip() for p in planners.split(",") if p.strip()))
+    if not names:
+        raise InputError(f"--planners expects planner names, got {planners!r}")
+    for name in names:
+        planner_entry(name)
+    counts = _int_list(targets, "--targets")
+    settings = planner_settings_for(names, option, iterations, time_limit)
+    check_output_dir(out, "--out")
+    check_output_path(json_path, "--json")
+    config = BenchmarkConfig(planners=names, settings=settings, target_counts=counts,
+                             scenarios=scenarios, homogeneous=homogeneous, first_seed=first_seed)
+    store = ResultStore(db)
+    with Progress(TextColumn("[bold]benchmark"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), TextColumn("{task.description}"),
+                  console=console) as progress:
+        task = progress.add_task("", total=None)
 
-            def on_done(row, finished, total):
-                progress.update(task, completed=finished, total=total,
-                                description=f"{row.key.planner} n={row.key.n_targets} "
-                                            f"seed={row.key.seed}: U={row.uncertainty:.2f}")
+        def on_done(row, finished, total):
+            progress.update(task, completed=finished, total=total,
+                            description=f"{row.key.planner} n={row.key.n_targets} "
+                                        f"seed={row.key.seed}: U={row.uncertainty:.2f}")
 
-            ran = run_benchmark(config, store, workers=workers, on_done=on_done)
-        keys = set(config.keys())
-        rows = [r for r in store.rows() if r.key in keys]
-        store.close()
-        console.print(f"{ran} episodes run now, {len(rows)} in the table ({db})")
-        _write_report(config, rows, out, figure_planners, figure_targets)
-        if json_path:
-            summary = summarise(rows)
-            write_json(json_path, {p: {str(n): c for n, c in by_n.items()}
-                                   for p, by_n in summary.items()})
+        ran = run_benchmark(config, store, workers=workers, on_done=on_done)
+    keys = set(config.keys())
+    rows = [r for r in store.rows() if r.key in keys]
+    store.close()
+    console.print(f"{ran} episodes run now, {len(rows)} of {len(keys)} in the table ({db})")
+    _write_report(config, rows, out, figure_planners, figure_targets)
+    if json_path:
+        summary = summarise(rows)
+        write_json(json_path, {p: {str(n): c for n, c in by_n.items()}
+                               for p, by_n in summary.items()})
 
 
 def _write_report(config, rows, out: Path, figure_planners: str | None,
@@ -101,10 +110,9 @@ def _write_report(config, rows, out: Path, figure_planners: str | None,
     from matplotlib.figure import Figure
     from rich.markdown import Markdown
 
-    from hptrack.experiments.benchmark import scenario_for
+    from hptrack.experiments.benchmark import planner_for, scenario_for
     from hptrack.experiments.report import markdown_tables, write_csv
     from hptrack.experiments.store import EpisodeKey
-    from hptrack.registry import make_planner
     from hptrack.sim.episode import run_episode
     from hptrack.viz.benchmark import plot_uncertainty_boxes
     from hptrack.viz.mission import plot_mission
@@ -113,7 +121,8 @@ def _write_report(config, rows, out: Path, figure_planners: str | None,
     paper = (("ARVI (paper)", "A* with heuristic (paper)", "hierarchical, homogeneous (paper)")
              if config.homogeneous else
              ("ADFQ (paper)", "hierarchical, heterogeneous (paper)"))
-    text = (f"Setting: {config.setting}; planning effort: {config.effort_label}; "
+    efforts = "; ".join(f"{p}: {config.settings[p].effort_label()}" for p in config.planners)
+    text = (f"Setting: {config.setting}; planning effort: {efforts}; "
             f"{config.scenarios} scenarios per n from seed {config.first_seed}.\n\n"
             + markdown_tables(rows, paper))
     (out / "table.md").write_text(text)
@@ -131,9 +140,11 @@ def _write_report(config, rows, out: Path, figure_planners: str | None,
     n_figure = figure_targets or max(config.target_counts)
     fig = Figure(figsize=(6.5 * len(names), 6.0))
     for i, name in enumerate(names):
-        key = EpisodeKey(name, n_figure, config.first_seed, config.setting, config.effort_label)
-        record = run_episode(scenario_for(key),
-                             make_planner(name, **config.planner_options(name)))
+        if name not in config.settings:
+            raise InputError(f"--figure-planners: {name!r} is not among --planners")
+        key = EpisodeKey(name, n_figure, config.first_seed, config.setting,
+                         config.settings[name].canonical())
+        record = run_episode(scenario_for(key), planner_for(key))
         plot_mission(fig.add_subplot(1, len(names), i + 1), record)
     fig.tight_layout()
     fig.savefig(out / "trajectories.png", dpi=110)

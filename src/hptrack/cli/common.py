@@ -1,42 +1,131 @@
-"""Shared CLI helpers: one-line errors, rich console, planner option parsing."""
+"""Shared CLI helpers: the rich consoles, planner options, output paths and JSON output.
+
+Errors are not handled here: :func:`hptrack.cli.app.main` turns an
+:class:`~hptrack.interface.InputError` (and a command-line usage error) into one line and exit
+code 2, and lets every other exception show its traceback with exit code 1.
+"""
 
 from __future__ import annotations
 
-import contextlib
 import json
-from collections.abc import Iterator
+import math
+import os
 from pathlib import Path
+from typing import Any
 
-import typer
-import yaml
 from rich.console import Console
+
+from hptrack.interface import InputError
+from hptrack.registry import PLANNERS, planner_entry
+from hptrack.settings import PlannerSettings
 
 console = Console()
 error_console = Console(stderr=True)
 
-
-@contextlib.contextmanager
-def clean_errors() -> Iterator[None]:
-    """Turn input errors into one red line on stderr and exit code 2 (no traceback)."""
-    try:
-        yield
-    except (ValueError, OSError) as err:
-        error_console.print(f"[bold red]error:[/] {err}", highlight=False, soft_wrap=True)
-        raise typer.Exit(code=2) from None
+SETTING_HELP = ("Shared q and prior for all targets (the paper's ARVI/A* setting) or drawn per "
+                "target; default heterogeneous.")
 
 
-def parse_options(pairs: list[str] | None) -> dict:
-    """``["key=value", ...]`` to a dict, values parsed as YAML scalars (``3`` -> int)."""
-    options = {}
+def check_seed(seed: int | None, option: str = "--seed") -> None:
+    """Refuse a seed that is not a non-negative 63-bit integer."""
+    if seed is not None and not 0 <= seed < 2**63:
+        raise InputError(f"{option} must be a non-negative integer below 2^63, got {seed}")
+
+
+def parse_value(text: str) -> Any:
+    """A ``-o`` value: an integer, a number, ``true``/``false``, ``none``, or the text as is
+    (comma-separated lists stay text; the settings model splits them)."""
+    lowered = text.strip().lower()
+    if lowered in ("none", "null"):
+        return None
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text.strip()
+
+
+def planner_options(pairs: list[str] | None, planners: tuple[str, ...]) -> dict[str, dict]:
+    """``-o`` options per planner: ``PLANNER.KEY=VALUE``, or ``KEY=VALUE`` when only one planner
+    runs. Keys may use ``-`` for ``_``.
+
+    Raises:
+        InputError: a malformed option, a planner that is not running, or a bare key with
+            several planners.
+    """
+    out: dict[str, dict] = {p: {} for p in planners}
     for pair in pairs or []:
         key, sep, value = pair.partition("=")
+        key = key.strip().replace("-", "_")
         if not sep or not key:
-            raise ValueError(f"--option expects KEY=VALUE, got {pair!r}")
-        options[key.strip().replace("-", "_")] = yaml.safe_load(value)
-    return options
+            raise InputError(f"--option expects KEY=VALUE or PLANNER.KEY=VALUE, got {pair!r}")
+        prefix, dot, name = key.partition(".")
+        if dot:
+            if prefix not in PLANNERS:
+                raise InputError(f"--option {pair!r}: unknown planner {prefix!r}; choose from "
+                                 f"{', '.join(sorted(PLANNERS))}")
+            if prefix not in out:
+                raise InputError(f"--option {pair!r}: planner {prefix!r} is not running "
+                                 f"(running: {', '.join(planners)})")
+            out[prefix][name] = parse_value(value)
+        elif len(planners) == 1:
+            out[planners[0]][key] = parse_value(value)
+        else:
+            raise InputError(f"--option {pair!r}: say which planner, PLANNER.{key}=VALUE "
+                             f"(running: {', '.join(planners)})")
+    return out
+
+
+def planner_settings_for(planners: tuple[str, ...], pairs: list[str] | None,
+                         iterations: int | None, time_limit: float | None
+                         ) -> dict[str, PlannerSettings]:
+    """Validated settings of each planner from ``-o`` options and the effort flags (which only
+    set the planners that have such a notion; an explicit ``-o`` wins)."""
+    if iterations is not None and iterations < 1:
+        raise InputError(f"--iterations must be a positive integer, got {iterations}")
+    if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
+        raise InputError(f"--time-limit must be a positive number of seconds, got {time_limit}")
+    options = planner_options(pairs, planners)
+    out = {}
+    for name in planners:
+        entry = planner_entry(name)
+        merged = {**entry.settings_type.effort_options(iterations, time_limit), **options[name]}
+        out[name] = entry.settings_type.from_options(name, merged)
+    return out
+
+
+def check_output_path(path: Path | None, option: str) -> None:
+    """Refuse, before any work, an output path that cannot be written (a folder, an unwritable
+    file or parent)."""
+    if path is None:
+        return
+    if path.is_dir():
+        raise InputError(f"{option} {path}: is a folder, not a file")
+    parent = path.parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(f"{option} {path}: cannot create its folder ({err.strerror})") from None
+    if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise InputError(f"{option} {path}: not writable")
+
+
+def check_output_dir(path: Path, option: str) -> None:
+    """Refuse, before any work, an output folder that cannot be created or written."""
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{option} {path}: is a file, not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(f"{option} {path}: cannot create it ({err.strerror})") from None
+    if not os.access(path, os.W_OK):
+        raise InputError(f"{option} {path}: not writable")
 
 
 def write_json(path: Path, data: object) -> None:
-    """Write ``data`` as indented JSON, creating parent folders."""
+    """Write ``data`` as indented strict JSON (a non-finite number is a bug, never written)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=2) + "\n")
+    path.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")

@@ -3,6 +3,7 @@ estimator-accuracy experiment of the paper's Sec. V-A (Table I, Fig. 5)."""
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import Annotated
@@ -10,10 +11,12 @@ from typing import Annotated
 import numpy as np
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.markup import escape
 from rich.table import Table
 
-from hptrack.cli.common import clean_errors, console, write_json
-from hptrack.coverage import CoverageSettings, CoverageSubtask
+from hptrack.cli.common import check_output_dir, check_output_path, check_seed, console, write_json
+from hptrack.coverage import CoverageSubtask
+from hptrack.interface import InputError, MissionSpec
 from hptrack.experiments.coverage_validation import (
     PAPER_MAPE,
     ValidationConfig,
@@ -29,18 +32,23 @@ from hptrack.scenario import load_scenario
 
 
 def _whole_steps(seconds: float, time_step: float, name: str) -> int:
+    if not math.isfinite(seconds):
+        raise InputError(f"{name} must be a finite number of seconds, got {seconds}")
     steps = round(seconds / time_step)
     if seconds < 0 or abs(seconds / time_step - steps) > 1e-9:
-        raise ValueError(f"{name} {seconds:g} s is not a non-negative whole number of "
+        raise InputError(f"{name} {seconds:g} s is not a non-negative whole number of "
                          f"{time_step:g} s steps")
     return steps
 
 
 def _parse_delays(text: str) -> tuple[float, ...]:
     try:
-        return tuple(float(part) for part in text.split(",") if part.strip())
+        values = tuple(float(part) for part in text.split(",") if part.strip())
     except ValueError:
-        raise ValueError(f"--delays expects comma-separated seconds, got {text!r}") from None
+        raise InputError(f"--delays expects comma-separated seconds, got {text!r}") from None
+    if not values or not all(math.isfinite(v) and v >= 0 for v in values):
+        raise InputError(f"--delays expects finite non-negative seconds, got {text!r}")
+    return values
 
 
 def coverage(
@@ -53,59 +61,61 @@ def coverage(
     plot: Annotated[Path | None, typer.Option(help="Write the plan figure (PNG).")] = None,
 ) -> None:
     """Plan one coverage sub-task (intercept + shifting spiral) and print its estimate."""
-    with clean_errors():
-        scenario = load_scenario(scenario_path)
-        mission = scenario.mission_spec()
-        if target not in mission.target_ids:
-            raise ValueError(f"unknown target {target!r}; targets are {list(mission.target_ids)}")
-        i = mission.target_ids.index(target)
-        d = _whole_steps(delay, mission.time_step, "--delay")
-        if delay >= mission.budget:
-            raise ValueError(f"--delay {delay:g} s leaves no budget (budget {mission.budget:g} s)")
-        q = float(mission.process_noise[i])
-        means, covs = mission.motion.predict(scenario.means()[i:i + 1],
-                                             scenario.covariances()[i:i + 1], q, d)
-        subtask = CoverageSubtask(np.asarray(scenario.agent.position), means[0], covs[0], q,
-                                  mission, mission.budget - delay, i, d)
-        est = subtask.estimate
-        table = Table(title=f"coverage of {target} after waiting {delay:g} s")
-        table.add_column("quantity")
-        table.add_column("value", justify="right")
-        for name, value in (("intercept flight", f"{subtask.intercept_time:.1f} s"),
-                            ("t_cutoff (from coverage start)", f"{est.cutoff_time:.1f} s"),
-                            ("p_find", f"{est.p_find:.4f}"),
-                            ("E[T_find] (from coverage start)", f"{est.expected_time:.2f} s"),
-                            ("cut by the budget", "yes" if est.budget_limited else "no")):
-            table.add_row(name, value)
-        console.print(table)
-        positions = subtask.planned_positions()
-        if json_path:
-            write_json(json_path, {
-                "target": target, "delay": delay, "time_step": mission.time_step,
-                "agent_speed": mission.agent_speed,
-                "sensor_diameter": mission.sensor.sensor_diameter,
-                "process_noise_form": mission.motion.process_noise_form,
-                "belief_at_departure": {"mean": means[0].tolist(), "covariance": covs[0].tolist(),
-                                        "process_noise": q},
-                "intercept_time": subtask.intercept_time, "intercept_steps":
-                    subtask.intercept.steps, "t_cutoff": est.cutoff_time,
-                "cutoff_steps": est.cutoff_steps, "p_find": est.p_find,
-                "expected_time": est.expected_time, "budget_limited": est.budget_limited,
-                "cdf": est.cdf.tolist(), "positions": positions.tolist(),
-            })
-        if plot:
-            from hptrack.viz.coverage import save_plan_figure
+    check_output_path(json_path, "--json")
+    check_output_path(plot, "--plot")
+    scenario = load_scenario(scenario_path)
+    mission = scenario.mission_spec()
+    if target not in mission.target_ids:
+        raise InputError(f"--target {target!r} is not a target of {scenario_path}; targets are "
+                         f"{list(mission.target_ids)}")
+    i = mission.target_ids.index(target)
+    d = _whole_steps(delay, mission.time_step, "--delay")
+    if delay >= mission.budget:
+        raise InputError(f"--delay {delay:g} s leaves no budget (budget {mission.budget:g} s)")
+    q = float(mission.process_noise[i])
+    means, covs = mission.motion.predict(scenario.means()[i:i + 1],
+                                         scenario.covariances()[i:i + 1], q, d * mission.time_step)
+    subtask = CoverageSubtask(np.asarray(scenario.agent.position), means[0], covs[0], q,
+                              mission, mission.budget - delay, i, d)
+    est = subtask.estimate
+    table = Table(title=escape(f"coverage of {target} after waiting {delay:g} s"))
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    for name, value in (("intercept flight", f"{subtask.intercept_time:.1f} s"),
+                        ("t_cutoff (from coverage start)", f"{est.cutoff_time:.1f} s"),
+                        ("p_find", f"{est.p_find:.4f}"),
+                        ("E[T_find] (from coverage start)", f"{est.expected_time:.2f} s"),
+                        ("cut by the budget", "yes" if est.budget_limited else "no")):
+        table.add_row(name, value)
+    console.print(table)
+    positions = subtask.planned_positions()
+    if json_path:
+        write_json(json_path, {
+            "target": target, "delay": delay, "time_step": mission.time_step,
+            "agent_speed": mission.agent_speed,
+            "sensor_diameter": mission.sensor.sensor_diameter,
+            "process_noise_form": mission.motion.process_noise_form,
+            "belief_at_departure": {"mean": means[0].tolist(), "covariance": covs[0].tolist(),
+                                    "process_noise": q},
+            "intercept_time": subtask.intercept_time, "intercept_steps":
+                subtask.intercept.steps, "t_cutoff": est.cutoff_time,
+            "cutoff_steps": est.cutoff_steps, "p_find": est.p_find,
+            "expected_time": est.expected_time, "budget_limited": est.budget_limited,
+            "cdf": est.cdf.tolist(), "positions": positions.tolist(),
+        })
+    if plot:
+        from hptrack.viz.coverage import save_plan_figure
 
-            n = subtask.intercept.steps
-            start_mean = subtask.intercept.start
-            end_mean, end_cov = mission.motion.predict(
-                np.concatenate([start_mean, means[0, 2:]])[None], subtask.start_covariance[None],
-                q, est.cutoff_steps)
-            plot.parent.mkdir(parents=True, exist_ok=True)
-            save_plan_figure(str(plot), positions, n, start_mean,
-                             subtask.start_covariance[:2, :2], end_mean[0, :2],
-                             end_cov[0, :2, :2], est.cdf, mission.time_step)
-            console.print(f"figure written to {plot}")
+        n = subtask.intercept.steps
+        start_mean = subtask.intercept.start
+        end_mean, end_cov = mission.motion.predict(
+            np.concatenate([start_mean, means[0, 2:]])[None], subtask.start_covariance[None],
+            q, est.cutoff_time)
+        plot.parent.mkdir(parents=True, exist_ok=True)
+        save_plan_figure(str(plot), positions, n, start_mean,
+                         subtask.start_covariance[:2, :2], end_mean[0, :2],
+                         end_cov[0, :2, :2], est.cdf, mission.time_step)
+        console.print(f"figure written to {plot}")
 
 
 def validate_coverage(
@@ -124,33 +134,40 @@ def validate_coverage(
     sample_case: Annotated[int, typer.Option(help="Case drawn in the CDF figure.")] = 0,
 ) -> None:
     """Estimator-accuracy experiment (paper Sec. V-A): MAPE of P_find and E[T_find] per delay."""
-    with clean_errors():
-        config = ValidationConfig(cases=cases, runs=runs, delays=_parse_delays(delays), seed=seed,
-                                  settings=CoverageSettings(process_noise_form=process_noise_form))
-        if not 0 <= sample_case < cases:
-            raise ValueError(f"--sample-case {sample_case} is not among the {cases} cases")
-        console.print(f"Q form: {process_noise_form}; {cases} cases x {len(config.delays)} delays "
-                      f"x {runs} runs; {workers} worker(s); results in {out}")
-        start = time.perf_counter()
-        with Progress(TextColumn("[bold]cases"), BarColumn(), MofNCompleteColumn(),
-                      TimeElapsedColumn(), console=console) as progress:
-            task = progress.add_task("cases", total=cases)
-            rows = run_validation(config, out, workers,
-                                  on_case=lambda done, total: progress.update(task, completed=done))
-        wall = time.perf_counter() - start
-        summary = summarise(rows, config.delays)
-        write_reports(summary, out, wall)
-        _print_table(summary, wall)
-        from hptrack.viz.coverage import save_cdf_figure
+    check_seed(seed)
+    for value, name in ((cases, "--cases"), (runs, "--runs"), (workers, "--workers")):
+        if value < 1:
+            raise InputError(f"{name} must be a positive integer, got {value}")
+    for delay in _parse_delays(delays):
+        _whole_steps(delay, MissionSpec().time_step, "--delays")
+    check_output_dir(out, "--out")
+    check_output_path(json_path, "--json")
+    config = ValidationConfig(cases=cases, runs=runs, delays=_parse_delays(delays), seed=seed,
+                              mission=MissionSpec(process_noise_form=process_noise_form))
+    if not 0 <= sample_case < cases:
+        raise InputError(f"--sample-case {sample_case} is not among the {cases} cases")
+    console.print(f"Q form: {process_noise_form}; {cases} cases x {len(config.delays)} delays "
+                  f"x {runs} runs; {workers} worker(s); results in {out}")
+    start = time.perf_counter()
+    with Progress(TextColumn("[bold]cases"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console) as progress:
+        task = progress.add_task("cases", total=cases)
+        rows = run_validation(config, out, workers,
+                              on_case=lambda done, total: progress.update(task, completed=done))
+    wall = time.perf_counter() - start
+    summary = summarise(rows, config.delays)
+    write_reports(summary, out, wall)
+    _print_table(summary, wall)
+    from hptrack.viz.coverage import save_cdf_figure
 
-        _, panels = case_rows(draw_case(sample_case, seed), config, keep_times=True)
-        figure = out / f"cdf-case-{sample_case}.png"
-        save_cdf_figure(panels, str(figure), title=f"case {sample_case}: estimated against "
-                                                   f"simulated ({runs} runs)")
-        console.print(f"tables in {out}/mape.md and mape.csv, per-case rows in {out}/cases.csv, "
-                      f"figure {figure}")
-        if json_path:
-            write_json(json_path, mape_json(summary))
+    _, panels = case_rows(draw_case(sample_case, seed), config, keep_times=True)
+    figure = out / f"cdf-case-{sample_case}.png"
+    save_cdf_figure(panels, str(figure), title=f"case {sample_case}: estimated against "
+                                               f"simulated ({runs} runs)")
+    console.print(f"tables in {out}/mape.md and mape.csv, per-case rows in {out}/cases.csv, "
+                  f"figure {figure}")
+    if json_path:
+        write_json(json_path, mape_json(summary))
 
 
 def _print_table(summary: dict, wall: float) -> None:

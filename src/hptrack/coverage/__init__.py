@@ -2,12 +2,11 @@
 
 Compiled kernels for the tree search: :func:`intercept_time`, :func:`intercept_steps`,
 :func:`coverage_outcome` (and :func:`spiral_phases` for the path). Python objects for planners:
-:class:`CoverageSubtask`, :class:`CoveragePlanner`, :func:`estimate_coverage`.
+:class:`CoverageSubtask`, :func:`estimate_coverage`.
 """
 
 from hptrack.coverage.estimator import (
     CoverageEstimate,
-    CoverageSettings,
     coverage_cdf,
     coverage_outcome,
     estimate_coverage,
@@ -17,15 +16,14 @@ from hptrack.coverage.intercept import (
     intercept_path,
     intercept_steps,
     intercept_time,
+    intercept_waypoint,
     plan_intercept,
 )
 from hptrack.coverage.spiral import ShiftingSpiral, ellipse_axes, spiral_phases
-from hptrack.coverage.subtask import CoveragePlanner, CoverageSubtask
+from hptrack.coverage.subtask import CoverageSubtask
 
 __all__ = [
     "CoverageEstimate",
-    "CoveragePlanner",
-    "CoverageSettings",
     "CoverageSubtask",
     "Intercept",
     "ShiftingSpiral",
@@ -36,6 +34,7 @@ __all__ = [
     "intercept_path",
     "intercept_steps",
     "intercept_time",
+    "intercept_waypoint",
     "plan_intercept",
     "spiral_phases",
 ]

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm, position_covariance_after
-from hptrack.sim.interface import MissionSpec
+from hptrack.interface import MissionSpec
+from hptrack.models.motion import position_covariance_after, position_polynomials
 
 MAX_COVERAGE_STEPS = 10_000_000
 """Cap on ``t_cutoff`` when no budget is given; reaching it means the belief does not grow."""
@@ -39,26 +39,6 @@ def _covered_ratio(cov, q, k, tau, c_per_step, speed, diameter):
     sxx, sxy, syy = position_covariance_after(cov, q, k, tau, c_per_step)
     area = speed * diameter * k * tau + math.pi * 0.25 * diameter * diameter
     return area / math.sqrt(sxx * syy - sxy * sxy)
-
-
-@numba.njit(cache=True)
-def _position_polynomials(cov, q, tau, c_per_step):
-    """``Sigma^xy`` after ``k`` steps as polynomials in ``k`` (Eq. (1) in closed form, the same
-    as :func:`~hptrack.models.motion.position_covariance_after`): ``sxx = x0 + x1 k + x2 k^2 +
-    x3 k^3``, ``syy`` likewise with ``y0, y1, y2, x3``, ``sxy = c0 + c1 k + c2 k^2``.
-
-    The accumulated position noise ``q (k a + tau b (k^2 - k) + tau^2 c (2k^3 - 3k^2 + k) / 6)``
-    (``a = tau^3/3``, ``b = tau^2/2``, ``c = c_per_step``) is expanded in powers of ``k``.
-    """
-    a = tau * tau * tau / 3.0
-    b = tau * tau / 2.0
-    c = c_per_step
-    n1 = q * (a - tau * b + tau * tau * c / 6.0)
-    n2 = q * (tau * b - tau * tau * c / 2.0)
-    n3 = q * tau * tau * c / 3.0
-    return (cov[0, 0], 2.0 * tau * cov[0, 2] + n1, tau * tau * cov[2, 2] + n2,
-            cov[1, 1], 2.0 * tau * cov[1, 3] + n1, tau * tau * cov[3, 3] + n2,
-            cov[0, 1], tau * (cov[0, 3] + cov[2, 1]), tau * tau * cov[2, 3], n3)
 
 
 @numba.njit(cache=True)
@@ -83,7 +63,7 @@ def coverage_outcome(cov: np.ndarray, q: float, tau: float, c_per_step: float, s
     """
     if max_steps < 0:
         return 0.0, 0.0, 0.0
-    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = _position_polynomials(cov, q, tau, c_per_step)
+    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials(cov, q, tau, c_per_step)
     area0 = math.pi * 0.25 * diameter * diameter  # S_cover(k) = area0 + k area1
     area1 = speed * diameter * tau
     inv_two_pi = 1.0 / (2.0 * math.pi)
@@ -120,47 +100,6 @@ def coverage_cdf(cov: np.ndarray, q: float, tau: float, c_per_step: float, speed
         ratio = _covered_ratio(cov, q, float(k), tau, c_per_step, speed, diameter)
         out[k] = -math.expm1(-ratio / (2.0 * math.pi))
     return out
-
-
-@dataclass(frozen=True)
-class CoverageSettings:
-    """The agent and model facts a coverage sub-task depends on.
-
-    Attributes:
-        time_step: ``tau``, s.
-        speed: agent speed ``v_a``, m/s.
-        sensor_diameter: footprint diameter ``w``, m.
-        process_noise_form: the ``Q`` form (notes "Targets").
-    """
-
-    time_step: float = 0.5
-    speed: float = 30.0
-    sensor_diameter: float = 100.0
-    process_noise_form: ProcessNoiseForm = "continuous"
-
-    def __post_init__(self) -> None:
-        for name in ("time_step", "speed", "sensor_diameter"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-        if self.process_noise_form not in ("continuous", "paper_text"):
-            raise ValueError(f"unknown process_noise_form {self.process_noise_form!r}")
-
-    @classmethod
-    def from_mission(cls, mission: MissionSpec) -> CoverageSettings:
-        """The settings of a mission."""
-        return cls(mission.time_step, mission.agent_speed, mission.sensor.sensor_diameter,
-                   mission.motion.process_noise_form)
-
-    @property
-    def motion(self) -> ConstantVelocityModel:
-        """The target motion model (Eq. (1))."""
-        return ConstantVelocityModel(self.time_step, self.process_noise_form)
-
-    @property
-    def step_length(self) -> float:
-        """``v_a tau``, m."""
-        return self.speed * self.time_step
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,14 +157,14 @@ def check_state_covariance(covariance: np.ndarray) -> np.ndarray:
     return cov
 
 
-def estimate_coverage(covariance: np.ndarray, q: float, settings: CoverageSettings,
+def estimate_coverage(covariance: np.ndarray, q: float, mission: MissionSpec,
                       remaining_time: float | None = None) -> CoverageEstimate:
     """Estimate the outcome of a spiral coverage starting from ``covariance`` (Sec. IV-B).
 
     Args:
         covariance: 4x4 belief covariance when the coverage starts (m, m/s).
         q: process noise intensity, m^2/s^3.
-        settings: agent speed, footprint, time step and ``Q`` form.
+        mission: the mission constants (agent speed, footprint, time step, ``Q`` form).
         remaining_time: budget left when the coverage starts, s; ``None`` for no budget. When it
             ends before ``t_cutoff`` the estimate is ``P_cdf`` at the budget's end; when it is
             negative the coverage never starts and ``p_find = 0``.
@@ -237,8 +176,9 @@ def estimate_coverage(covariance: np.ndarray, q: float, settings: CoverageSettin
     cov = check_state_covariance(covariance)
     if not (math.isfinite(q) and q >= 0.0):
         raise ValueError(f"process noise q must be a non-negative finite number, got {q!r}")
-    tau = settings.time_step
-    c_per_step = settings.motion.c_per_step
+    tau = mission.time_step
+    c_per_step = mission.c_per_step
+    speed, diameter = mission.agent_speed, mission.sensor_diameter
     if remaining_time is None:
         max_steps = MAX_COVERAGE_STEPS
     elif math.isnan(remaining_time):
@@ -247,16 +187,14 @@ def estimate_coverage(covariance: np.ndarray, q: float, settings: CoverageSettin
         return CoverageEstimate(0, 0.0, 0.0, np.zeros(0), tau, True)
     else:
         max_steps = min(math.floor(remaining_time / tau + 1e-9), MAX_COVERAGE_STEPS)
-    cutoff, p_find, expected = coverage_outcome(cov, float(q), tau, c_per_step, settings.speed,
-                                                settings.sensor_diameter, max_steps)
+    cutoff, p_find, expected = coverage_outcome(cov, float(q), tau, c_per_step, speed, diameter,
+                                                max_steps)
     cutoff = int(cutoff)
     limited = cutoff == max_steps and _covered_ratio(
-        cov, float(q), cutoff + 1.0, tau, c_per_step, settings.speed,
-        settings.sensor_diameter) > _covered_ratio(cov, float(q), float(cutoff), tau, c_per_step,
-                                                   settings.speed, settings.sensor_diameter)
+        cov, float(q), cutoff + 1.0, tau, c_per_step, speed, diameter) > _covered_ratio(
+        cov, float(q), float(cutoff), tau, c_per_step, speed, diameter)
     if limited and remaining_time is None:
         raise ValueError(f"P_cdf still rises after {MAX_COVERAGE_STEPS} steps: the belief does "
                          "not grow (zero velocity variance and q = 0?), so t_cutoff is undefined")
-    cdf = coverage_cdf(cov, float(q), tau, c_per_step, settings.speed, settings.sensor_diameter,
-                       cutoff + 1)
+    cdf = coverage_cdf(cov, float(q), tau, c_per_step, speed, diameter, cutoff + 1)
     return CoverageEstimate(cutoff, float(p_find), float(expected) * tau, cdf, tau, bool(limited))

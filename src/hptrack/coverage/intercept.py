@@ -129,16 +129,25 @@ def plan_intercept(agent_position: np.ndarray, mean_position: np.ndarray,
     return Intercept(t, steps, mean + velocity * steps * time_step, time_step)
 
 
-def intercept_path(agent_position: np.ndarray, intercept: Intercept,
-                   step_length: float) -> np.ndarray:
-    """Agent positions ``(n + 1, 2)`` at steps ``0..n`` of the intercept flight: straight towards
-    ``intercept.start`` at ``step_length`` (m) per step, the last step possibly shorter."""
+def intercept_path(agent_position: np.ndarray, intercept: Intercept, step_length: float,
+                   steps: np.ndarray | None = None) -> np.ndarray:
+    """Agent positions ``(len(steps), 2)`` at the given steps (default ``0..n``) of the intercept
+    flight: straight towards ``intercept.start`` at ``step_length`` (m) per step, the last step
+    possibly shorter; from step ``n`` on the agent is at ``intercept.start``."""
     agent = np.asarray(agent_position, dtype=float)
+    steps = np.arange(intercept.steps + 1) if steps is None else np.asarray(steps)
     delta = intercept.start - agent
     length = float(np.hypot(*delta))
-    travelled = np.minimum(np.arange(intercept.steps + 1) * step_length, length)
     if length == 0.0:
-        return np.repeat(agent[None, :], intercept.steps + 1, axis=0)
+        return np.repeat(agent[None, :], steps.shape[0], axis=0)
+    travelled = np.minimum(steps * step_length, length)
     path = agent + travelled[:, None] * (delta / length)
-    path[-1] = intercept.start  # exact arrival despite round-off in the last partial step
+    path[steps >= intercept.steps] = intercept.start  # exact arrival despite round-off
     return path
+
+
+def intercept_waypoint(agent_position: np.ndarray, intercept: Intercept, step_length: float,
+                       step: int) -> np.ndarray:
+    """The agent's position ``(2,)`` at one ``step`` of the intercept flight (no allocation of
+    the whole path, whatever its length)."""
+    return intercept_path(agent_position, intercept, step_length, np.array([step]))[0]

@@ -4,9 +4,8 @@ When the agent pursues target ``a`` it flies straight at full speed to intercept
 (:mod:`hptrack.coverage.intercept`), then flies the shifting spiral of Sec. IV-A
 (:mod:`hptrack.coverage.spiral`) until the target is detected or ``t_cutoff`` of Sec. IV-B is
 reached, or the budget ends. :class:`CoverageSubtask` is the plan the hierarchical planner
-executes inside its ``Planner.act`` loop; :class:`CoveragePlanner` is a whole
-:class:`~hptrack.sim.interface.Planner` that pursues one target with successive sub-tasks, so a
-sub-task can be simulated on its own.
+executes inside its ``Planner.act`` loop (and the ``coverage`` planner of
+:mod:`hptrack.baselines.coverage` flies on its own).
 
 Step bookkeeping: a sub-task built at step ``s`` (the observation it was planned from) has its
 planned positions ``path[j]`` for steps ``s + j``: ``path[0]`` is the agent's position, the
@@ -20,10 +19,10 @@ import math
 
 import numpy as np
 
-from hptrack.coverage.estimator import CoverageEstimate, CoverageSettings, estimate_coverage
-from hptrack.coverage.intercept import Intercept, intercept_path, plan_intercept
+from hptrack.coverage.estimator import CoverageEstimate, estimate_coverage
+from hptrack.coverage.intercept import Intercept, intercept_path, intercept_waypoint, plan_intercept
 from hptrack.coverage.spiral import ShiftingSpiral
-from hptrack.sim.interface import MissionSpec, Observation
+from hptrack.interface import MissionSpec, Observation
 
 
 class CoverageSubtask:
@@ -35,7 +34,8 @@ class CoverageSubtask:
         covariance: ``(4, 4)`` its belief covariance now.
         q: its process noise intensity, m^2/s^3.
         mission: the mission facts (speed, footprint, time step, ``Q`` form).
-        remaining_budget: budget left now, s.
+        remaining_budget: budget left now, s; ``None`` for a coverage that runs to
+            ``t_cutoff`` whatever the budget (the estimator-accuracy experiment).
         target_index: the target's index in observations (to see its detections).
         start_step: the step of the observation the sub-task is planned from.
 
@@ -44,9 +44,9 @@ class CoverageSubtask:
     """
 
     def __init__(self, agent_position: np.ndarray, mean: np.ndarray, covariance: np.ndarray,
-                 q: float, mission: MissionSpec, remaining_budget: float,
+                 q: float, mission: MissionSpec, remaining_budget: float | None,
                  target_index: int = 0, start_step: int = 0) -> None:
-        self.settings = CoverageSettings.from_mission(mission)
+        self.mission = mission
         self.target_index = int(target_index)
         self.start_step = int(start_step)
         self.q = float(q)
@@ -56,23 +56,25 @@ class CoverageSubtask:
         mean = np.asarray(mean, dtype=float)
         if mean.shape != (4,) or not np.all(np.isfinite(mean)):
             raise ValueError(f"mean must be 4 finite numbers [x, y, vx, vy], got {mean!r}")
-        if math.isnan(remaining_budget):
+        if remaining_budget is not None and math.isnan(remaining_budget):
             raise ValueError("remaining_budget is NaN")
-        s = self.settings
+        m = mission
         self.agent_position = np.asarray(agent_position, dtype=float).copy()
         self.intercept: Intercept = plan_intercept(self.agent_position, mean[:2], mean[2:],
-                                                   s.speed, s.time_step, s.sensor_diameter)
+                                                   m.agent_speed, m.time_step, m.sensor_diameter)
         n = self.intercept.steps
-        _, covs = s.motion.predict(mean[None, :], np.asarray(covariance, dtype=float)[None],
-                                   self.q, n)
+        _, covs = m.motion.predict(mean[None, :], np.asarray(covariance, dtype=float)[None],
+                                   self.q, n * m.time_step)
         self.start_covariance = covs[0]
         self.estimate: CoverageEstimate = estimate_coverage(
-            self.start_covariance, self.q, s, remaining_budget - n * s.time_step)
+            self.start_covariance, self.q, m,
+            None if remaining_budget is None else remaining_budget - n * m.time_step)
         self.spiral = ShiftingSpiral(self.intercept.start, mean[2:], self.start_covariance[:2, :2],
-                                     s.speed, s.time_step, s.sensor_diameter)
-        self._intercept_path = intercept_path(self.agent_position, self.intercept, s.step_length)
-        budget_steps = math.floor(remaining_budget / s.time_step + 1e-9)
-        self.total_steps = min(n + self.estimate.cutoff_steps, max(budget_steps, 0))
+                                     m.agent_speed, m.time_step, m.sensor_diameter)
+        self.total_steps = n + self.estimate.cutoff_steps
+        if remaining_budget is not None:
+            budget_steps = math.floor(remaining_budget / m.time_step + 1e-9)
+            self.total_steps = min(self.total_steps, max(budget_steps, 0))
 
     @classmethod
     def from_observation(cls, observation: Observation, target_index: int,
@@ -123,18 +125,19 @@ class CoverageSubtask:
             raise ValueError(f"step offset must be non-negative, got {j}")
         n = self.intercept.steps
         if j <= n:
-            return self._intercept_path[j].copy()
+            return intercept_waypoint(self.agent_position, self.intercept,
+                                      self.mission.step_length, j)
         return self.spiral.position(j - n)
 
     def planned_positions(self, n_steps: int | None = None) -> np.ndarray:
-        """Planned positions ``(n_steps, 2)`` from the start; by default up to ``t_cutoff``
-        (``n + t_cutoff + 1`` positions), m."""
-        count = self.intercept.steps + self.estimate.cutoff_steps + 1 if n_steps is None \
-            else int(n_steps)
+        """Planned positions ``(n_steps, 2)`` from the start; by default up to ``t_cutoff`` or
+        the budget's end, whichever comes first (``total_steps + 1`` positions), m."""
+        count = self.total_steps + 1 if n_steps is None else int(n_steps)
         n = self.intercept.steps
-        head = self._intercept_path[:count]
+        head = intercept_path(self.agent_position, self.intercept, self.mission.step_length,
+                              np.arange(min(count, n + 1)))
         if count <= n + 1:
-            return head.copy()
+            return head
         return np.concatenate([head, self.spiral.positions(count - n)[1:]])
 
     def next_waypoint(self, observation: Observation) -> np.ndarray:
@@ -149,54 +152,3 @@ class CoverageSubtask:
         """The target is detected, ``t_cutoff`` is reached, or the budget is spent."""
         return (self.found(observation) or observation.step >= self.end_step
                 or observation.remaining_budget <= 0.0)
-
-
-class CoveragePlanner:
-    """Pursue one target with coverage sub-tasks (name ``"coverage"``).
-
-    While the target is measured the agent flies to its belief mean one step ahead (it keeps
-    seeing it); otherwise it runs a :class:`CoverageSubtask`, planning a new one from the current
-    belief when the last one was found or reached ``t_cutoff`` without a detection.
-
-    Args:
-        target: the pursued target's id or index.
-    """
-
-    name = "coverage"
-
-    def __init__(self, target: str | int = 0) -> None:
-        self.target = target
-
-    def reset(self, mission: MissionSpec, observation: Observation,
-              rng: np.random.Generator) -> None:
-        if isinstance(self.target, str) and self.target in mission.target_ids:
-            self._index = mission.target_ids.index(self.target)
-        elif isinstance(self.target, int) and 0 <= self.target < mission.n_targets:
-            self._index = self.target
-        else:
-            raise ValueError(f"unknown target {self.target!r}; targets are "
-                             f"{list(mission.target_ids)}")
-        self._mission = mission
-        self._subtask: CoverageSubtask | None = None
-        self._log: list[dict] = []
-
-    def _close(self, observation: Observation, outcome: str) -> None:
-        if self._subtask is not None:
-            self._log[-1].update(outcome=outcome, end_step=observation.step)
-            self._subtask = None
-
-    def act(self, observation: Observation) -> np.ndarray:
-        i = self._index
-        if observation.detected[i]:
-            self._close(observation, "found")
-            return observation.means[i, :2] + observation.means[i, 2:] * self._mission.time_step
-        if self._subtask is not None and self._subtask.done(observation):
-            self._close(observation, "missed")
-        if self._subtask is None:
-            self._subtask = CoverageSubtask.from_observation(observation, i, self._mission)
-            self._log.append(self._subtask.summary())
-        return self._subtask.next_waypoint(observation)
-
-    def episode_info(self) -> dict:
-        """The sub-tasks flown, each with its plan and outcome."""
-        return {"target": self.target, "subtasks": self._log}

@@ -1,27 +1,29 @@
-"""Multi-target benchmark (the paper's Sec. V-B, Tables II-III; notes "Multi-target benchmark").
+"""Multi-target benchmark (the paper's Sec. V-B, Tables II-III; ``docs/protocols.md``).
 
 For each number of targets ``n`` and each scenario seed, every planner flies the same random
-scenario once for the whole budget. Episodes run on worker processes and are stored as each one
-finishes (:mod:`hptrack.experiments.store`); a re-run with the same arguments skips what is done.
-Next to every ``U`` the store keeps the scenario's *never observed* score: the ``U`` of a mission
-that measures nothing, which depends only on the priors and the budget.
+scenario once for the whole budget. Episodes run on worker processes (or any
+:class:`concurrent.futures.Executor`, e.g. a Dask cluster's) and are stored as each one finishes
+(:mod:`hptrack.experiments.store`); a re-run with the same arguments skips what is done, and two
+runs on one database share the work. Next to every ``U`` the store keeps the scenario's *never
+observed* score: the ``U`` of a mission that measures nothing, which depends only on the priors
+and the budget.
 """
 
 from __future__ import annotations
 
-import inspect
+import json
 import time
 from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
-from hptrack.models.beliefs import position_logdet
-from hptrack.registry import PLANNERS, make_planner
+from hptrack.registry import make_planner
 from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
+from hptrack.settings import PlannerSettings
 from hptrack.sim.episode import run_episode
 
 
@@ -31,42 +33,34 @@ class BenchmarkConfig:
 
     Attributes:
         planners: registered planner names.
+        settings: each planner's validated settings (all of ``planners``).
         target_counts: the values of ``n``.
         scenarios: scenarios per ``n`` (seeds ``first_seed .. first_seed + scenarios - 1``).
         homogeneous: the paper's setting for ARVI and A* (shared ``q`` and prior).
         first_seed: first scenario seed.
-        effort: planning effort passed to planners that take it, e.g. ``{"iterations": 2000}``
-            or ``{"time_limit": 1.0}`` (seconds per decision).
-        options: extra options per planner name.
     """
 
     planners: tuple[str, ...]
+    settings: dict[str, PlannerSettings] = field(default_factory=dict)
     target_counts: tuple[int, ...] = (2, 3, 4, 5, 6)
     scenarios: int = 100
     homogeneous: bool = True
     first_seed: int = 0
-    effort: dict = field(default_factory=dict)
-    options: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        missing = [p for p in self.planners if p not in self.settings]
+        if missing:
+            raise ValueError(f"no settings for planners {missing}")
 
     @property
     def setting(self) -> str:
         return "homogeneous" if self.homogeneous else "heterogeneous"
 
-    @property
-    def effort_label(self) -> str:
-        return ",".join(f"{k}={v}" for k, v in sorted(self.effort.items())) or "default"
-
     def keys(self) -> list[EpisodeKey]:
         """Every episode of the benchmark, in run order."""
         seeds = range(self.first_seed, self.first_seed + self.scenarios)
-        return [EpisodeKey(p, n, s, self.setting, self.effort_label)
+        return [EpisodeKey(p, n, s, self.setting, self.settings[p].canonical())
                 for n in self.target_counts for s in seeds for p in self.planners]
-
-    def planner_options(self, name: str) -> dict:
-        """The effort options ``name``'s factory accepts, plus its own options."""
-        params = inspect.signature(PLANNERS[name]).parameters
-        accepted = {k: v for k, v in self.effort.items() if k in params}
-        return {**accepted, **self.options.get(name, {})}
 
 
 def scenario_for(key: EpisodeKey) -> Scenario:
@@ -75,59 +69,85 @@ def scenario_for(key: EpisodeKey) -> Scenario:
                            homogeneous=key.setting == "homogeneous")
 
 
-def never_observed_uncertainty(scenario: Scenario) -> float:
-    """``U`` of a mission that measures nothing: every prior grown to the budget's end."""
-    mission = scenario.mission_spec()
-    _, covs = mission.motion.predict(scenario.means(), scenario.covariances(),
-                                     mission.process_noise, mission.n_steps)
-    return float(position_logdet(covs).sum())
+def planner_for(key: EpisodeKey):
+    """A fresh planner of a benchmark episode, from the settings stored in its key."""
+    return make_planner(key.planner, json.loads(key.settings))
 
 
-def run_one(key: EpisodeKey, options: dict) -> EpisodeRow:
+def run_one(key: EpisodeKey) -> EpisodeRow:
     """Fly one benchmark episode (a top-level function, so worker processes can run it)."""
     scenario = scenario_for(key)
-    planner = make_planner(key.planner, **options)
+    planner = planner_for(key)
     start = time.perf_counter()
-    record = run_episode(scenario, planner, belief_stride=scenario.mission_spec().n_steps)
+    record = run_episode(scenario, planner, belief_stride=scenario.n_steps)
     wall = time.perf_counter() - start
-    return EpisodeRow(key, record.uncertainty, never_observed_uncertainty(scenario),
+    return EpisodeRow(key, record.uncertainty, scenario.never_observed_uncertainty(),
                       int(record.detections.sum()), wall, record.info)
 
 
 def run_benchmark(config: BenchmarkConfig, store: ResultStore, workers: int = 1,
-                  on_done: Callable[[EpisodeRow, int, int], None] | None = None) -> int:
-    """Run every episode not yet in ``store``; each is stored as soon as it finishes.
+                  on_done: Callable[[EpisodeRow, int, int], None] | None = None,
+                  executor: Executor | None = None) -> int:
+    """Run every episode not yet in ``store``; each is claimed before it runs and stored as soon
+    as it finishes.
 
-    Returns the number of episodes run now. ``on_done(row, finished, total)`` reports progress.
+    Args:
+        config: what to run.
+        store: the results database.
+        workers: episodes in flight at once (worker processes unless ``executor`` is given).
+        on_done: ``on_done(row, finished, total)`` reports progress.
+        executor: where episodes run (e.g. a Dask ``Client.get_executor()``); default this
+            process (``workers == 1``) or a process pool of ``workers``.
+
+    Returns:
+        The number of episodes run now.
     """
+    store.release_stale_claims()
     done = store.done()
     todo = [k for k in config.keys() if k not in done]
     total = len(todo)
-    if total == 0:
-        return 0
-    jobs = ((k, config.planner_options(k.planner)) for k in todo)
     finished = 0
-    if workers <= 1:
-        for key, options in jobs:
-            row = run_one(key, options)
-            store.add(row)
-            finished += 1
-            if on_done:
-                on_done(row, finished, total)
+
+    def record(row: EpisodeRow) -> None:
+        nonlocal finished
+        store.add(row)
+        finished += 1
+        if on_done:
+            on_done(row, finished, total)
+
+    if executor is None and workers <= 1:
+        for key in todo:
+            if store.claim(key):
+                try:
+                    row = run_one(key)
+                except BaseException:
+                    store.release(key)
+                    raise
+                record(row)
         return finished
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = [pool.submit(run_one, k, o) for k, o in jobs]
-        try:
-            for future in as_completed(futures):
-                row = future.result()
-                store.add(row)
-                finished += 1
-                if on_done:
-                    on_done(row, finished, total)
-        except BaseException:
-            for f in futures:
-                f.cancel()
-            raise
+    own_pool = executor is None
+    pool = ProcessPoolExecutor(max_workers=workers) if own_pool else executor
+    pending: dict[Future, EpisodeKey] = {}
+    queue = iter(todo)
+    try:
+        while True:
+            while len(pending) < workers:
+                key = next((k for k in queue if store.claim(k)), None)
+                if key is None:
+                    break
+                pending[pool.submit(run_one, key)] = key
+            if not pending:
+                break
+            ready, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in ready:
+                pending.pop(future)
+                record(future.result())
+    finally:
+        for future, key in pending.items():
+            future.cancel()
+            store.release(key)
+        if own_pool:
+            pool.shutdown(wait=True, cancel_futures=True)
     return finished
 
 

@@ -1,6 +1,6 @@
 """The estimator-accuracy experiment: the paper's first table and its CDF figure (Sec. V-A).
 
-Protocol (notes "Estimator validation"): for each random single-target case and each departure
+Protocol (``docs/protocols.md``, "Estimator validation"): for each random single-target case and each departure
 delay ``t_d``, the agent waits ``t_d`` at its start, intercepts the belief mean and flies the
 shifting spiral until ``t_cutoff`` (Secs. IV-A, IV-B). The agent path and the estimate are fixed;
 ``runs`` target trajectories are sampled from the prior and the motion model, and each is checked
@@ -13,10 +13,12 @@ Two variants are recorded for the write-up: the sensor switched off during the i
 (only detections on the spiral count), and times measured from departure instead of from the
 start of the coverage (the estimate then adds the intercept flight).
 
-Sampling: no detection is checked while the agent waits, so the true state at departure is drawn
-exactly from the belief propagated ``t_d`` (Eq. (1) in closed form); from there trajectories are
-advanced step by step, all runs at once, with the process noise drawn in blocks of steps and runs
-dropped once detected. Randomness: the case ``i`` is drawn from ``SeedSequence(seed,
+The agent's path is the hierarchical planner's own sub-task (:class:`~hptrack.coverage.subtask.
+CoverageSubtask`), and the true motion is :func:`hptrack.models.motion.advance_true_state`, the
+simulator's. Sampling: no detection is checked while the agent waits, so the true state at
+departure is drawn exactly from the belief propagated ``t_d`` (Eq. (1) in closed form); from
+there trajectories are advanced step by step, all runs at once, with the process noise drawn in
+blocks of steps and runs dropped once detected. Randomness: the case ``i`` is drawn from ``SeedSequence(seed,
 spawn_key=(i, 0))`` and its Monte Carlo for a delay of ``d`` steps from ``spawn_key=(i, 1 + d)``,
 so every number depends only on ``(seed, case, delay)``, whatever the worker count or order.
 """
@@ -28,15 +30,16 @@ import json
 import math
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numba
 import numpy as np
 
-from hptrack.coverage.estimator import CoverageEstimate, CoverageSettings, estimate_coverage
-from hptrack.coverage.intercept import intercept_path, plan_intercept
-from hptrack.coverage.spiral import ShiftingSpiral
+from hptrack.coverage.estimator import CoverageEstimate
+from hptrack.coverage.subtask import CoverageSubtask
+from hptrack.interface import MissionSpec
+from hptrack.models.motion import advance_true_state, motion_noise_factors
 from hptrack.scenario.random import random_mean, random_prior
 
 PAPER_MAPE = {"0": (3.58, 5.18), "100": (2.46, 3.42), "200": (5.46, 3.73)}
@@ -63,14 +66,15 @@ class ValidationConfig:
         runs: sampled target trajectories per case and delay.
         delays: departure delays ``t_d``, s (whole time steps).
         seed: root seed.
-        settings: agent, sensor and model settings.
+        mission: agent, sensor and model constants (its budget is not used: the coverage runs
+            to ``t_cutoff``).
     """
 
     cases: int = 1000
     runs: int = 10000
     delays: tuple[float, ...] = (0.0, 100.0, 200.0)
     seed: int = 0
-    settings: CoverageSettings = field(default_factory=CoverageSettings)
+    mission: MissionSpec = field(default_factory=MissionSpec)
 
     def __post_init__(self) -> None:
         if self.cases < 1 or self.runs < 1:
@@ -82,16 +86,20 @@ class ValidationConfig:
 
     def delay_steps(self, delay: float) -> int:
         """The delay in whole steps; raises if it is negative or not a whole number of steps."""
-        steps = delay / self.settings.time_step
+        steps = delay / self.mission.time_step
         if not (math.isfinite(delay) and delay >= 0.0 and abs(steps - round(steps)) < 1e-9):
             raise ValueError(f"delay {delay!r} s is not a non-negative whole number of "
-                             f"{self.settings.time_step:g} s steps")
+                             f"{self.mission.time_step:g} s steps")
         return round(steps)
 
     def identity(self) -> dict:
         """Everything that determines a case's rows (``cases`` excluded, so runs can extend)."""
+        m = self.mission
         return {"runs": self.runs, "delays": [float(d) for d in self.delays], "seed": self.seed,
-                "settings": asdict(self.settings), "block_steps": BLOCK_STEPS}
+                "mission": {"time_step": m.time_step, "agent_speed": m.agent_speed,
+                            "sensor_diameter": m.sensor_diameter,
+                            "process_noise_form": m.process_noise_form},
+                "block_steps": BLOCK_STEPS, "sampler": "models.motion.advance_true_state"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,62 +139,50 @@ class CoveragePlan:
     path: np.ndarray
 
 
-def plan_coverage(case: CoverageCase, delay_steps: int, settings: CoverageSettings,
+def plan_coverage(case: CoverageCase, delay_steps: int, mission: MissionSpec,
                   agent_position: np.ndarray | None = None) -> CoveragePlan:
-    """Wait ``delay_steps`` at ``agent_position`` (default the origin), intercept, spiral."""
+    """Wait ``delay_steps`` at ``agent_position`` (default the origin), then fly the planner's
+    coverage sub-task (intercept, spiral) to ``t_cutoff``."""
     agent = np.zeros(2) if agent_position is None else np.asarray(agent_position, dtype=float)
-    motion = settings.motion
-    means, covs = motion.predict(case.mean[None], case.covariance[None], case.q, delay_steps)
+    means, covs = mission.motion.predict(case.mean[None], case.covariance[None], case.q,
+                                         delay_steps * mission.time_step)
     mean, cov = means[0], covs[0]
-    intercept = plan_intercept(agent, mean[:2], mean[2:], settings.speed, settings.time_step,
-                               settings.sensor_diameter)
-    start_cov = motion.predict(mean[None], cov[None], case.q, intercept.steps)[1][0]
-    estimate = estimate_coverage(start_cov, case.q, settings)
-    spiral = ShiftingSpiral(intercept.start, mean[2:], start_cov[:2, :2], settings.speed,
-                            settings.time_step, settings.sensor_diameter)
-    path = np.concatenate([intercept_path(agent, intercept, settings.step_length),
-                           spiral.positions(estimate.cutoff_steps + 1)[1:]])
-    return CoveragePlan(mean, cov, intercept.steps, estimate, path)
+    single = replace(mission, process_noise=np.array([case.q]), target_ids=("case",))
+    subtask = CoverageSubtask(agent, mean, cov, case.q, single, None)
+    return CoveragePlan(mean, cov, subtask.intercept.steps, subtask.estimate,
+                        subtask.planned_positions())
 
 
 @numba.njit(cache=True)
-def _advance_block(states, active, noise, path, first_step, flight_steps, chol, tau,
-                   radius2, first_any, first_spiral):
-    """Advance the ``active`` runs through steps ``first_step ..`` with ``noise`` and record
-    detections; a run stops at its first detection on the spiral (step >= ``flight_steps``)."""
-    l11, l21, l22 = chol
+def _advance_block(states, active, noise, path, first_step, flight_steps, sqrt_q, tau,
+                   c_per_step, radius2, first_any, first_spiral):
+    """Advance the ``active`` runs through steps ``first_step ..`` with unit normal ``noise``
+    ``(runs, steps, 4)`` and record detections; a run stops at its first detection on the
+    spiral (step >= ``flight_steps``)."""
+    l11, l21, l22 = motion_noise_factors(tau, c_per_step)
     for a in range(active.shape[0]):
         i = active[a]
-        x, y, vx, vy = states[i, 0], states[i, 1], states[i, 2], states[i, 3]
         for t in range(noise.shape[1]):
-            z = noise[a, t]
-            x += tau * vx + l11 * z[0]
-            vx += l21 * z[0] + l22 * z[1]
-            y += tau * vy + l11 * z[2]
-            vy += l21 * z[2] + l22 * z[3]
+            advance_true_state(states, i, noise[a, t], sqrt_q, l11, l21, l22, tau)
             j = first_step + t
-            dx = x - path[j, 0]
-            dy = y - path[j, 1]
+            dx = states[i, 0] - path[j, 0]
+            dy = states[i, 1] - path[j, 1]
             if dx * dx + dy * dy <= radius2:
                 if first_any[i] < 0:
                     first_any[i] = j
                 if j >= flight_steps:
                     first_spiral[i] = j
                     break
-        states[i, 0], states[i, 1], states[i, 2], states[i, 3] = x, y, vx, vy
 
 
-def first_detections(plan: CoveragePlan, q: float, settings: CoverageSettings, runs: int,
+def first_detections(plan: CoveragePlan, q: float, mission: MissionSpec, runs: int,
                      rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Monte Carlo of the fixed plan: for each of ``runs`` sampled trajectories, the first step
     (from departure) at which the target is detected, and the first such step on the spiral
     (``>= n``); ``-1`` when not detected by ``t_cutoff``.
     """
     states = rng.multivariate_normal(plan.mean, plan.covariance, size=runs, method="cholesky")
-    unit = settings.motion.process_noise(1.0, 1)[[0, 2]][:, [0, 2]]  # one axis: [[pp, pv], [., vv]]
-    l_unit = np.linalg.cholesky(unit) * math.sqrt(q)
-    chol = (float(l_unit[0, 0]), float(l_unit[1, 0]), float(l_unit[1, 1]))
-    radius2 = (0.5 * settings.sensor_diameter) ** 2
+    radius2 = mission.sensor_radius ** 2
     n = plan.intercept_steps
     first_any = np.full(runs, -1, dtype=np.int64)
     first_spiral = np.full(runs, -1, dtype=np.int64)
@@ -200,8 +196,8 @@ def first_detections(plan: CoveragePlan, q: float, settings: CoverageSettings, r
     while step < total and active.size:
         block = min(BLOCK_STEPS, total - step)
         noise = rng.standard_normal((active.size, block, 4))
-        _advance_block(states, active, noise, plan.path, step, n, chol, settings.time_step,
-                       radius2, first_any, first_spiral)
+        _advance_block(states, active, noise, plan.path, step, n, math.sqrt(q),
+                       mission.time_step, mission.c_per_step, radius2, first_any, first_spiral)
         active = active[first_spiral[active] < 0]
         step += block
     return first_any, first_spiral
@@ -219,7 +215,7 @@ def case_rows(case: CoverageCase, config: ValidationConfig,
         the per-delay rows (keys :data:`CASE_FIELDS`, times in s) and, with ``keep_times``, per
         delay the estimated CDF and the empirical coverage times of detection (s, NaN if missed).
     """
-    s = config.settings
+    s = config.mission
     rows, times = [], {}
     for delay in config.delays:
         d = config.delay_steps(delay)

@@ -4,10 +4,17 @@ reduction of each planner against each other, a box plot per ``n`` and a traject
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 from hptrack.experiments.benchmark import reductions, summarise
-from hptrack.experiments.store import EpisodeRow
+from hptrack.experiments.store import EpisodeKey, EpisodeRow
+from hptrack.registry import planner_settings
+
+
+def effort_label(key: EpisodeKey) -> str:
+    """The planning effort an episode's settings set (``"none"`` for a planner without one)."""
+    return planner_settings(key.planner, json.loads(key.settings)).effort_label()
 
 # Paper, Tables II and III (mean +- std of U over its random cases), for side-by-side reports.
 PAPER_TABLE = {
@@ -61,11 +68,11 @@ def write_csv(rows: list[EpisodeRow], path: Path) -> None:
     with open(path, "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(["planner", "n_targets", "seed", "setting", "effort", "U",
-                         "never_observed", "detections", "wall_time_s"])
+                         "never_observed", "detections", "wall_time_s", "settings"])
         for r in rows:
             writer.writerow([r.key.planner, r.key.n_targets, r.key.seed, r.key.setting,
-                             r.key.effort, r.uncertainty, r.never_observed, r.detections,
-                             r.wall_time_s])
+                             effort_label(r.key), r.uncertainty, r.never_observed, r.detections,
+                             r.wall_time_s, r.key.settings])
     summary_path = path.with_name(path.stem + "_summary.csv")
     with open(summary_path, "w", newline="") as fh:
         writer = csv.writer(fh)

@@ -1,39 +1,84 @@
 """SQLite store of finished episodes: written as each one finishes, so a crash or Ctrl-C loses
-nothing already done, and a re-run resumes by skipping the keys already stored."""
+nothing already done, and a re-run resumes by skipping the keys already stored.
+
+An episode's identity is its planner, number of targets, scenario seed, setting and the
+planner's full canonical settings (:meth:`hptrack.settings.PlannerSettings.canonical`, stored as
+JSON beside its hash), so a run with another value of any option never reuses another's rows.
+Before running an episode a run *claims* it (a row in ``claims`` with its process id and host);
+two runs on one database therefore share the work instead of both computing everything. Claims
+of a process that no longer runs (on this host) or older than :data:`STALE_CLAIM_S` are released.
+"""
 
 from __future__ import annotations
 
+import hashlib
 import json
+import os
+import socket
 import sqlite3
-from dataclasses import asdict, dataclass
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
+from hptrack.interface import InputError
+
+SCHEMA_VERSION = 2
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS episodes (
     planner TEXT NOT NULL,
     n_targets INTEGER NOT NULL,
     seed INTEGER NOT NULL,
     setting TEXT NOT NULL,
-    effort TEXT NOT NULL,
+    settings_hash TEXT NOT NULL,
+    settings TEXT NOT NULL,
     uncertainty REAL NOT NULL,
     never_observed REAL NOT NULL,
     detections INTEGER NOT NULL,
     wall_time_s REAL NOT NULL,
     info TEXT NOT NULL,
-    PRIMARY KEY (planner, n_targets, seed, setting, effort)
-)
+    PRIMARY KEY (planner, n_targets, seed, setting, settings_hash)
+);
+CREATE TABLE IF NOT EXISTS claims (
+    planner TEXT NOT NULL,
+    n_targets INTEGER NOT NULL,
+    seed INTEGER NOT NULL,
+    setting TEXT NOT NULL,
+    settings_hash TEXT NOT NULL,
+    host TEXT NOT NULL,
+    pid INTEGER NOT NULL,
+    claimed_at REAL NOT NULL,
+    PRIMARY KEY (planner, n_targets, seed, setting, settings_hash)
+);
 """
+STALE_CLAIM_S = 6 * 3600.0
+"""A claim older than this is released whatever its owner (a run on another host that died)."""
 
 
 @dataclass(frozen=True)
 class EpisodeKey:
-    """What identifies one benchmark episode."""
+    """What identifies one benchmark episode.
+
+    Attributes:
+        planner: registered planner name.
+        n_targets: number of targets.
+        seed: scenario seed.
+        setting: ``"homogeneous"`` or ``"heterogeneous"``.
+        settings: the planner's canonical settings JSON.
+    """
 
     planner: str
     n_targets: int
     seed: int
-    setting: str  # "homogeneous" or "heterogeneous"
-    effort: str  # planning effort, e.g. "iterations=2000" or "time_limit=1.0"
+    setting: str
+    settings: str
+
+    @property
+    def settings_hash(self) -> str:
+        """A short hash of :attr:`settings` (the same as the settings' ``digest()``)."""
+        return hashlib.sha256(self.settings.encode()).hexdigest()[:16]
+
+    def _id(self) -> tuple:
+        return (self.planner, self.n_targets, self.seed, self.setting, self.settings_hash)
 
 
 @dataclass(frozen=True)
@@ -49,34 +94,97 @@ class EpisodeRow:
     info: dict
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 class ResultStore:
-    """Episodes in an SQLite file (one row per :class:`EpisodeKey`, inserted once)."""
+    """Episodes in an SQLite file (one row per :class:`EpisodeKey`, inserted once).
+
+    Raises:
+        InputError: the file is not an hptrack results database (or one of an older layout).
+    """
 
     def __init__(self, path: str | Path) -> None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        self._db = sqlite3.connect(str(path))
-        self._db.execute(SCHEMA)
+        path = Path(path)
+        if path.exists() and path.is_dir():
+            raise InputError(f"--db {path}: is a folder, not a results database")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self._db = sqlite3.connect(str(path), timeout=60.0)
+            version = self._db.execute("PRAGMA user_version").fetchone()[0]
+            tables = {r[0] for r in self._db.execute(
+                "SELECT name FROM sqlite_master WHERE type='table'")}
+        except (sqlite3.DatabaseError, OSError) as err:
+            raise InputError(f"--db {path}: not an hptrack results database ({err})") from None
+        if tables and (version != SCHEMA_VERSION or "episodes" not in tables):
+            self._db.close()
+            raise InputError(f"--db {path}: a database of another layout (version {version}, "
+                             f"tables {sorted(tables)}); use a new --db file")
+        self._db.executescript(SCHEMA)
+        self._db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
         self._db.commit()
+        self._host = socket.gethostname()
+        self._pid = os.getpid()
 
     def add(self, row: EpisodeRow) -> None:
-        """Insert a finished episode and commit at once (a duplicate key is ignored)."""
-        key = asdict(row.key)
+        """Insert a finished episode, release its claim and commit at once (a duplicate key is
+        ignored)."""
+        key = row.key
         self._db.execute(
-            "INSERT OR IGNORE INTO episodes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (key["planner"], key["n_targets"], key["seed"], key["setting"], key["effort"],
-             row.uncertainty, row.never_observed, row.detections, row.wall_time_s,
-             json.dumps(row.info)))
+            "INSERT OR IGNORE INTO episodes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (*key._id(), key.settings, row.uncertainty, row.never_observed, row.detections,
+             row.wall_time_s, json.dumps(row.info)))
+        self._db.execute("DELETE FROM claims WHERE planner=? AND n_targets=? AND seed=? AND "
+                         "setting=? AND settings_hash=?", key._id())
         self._db.commit()
 
     def done(self) -> set[EpisodeKey]:
         """Keys of every stored episode."""
         cur = self._db.execute(
-            "SELECT planner, n_targets, seed, setting, effort FROM episodes")
+            "SELECT planner, n_targets, seed, setting, settings FROM episodes")
         return {EpisodeKey(*r) for r in cur}
+
+    def release_stale_claims(self) -> int:
+        """Release claims whose process is gone (this host) or that are too old; returns how
+        many were released."""
+        now = time.time()
+        rows = self._db.execute("SELECT rowid, host, pid, claimed_at FROM claims").fetchall()
+        stale = [r[0] for r in rows if now - r[3] > STALE_CLAIM_S
+                 or (r[1] == self._host and r[2] != self._pid and not _alive(r[2]))]
+        self._db.executemany("DELETE FROM claims WHERE rowid=?", [(r,) for r in stale])
+        self._db.commit()
+        return len(stale)
+
+    def claim(self, key: EpisodeKey) -> bool:
+        """Claim ``key`` for this process; ``False`` if it is done or another run holds it."""
+        with self._db:
+            if self._db.execute("SELECT 1 FROM episodes WHERE planner=? AND n_targets=? AND "
+                                "seed=? AND setting=? AND settings_hash=?",
+                                key._id()).fetchone():
+                return False
+            cur = self._db.execute("INSERT OR IGNORE INTO claims VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                                   (*key._id(), self._host, self._pid, time.time()))
+            return cur.rowcount == 1
+
+    def release(self, key: EpisodeKey) -> None:
+        """Give up this process's claim of ``key`` (an episode that was not run after all)."""
+        self._db.execute("DELETE FROM claims WHERE planner=? AND n_targets=? AND seed=? AND "
+                         "setting=? AND settings_hash=? AND host=? AND pid=?",
+                         (*key._id(), self._host, self._pid))
+        self._db.commit()
 
     def rows(self) -> list[EpisodeRow]:
         """Every stored episode, in key order."""
-        cur = self._db.execute("SELECT * FROM episodes ORDER BY planner, n_targets, seed")
+        cur = self._db.execute(
+            "SELECT planner, n_targets, seed, setting, settings, uncertainty, never_observed, "
+            "detections, wall_time_s, info FROM episodes ORDER BY planner, n_targets, seed")
         return [EpisodeRow(EpisodeKey(*r[:5]), r[5], r[6], r[7], r[8], json.loads(r[9]))
                 for r in cur]
 

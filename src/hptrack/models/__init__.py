@@ -1,4 +1,6 @@
-"""Target motion, measurement and belief models (paper Sec. III, Eq. (1))."""
+"""Target motion, measurement and belief models (paper Sec. III, Eq. (1)): one compiled kernel per
+formula (prediction over any duration, Kalman update with a full ``R``, Riccati compositions),
+with a thin numpy API on top."""
 
 from hptrack.models.beliefs import TargetBeliefs, position_logdet
 from hptrack.models.measurement import PositionMeasurementModel

@@ -6,12 +6,20 @@ covariances ``(n, 4, 4)``. ``U = sum_i log det Sigma^xy_i`` (paper Sec. III), lo
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.motion import ConstantVelocityModel
+
+
+@numba.njit(cache=True, inline="always")
+def logdet_xy(sxx, sxy, syy):
+    """``log det`` of the 2x2 position covariance ``[[sxx, sxy], [sxy, syy]]`` (log m^4)."""
+    return math.log(sxx * syy - sxy * sxy)
 
 
 def position_logdet(covariances: np.ndarray) -> np.ndarray:
@@ -38,11 +46,10 @@ class TargetBeliefs:
     motion: ConstantVelocityModel
     sensor: PositionMeasurementModel
 
-    def predict(self, steps: float = 1) -> None:
-        """Propagate every belief ``steps`` steps with Eq. (1) (closed form)."""
+    def predict(self, duration: float) -> None:
+        """Propagate every belief ``duration`` seconds with Eq. (1) (closed form, any gap)."""
         self.means, self.covariances = self.motion.predict(
-            self.means, self.covariances, self.process_noise, steps
-        )
+            self.means, self.covariances, self.process_noise, duration)
 
     def update(self, indices: np.ndarray, measurements: np.ndarray) -> None:
         """Kalman-update the beliefs of targets ``indices`` with position ``measurements``."""

@@ -1,34 +1,120 @@
-"""Position measurement and Kalman update (paper Sec. III; notes: R = 10 I by default).
+"""Position measurement and the Kalman update (paper Sec. III; ``docs/model.md``: ``R = 10 I`` by
+default, any symmetric positive definite 2x2 ``R`` allowed).
 
 A target inside the circular sensor footprint is measured as ``z = [x, y] + v``,
-``v ~ N(0, R)``. The update uses the Joseph form so the covariance stays symmetric positive
-definite over thousands of updates.
+``v ~ N(0, R)``. The update is written out for ``H = [I 0]``: ``S = P_xy + R``,
+``K = P H' S^-1``, ``P+ = P - K H P`` built symmetric entry by entry, ``m+ = m + K (z - H m)``.
+:func:`update_covariance` and :func:`kalman_update` are the one implementation of the update in
+the project (simulator, tree search, baselines and controller call them).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
+import numba
 import numpy as np
 
-H = np.hstack([np.eye(2), np.zeros((2, 2))])
+
+@numba.njit(cache=True, inline="always")
+def _gain(cov, noise):
+    """Entries of ``K = P H' (H P H' + R)^-1`` (rows x, y, vx, vy) and of the symmetric ``P``."""
+    p00, p01, p02, p03 = cov[0, 0], 0.5 * (cov[0, 1] + cov[1, 0]), cov[0, 2], cov[0, 3]
+    p11, p12, p13 = cov[1, 1], cov[1, 2], cov[1, 3]
+    p22, p23, p33 = cov[2, 2], 0.5 * (cov[2, 3] + cov[3, 2]), cov[3, 3]
+    s00, s01, s11 = p00 + noise[0, 0], p01 + 0.5 * (noise[0, 1] + noise[1, 0]), p11 + noise[1, 1]
+    det = s00 * s11 - s01 * s01
+    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+    g00, g01 = p00 * i00 + p01 * i01, p00 * i01 + p01 * i11
+    g10, g11 = p01 * i00 + p11 * i01, p01 * i01 + p11 * i11
+    g20, g21 = p02 * i00 + p12 * i01, p02 * i01 + p12 * i11
+    g30, g31 = p03 * i00 + p13 * i01, p03 * i01 + p13 * i11
+    return (g00, g01, g10, g11, g20, g21, g30, g31,
+            p00, p01, p02, p03, p11, p12, p13, p22, p23, p33)
 
 
-@dataclass(frozen=True)
+@numba.njit(cache=True)
+def update_covariance(cov, noise, out):
+    """Posterior covariance of a position measurement with noise ``R = noise`` (2x2):
+    ``out = P - P H' (H P H' + R)^-1 H P`` (symmetric by construction; ``out`` may be ``cov``)."""
+    (g00, g01, g10, g11, g20, g21, g30, g31,
+     p00, p01, p02, p03, p11, p12, p13, p22, p23, p33) = _gain(cov, noise)
+    out[0, 0] = p00 - (g00 * p00 + g01 * p01)
+    out[1, 1] = p11 - (g10 * p01 + g11 * p11)
+    out[2, 2] = p22 - (g20 * p02 + g21 * p12)
+    out[3, 3] = p33 - (g30 * p03 + g31 * p13)
+    out[0, 1] = out[1, 0] = p01 - (g00 * p01 + g01 * p11)
+    out[0, 2] = out[2, 0] = p02 - (g00 * p02 + g01 * p12)
+    out[0, 3] = out[3, 0] = p03 - (g00 * p03 + g01 * p13)
+    out[1, 2] = out[2, 1] = p12 - (g10 * p02 + g11 * p12)
+    out[1, 3] = out[3, 1] = p13 - (g10 * p03 + g11 * p13)
+    out[2, 3] = out[3, 2] = p23 - (g20 * p03 + g21 * p13)
+
+
+@numba.njit(cache=True)
+def kalman_update(mean, cov, z, noise, mean_out, cov_out):
+    """Kalman update of one belief with a position measurement ``z`` (2,) of noise ``R``:
+    ``mean_out = m + K (z - H m)``, ``cov_out`` as :func:`update_covariance`. The outputs may be
+    the inputs (in place)."""
+    g = _gain(cov, noise)
+    ex = z[0] - mean[0]
+    ey = z[1] - mean[1]
+    m0 = mean[0] + g[0] * ex + g[1] * ey
+    m1 = mean[1] + g[2] * ex + g[3] * ey
+    m2 = mean[2] + g[4] * ex + g[5] * ey
+    m3 = mean[3] + g[6] * ex + g[7] * ey
+    update_covariance(cov, noise, cov_out)
+    mean_out[0], mean_out[1], mean_out[2], mean_out[3] = m0, m1, m2, m3
+
+
+@numba.njit(cache=True)
+def _update_stacked(means, covariances, measurements, noise):
+    for i in range(means.shape[0]):
+        kalman_update(means[i], covariances[i], measurements[i], noise, means[i],
+                      covariances[i])
+
+
+def check_noise_covariance(noise: np.ndarray) -> np.ndarray:
+    """``noise`` as a finite symmetric positive definite 2x2 float array.
+
+    Raises:
+        ValueError: naming what is wrong.
+    """
+    r = np.array(noise, dtype=float)
+    if r.shape != (2, 2) or not np.all(np.isfinite(r)):
+        raise ValueError(f"measurement noise must be a finite 2x2 matrix, got {r.tolist()}")
+    if abs(r[0, 1] - r[1, 0]) > 1e-9 * max(float(np.max(np.abs(r))), 1.0):
+        raise ValueError(f"measurement noise is not symmetric: {r.tolist()}")
+    if np.min(np.linalg.eigvalsh(r)) <= 0.0:
+        raise ValueError(f"measurement noise is not positive definite: {r.tolist()}")
+    return r
+
+
 class PositionMeasurementModel:
     """Linear position sensor with a circular footprint.
 
-    Attributes:
-        noise_std: standard deviation of each position coordinate, m (``R = noise_std^2 I``).
+    Args:
+        noise_covariance: ``R``, the 2x2 covariance of the position error, m^2 (a full matrix
+            is allowed); default ``10 I``.
         sensor_diameter: footprint diameter ``w``, m; targets within ``w/2`` are measured.
     """
 
-    noise_std: float = float(np.sqrt(10.0))
-    sensor_diameter: float = 100.0
-    noise_covariance: np.ndarray = field(init=False, repr=False, compare=False)
+    def __init__(self, noise_covariance: np.ndarray | None = None,
+                 sensor_diameter: float = 100.0) -> None:
+        r = check_noise_covariance(10.0 * np.eye(2) if noise_covariance is None
+                                   else noise_covariance)
+        r.flags.writeable = False
+        self.noise_covariance = r
+        self.sensor_diameter = float(sensor_diameter)
+        self._factor = np.linalg.cholesky(r)
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "noise_covariance", self.noise_std**2 * np.eye(2))
+    @classmethod
+    def isotropic(cls, noise_std: float, sensor_diameter: float = 100.0
+                  ) -> PositionMeasurementModel:
+        """``R = noise_std^2 I`` (``noise_std`` in m per axis)."""
+        return cls(noise_std**2 * np.eye(2), sensor_diameter)
+
+    def __repr__(self) -> str:
+        return (f"PositionMeasurementModel(noise_covariance={self.noise_covariance.tolist()}, "
+                f"sensor_diameter={self.sensor_diameter})")
 
     def in_footprint(self, agent_position: np.ndarray, positions: np.ndarray) -> np.ndarray:
         """Boolean mask ``(n,)``: which positions ``(n, 2)`` lie within ``w/2`` of the agent."""
@@ -36,20 +122,16 @@ class PositionMeasurementModel:
         return d2 <= (0.5 * self.sensor_diameter) ** 2
 
     def sample(self, positions: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Noisy measurements ``(m, 2)`` of true positions ``(m, 2)``."""
-        return positions + self.noise_std * rng.standard_normal(positions.shape)
+        """Noisy measurements ``(m, 2)`` of true positions ``(m, 2)``: ``z = p + L e``,
+        ``L L' = R``, ``e ~ N(0, I)``."""
+        e = rng.standard_normal(np.shape(positions))
+        return positions + e @ self._factor.T
 
     def update(self, means: np.ndarray, covariances: np.ndarray, measurements: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
-        """Kalman update of stacked beliefs ``(m, 4)``, ``(m, 4, 4)`` with ``z`` ``(m, 2)``.
-
-        Joseph form ``P+ = (I - K H) P (I - K H)' + K R K'``.
-        """
-        r = self.noise_covariance
-        innovation_cov = covariances[:, :2, :2] + r
-        gain = np.linalg.solve(innovation_cov, covariances[:, :2, :]).transpose(0, 2, 1)
-        innovation = measurements - means[:, :2]
-        new_means = means + np.einsum("mij,mj->mi", gain, innovation)
-        i_kh = np.eye(4) - gain @ H
-        new_covs = i_kh @ covariances @ i_kh.transpose(0, 2, 1) + gain @ r @ gain.transpose(0, 2, 1)
-        return new_means, 0.5 * (new_covs + new_covs.transpose(0, 2, 1))
+        """Kalman update of stacked beliefs ``(m, 4)``, ``(m, 4, 4)`` with ``z`` ``(m, 2)``."""
+        new_means = np.array(means, dtype=float)
+        new_covs = np.array(covariances, dtype=float)
+        _update_stacked(new_means, new_covs, np.ascontiguousarray(measurements, dtype=float),
+                        self.noise_covariance)
+        return new_means, new_covs

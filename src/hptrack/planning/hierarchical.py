@@ -1,6 +1,6 @@
 """The paper's hierarchical planner in the simulator (Fig. 2; Sec. IV-C-4 re-planning).
 
-1. At the start, the tree search (:func:`hptrack.planning.mcts.search`) picks the first target.
+1. At the start, the tree search (:func:`hptrack.planning.search.search`) picks the first target.
 2. The agent executes that sub-task (:class:`~hptrack.coverage.subtask.CoverageSubtask`:
    intercept, then the shifting spiral, until the target is detected or ``t_cutoff``).
 3. As the sub-task starts, the search re-plans with the current action fixed and returns a
@@ -19,41 +19,78 @@ follows the last found target, or hovers.
 
 from __future__ import annotations
 
+from typing import Annotated, Any
+
 import numpy as np
+from pydantic import Field, model_validator
 
 from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
-from hptrack.planning.mcts import DEFAULT_EXPLORATION, SearchResult, search
-from hptrack.planning.mdp import PlanningProblem
-from hptrack.sim.interface import MissionSpec, Observation
+from hptrack.interface import MissionSpec, Observation
+from hptrack.models.motion import predicted_positions
+from hptrack.planning.search import DEFAULT_EXPLORATION, SearchResult, search
+from hptrack.planning.subtask_mdp import PlanningProblem
+from hptrack.settings import PlannerSettings
 
 DEFAULT_ITERATIONS = 100_000
 """Simulations per tree search when neither ``iterations`` nor ``time_limit`` is given."""
 
 
-class HierarchicalPlanner:
-    """Monte Carlo tree search over coverage sub-tasks (name ``"mcts"``).
+class MctsSettings(PlannerSettings):
+    """Options of the hierarchical planner (``mcts``).
 
-    Args:
-        iterations: simulations per tree search (reproducible on any machine).
+    Attributes:
+        iterations: simulations per tree search (reproducible on any machine); default
+            100,000 when no time limit is given.
         time_limit: wall time per tree search, s (the paper uses 30 s). With both, whichever
-            comes first; with neither, ``DEFAULT_ITERATIONS``.
-        exploration: UCB1 constant on values normalised to the observed return range.
+            comes first.
+        exploration: UCB1 constant ``c`` on values normalised to the observed return range.
     """
+
+    iterations: Annotated[int | None, Field(ge=1)] = None
+    time_limit: Annotated[float | None, Field(gt=0.0)] = None
+    exploration: Annotated[float, Field(gt=0.0)] = DEFAULT_EXPLORATION
+
+    effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_effort(cls, data: Any) -> Any:
+        if isinstance(data, dict) and data.get("iterations") is None \
+                and data.get("time_limit") is None:
+            data = {**data, "iterations": DEFAULT_ITERATIONS}
+        return data
+
+
+_warmed = False
+
+
+def warm_up() -> None:
+    """Load (or compile) the search's kernels once per process with a tiny search, so that the
+    first timed search of a process gets as many simulations as the later ones."""
+    global _warmed
+    if _warmed:
+        return
+    cov = np.diag([1000.0, 1000.0, 0.4, 0.4])
+    for fixed in (None, 0):
+        problem = PlanningProblem(np.zeros(2), np.array([[300.0, 0, 1, 0], [-300.0, 0, 0, 1]]),
+                                  np.stack([cov, cov]), np.full(2, 3e-4), 60.0, 0.5, 0.5, 30.0,
+                                  100.0, 10.0 * np.eye(2), current_action=fixed)
+        search(problem, iterations=64, seed=0)
+    _warmed = True
+
+
+class HierarchicalPlanner:
+    """Monte Carlo tree search over coverage sub-tasks (name ``"mcts"``); see the module
+    docstring and :class:`MctsSettings`."""
 
     name = "mcts"
 
-    def __init__(self, iterations: int | None = None, time_limit: float | None = None,
-                 exploration: float = DEFAULT_EXPLORATION) -> None:
-        if iterations is None and time_limit is None:
-            iterations = DEFAULT_ITERATIONS
-        if iterations is not None and iterations < 1:
-            raise ValueError(f"iterations must be positive, got {iterations}")
-        if time_limit is not None and not time_limit > 0:
-            raise ValueError(f"time_limit must be positive, got {time_limit}")
-        self.iterations = iterations
-        self.time_limit = time_limit
-        self.exploration = exploration
+    def __init__(self, settings: MctsSettings | None = None) -> None:
+        self.settings = settings or MctsSettings()
+        self.iterations = self.settings.iterations
+        self.time_limit = self.settings.time_limit
+        self.exploration = self.settings.exploration
 
     # --- planning -------------------------------------------------------------------------
     def _search(self, observation: Observation, current_action: int | None = None,
@@ -73,7 +110,7 @@ class HierarchicalPlanner:
             return False
         m, agent, mission = observation.means[target], observation.agent_position, self._mission
         steps = intercept_steps(agent[0], agent[1], m[0], m[1], m[2], m[3], mission.agent_speed,
-                                mission.time_step, 0.5 * mission.sensor.sensor_diameter)
+                                mission.time_step, mission.sensor_radius)
         left = int(np.floor(observation.remaining_budget / mission.time_step + 1e-9))
         return 0 <= steps < left
 
@@ -104,6 +141,8 @@ class HierarchicalPlanner:
     # --- Planner protocol ----------------------------------------------------------------
     def reset(self, mission: MissionSpec, observation: Observation,
               rng: np.random.Generator) -> None:
+        if self.time_limit is not None:
+            warm_up()
         self._mission = mission
         self._rng = rng
         self._available = np.ones(mission.n_targets, dtype=bool)
@@ -129,11 +168,10 @@ class HierarchicalPlanner:
         if self._subtask is not None:
             return self._subtask.next_waypoint(observation)
         if self._follow is not None:
-            mean = observation.means[self._follow]
-            return mean[:2] + mean[2:] * self._mission.time_step
+            return predicted_positions(observation.means[self._follow], self._mission.time_step)
         return observation.agent_position
 
     def episode_info(self) -> dict:
-        """The sub-tasks flown (plan, estimate, outcome) and every search's effort."""
-        return {"subtasks": self._log, "searches": self._searches,
-                "iterations": self.iterations, "time_limit": self.time_limit}
+        """The sub-tasks flown (plan, estimate, outcome), every search's effort, the settings."""
+        return {"settings": self.settings.as_json(), "subtasks": self._log,
+                "searches": self._searches}

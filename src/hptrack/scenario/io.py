@@ -7,11 +7,56 @@ from pathlib import Path
 import yaml
 from pydantic import ValidationError
 
+from hptrack.interface import InputError
 from hptrack.scenario.model import Scenario
 
 
-class ScenarioError(ValueError):
+class ScenarioError(InputError):
     """A scenario file that cannot be read or is invalid; the message is one line."""
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A safe YAML loader that refuses a mapping with the same key twice (PyYAML keeps the
+    last one silently)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                duplicated = key in seen
+            except TypeError:  # an unhashable key: the base class refuses it
+                break
+            if duplicated:
+                mark = key_node.start_mark
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicated key {key!r} at line {mark.line + 1}", mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def read_yaml(path: str | Path, what: str = "file") -> object:
+    """Parse a YAML file (UTF-8 text, no duplicated keys), or raise :class:`ScenarioError`
+    naming the file."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as err:
+        raise ScenarioError(f"{path}: cannot read {what} ({err.strerror})") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ScenarioError(f"{path}: not a UTF-8 text file (byte {err.start}); is it a "
+                            f"{what}?") from None
+    if "\x00" in text:
+        raise ScenarioError(f"{path}: a binary file, not a {what}")
+    try:
+        return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(err, "problem", None) or "invalid YAML"
+        raise ScenarioError(f"{path}: malformed YAML{where}: {problem}") from None
 
 
 def format_validation_error(error: ValidationError) -> str:
@@ -21,7 +66,7 @@ def format_validation_error(error: ValidationError) -> str:
         loc = ".".join(str(p) for p in item["loc"]) or "scenario"
         msg = item["msg"].removeprefix("Value error, ")
         value = item.get("input")
-        shown = "" if isinstance(value, dict) or "value" in msg else f" (value {value!r})"
+        shown = "" if isinstance(value, dict | list) or "value" in msg else f" (value {value!r})"
         parts.append(f"{loc}: {msg}{shown}")
     return "; ".join(parts)
 
@@ -38,19 +83,7 @@ def parse_scenario(data: object, source: str = "scenario") -> Scenario:
 
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a YAML scenario file."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as err:
-        raise ScenarioError(f"{path}: cannot read ({err.strerror})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(err, "problem", None) or "invalid YAML"
-        raise ScenarioError(f"{path}: malformed YAML{where}: {problem}") from None
-    return parse_scenario(data, str(path))
+    return parse_scenario(read_yaml(path, "scenario file"), str(path))
 
 
 def save_scenario(scenario: Scenario, path: str | Path) -> None:

@@ -1,5 +1,5 @@
 """Mission simulation: true world, agent kinematics, sensing, the episode loop and its record.
 
-Import from the submodules: :mod:`hptrack.sim.interface` (what planners see),
+Import from the submodules: :mod:`hptrack.interface` (what planners see),
 :mod:`hptrack.sim.episode` (the loop) and :mod:`hptrack.sim.record` (the episode record).
 """

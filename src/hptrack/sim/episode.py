@@ -18,7 +18,7 @@ import numpy as np
 
 from hptrack.models.beliefs import TargetBeliefs
 from hptrack.scenario.model import Scenario
-from hptrack.sim.interface import MissionSpec, Observation, Planner
+from hptrack.interface import MissionSpec, Observation, Planner
 from hptrack.sim.record import EpisodeRecord
 
 
@@ -58,7 +58,7 @@ def run_episode(scenario: Scenario, planner: Planner, seed: int | None = None,
 
     Args:
         scenario: the mission.
-        planner: any :class:`~hptrack.sim.interface.Planner`; it never sees the truth.
+        planner: any :class:`~hptrack.interface.Planner`; it never sees the truth.
         seed: overrides ``scenario.seed``.
         belief_stride: store beliefs every this many steps (the last step is always stored).
         on_step: called as ``on_step(k, K)`` after each step (progress bars).
@@ -103,7 +103,7 @@ def run_episode(scenario: Scenario, planner: Planner, seed: int | None = None,
             raise ValueError(f"planner {planner.name!r} returned an invalid waypoint {waypoint!r}")
         agent = move_towards(agent, waypoint, mission.step_length)
         truth = motion.sample_motion(truth, q, motion_rng)
-        beliefs.predict(1)
+        beliefs.predict(mission.time_step)
         seen = sense(k)
         observation = _observation(k, mission, agent, beliefs, seen)
         if on_step is not None:
@@ -114,6 +114,13 @@ def run_episode(scenario: Scenario, planner: Planner, seed: int | None = None,
         time_step=mission.time_step, sensor_diameter=sensor.sensor_diameter,
         agent_path=agent_path, true_states=true_states, belief_steps=np.asarray(stored),
         belief_means=belief_means, belief_covariances=belief_covs, detections=detections,
-        per_target_logdet=beliefs.position_logdets(),
-        info=dict(getattr(planner, "episode_info", lambda: {})()),
+        per_target_logdet=beliefs.position_logdets(), info=dict(planner.episode_info()),
     )
+
+
+def record_bytes(n_targets: int, n_steps: int, belief_stride: int = 1) -> int:
+    """Memory an :class:`EpisodeRecord` of a mission needs, bytes (to refuse one that does not
+    fit before it starts)."""
+    per_step = 8 * (2 + 4 * n_targets) + n_targets
+    stored = n_steps // belief_stride + 2
+    return (n_steps + 1) * per_step + stored * 8 * 20 * n_targets

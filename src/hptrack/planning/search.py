@@ -1,0 +1,370 @@
+"""Monte Carlo tree search (paper Sec. IV-C-3, Algorithm 1; re-planning Sec. IV-C-4, Algorithm 1
+lines 9-12), apart from the MDP it searches and its rollout policy.
+
+The search takes its model as compiled functions, in the spirit of mctx's ``recurrent_fn``. An
+MDP with chance nodes of two outcomes is a class of ``env`` (a ``NamedTuple`` of the MDP's
+constant data) registered with :func:`hptrack.planning.mdp.register_mdp` and these kernels, all taking ``env`` first:
+
+* ``copy_state(env, src, dst)``: copy a state (a tuple of arrays) into scratch;
+* ``is_available(env, state, a) -> bool``; a state without an available action is terminal;
+* ``expand(env, state, a, work) -> (p, payload0, payload1)``: the probability of outcome 0 and
+  one integer per outcome that ``apply`` needs (deterministic, so it is stored in the tree);
+* ``apply(env, state, a, outcome0, payload, work)``: the transition, in place;
+* ``value(env, state) -> float``: the return of a terminal state (``-U`` in this project).
+
+A rollout policy is a class of ``policy`` (a ``NamedTuple`` of its parameters, possibly empty)
+registered with :func:`hptrack.planning.rollout.register_policy` and a kernel ``choose(policy, env, state, rng,
+candidates) -> a`` (:mod:`hptrack.planning.rollout`); the search takes a policy instance as an
+argument. Numba compiles one version of the search per (env, policy) class and caches it on
+disk, so a new process plans at once (passing the kernels as function arguments would compile
+the whole search anew in every process, several seconds).
+
+The search is a pure function of ``(env, root, policy, seed, number of simulations)``: the same
+inputs give the same tree, whether the simulations ran in one call or in chunks between
+wall-clock checks. :func:`search` runs it on the sub-task MDP of
+:mod:`hptrack.planning.subtask_mdp`.
+
+**Simulate** (Algorithm 1 lines 15-34), iteratively:
+
+* a state without an available action is terminal: its value is computed once and cached in the
+  node (lines 16-17);
+* first visit (lines 18-22): the node is expanded and a rollout runs to the end. The expansion is
+  deterministic, so it is stored lazily: the action slots are allocated on the second visit and
+  each action's ``expand`` is called the first time the action is selected; the tree's statistics
+  are the same as with an eager expansion, at a fraction of the cost;
+* otherwise UCB1 picks an action (:func:`hptrack.planning.tree.select`), the outcome is drawn
+  from ``p`` (line 25), the child state is created on first draw (lines 26-29) and values are
+  backed up as running means (:func:`hptrack.planning.tree.backup`, lines 31-33).
+
+States are not stored: the descent rebuilds the state from the root by applying the stored
+transitions, only when it is needed (a first visit, opening the action slots, or a first
+expansion), so a descent to a cached terminal node costs no transition at all.
+
+**Re-planning** (lines 9-12): the root's only action is the current one (``fixed``), and the
+result gives ``argmax V`` over the actions of its find child and of its miss child. As both
+answers are needed whatever ``p`` is (it is often above 0.99), the root's outcome alternates
+between find and miss instead of being drawn, so each child gets half of the simulations; below
+the root everything is as above.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+import numba
+import numpy as np
+
+from hptrack.planning import subtask_mdp
+from hptrack.planning.mdp import mdp_apply, mdp_copy_state, mdp_expand, mdp_is_available, mdp_value
+from hptrack.planning.rollout import UniformRandom, choose_action
+from hptrack.planning.stream import seed_value, uniform
+from hptrack.planning.tree import (
+    LEAF,
+    TERMINAL,
+    UNVISITED,
+    ActionStats,
+    Tree,
+    backup,
+    grow_tree,
+    new_tree,
+    node_stats,
+    select,
+)
+
+DEFAULT_EXPLORATION = 0.5
+"""UCB1 constant ``c`` on values normalised to the observed return range."""
+
+
+@numba.njit(cache=True)
+def rollout(env, state, forced, policy, rng, candidates, work):
+    """Run ``policy`` from ``state`` to a terminal state (Algorithm 1 line 21) and return its
+    value; ``forced >= 0`` fixes the first action (re-planning at the root)."""
+    while True:
+        if forced >= 0:
+            a = forced
+            forced = -1
+        else:
+            a = choose_action(policy, env, state, rng, candidates)
+            if a < 0:
+                break
+        p, payload0, payload1 = mdp_expand(env, state, a, work)
+        found = uniform(rng) < p
+        mdp_apply(env, state, a, found, payload0 if found else payload1, work)
+    return mdp_value(env, state)
+
+
+@numba.njit(cache=True)
+def _open_slots(tree, env, s, state, fixed, n_actions):
+    """Allocate the action slots of state node ``s`` (its available actions, in order; only
+    ``fixed`` at the root in re-planning mode)."""
+    first = tree.counts[1]
+    count = 0
+    for a in range(n_actions):
+        if (fixed < 0 or s != 0 or a == fixed) and mdp_is_available(env, state, a):
+            x = first + count
+            tree.a_target[x] = a
+            tree.a_p[x] = -1.0
+            count += 1
+    tree.counts[1] += count
+    tree.s_first[s] = first
+    tree.s_count[s] = count
+
+
+@numba.njit(cache=True)
+def _catch_up(tree, env, path_action, path_found, applied, depth, root, state, work):
+    """Bring the scratch state from path level ``applied`` (``-1``: not reset yet) to ``depth``
+    by re-applying the stored transitions from the root; returns ``depth``."""
+    if applied < 0:
+        mdp_copy_state(env, root, state)
+        applied = 0
+    for d in range(applied, depth):
+        x = path_action[d]
+        found = path_found[d]
+        mdp_apply(env, state, np.int64(tree.a_target[x]), found,
+                  tree.a_find[x] if found else tree.a_miss[x], work)
+    return depth
+
+
+@numba.njit(cache=True)
+def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
+                    exploration, n_simulations):
+    """Run up to ``n_simulations`` simulations (Algorithm 1, ``Simulate`` from the root) and
+    return how many ran: it stops early when the tree's arrays might not hold one more
+    simulation's nodes (:func:`~hptrack.planning.tree.grow_tree` makes room).
+
+    ``root`` is the root state (never modified), ``state`` scratch of the same shapes, ``work``
+    the MDP's scratch; ``max_depth`` bounds the number of sub-tasks of a history.
+    """
+    candidates = np.empty(n_actions, dtype=np.int64)
+    path_state = np.empty(max_depth, dtype=np.int64)
+    path_action = np.empty(max_depth, dtype=np.int64)
+    path_found = np.empty(max_depth, dtype=np.bool_)
+    cap_s = tree.s_first.shape[0]
+    cap_a = tree.a_target.shape[0]
+    for sim in range(n_simulations):
+        if tree.counts[0] + 1 > cap_s or tree.counts[1] + n_actions > cap_a:
+            return sim
+        s = 0
+        depth = 0
+        applied = -1
+        while True:
+            first = tree.s_first[s]
+            if first == TERMINAL:
+                ret = tree.s_value[s]
+                break
+            if first < 0:
+                applied = _catch_up(tree, env, path_action, path_found, applied, depth, root,
+                                    state, work)
+            if first == UNVISITED:
+                live = False
+                for a in range(n_actions):
+                    if mdp_is_available(env, state, a):
+                        live = True
+                        break
+                if not live:
+                    ret = mdp_value(env, state)
+                    tree.s_first[s] = TERMINAL
+                    tree.s_value[s] = ret
+                    break
+                tree.s_first[s] = LEAF
+                ret = rollout(env, state, fixed if s == 0 else -1, policy, tree.rng,
+                              candidates, work)
+                break
+            if first == LEAF:
+                _open_slots(tree, env, s, state, fixed, n_actions)
+            x = select(tree, s, exploration)
+            if tree.a_p[x] < 0.0:
+                applied = _catch_up(tree, env, path_action, path_found, applied, depth, root,
+                                    state, work)
+                p, payload0, payload1 = mdp_expand(env, state, np.int64(tree.a_target[x]),
+                                                   work)
+                tree.a_p[x] = p
+                tree.a_find[x] = payload0
+                tree.a_miss[x] = payload1
+            if s == 0 and fixed >= 0 and 0.0 < tree.a_p[x] < 1.0:
+                found = tree.counts[2] % 2 == 1  # re-planning: both outcomes need a plan
+            else:
+                found = uniform(tree.rng) < tree.a_p[x]
+            path_state[depth] = s
+            path_action[depth] = x
+            path_found[depth] = found
+            depth += 1
+            outcome = 0 if found else 1
+            child = tree.a_child[x, outcome]
+            if child < 0:
+                child = tree.counts[0]
+                tree.counts[0] += 1
+                tree.a_child[x, outcome] = child
+            s = child
+        backup(tree, path_state, path_action, depth, ret)
+    return n_simulations
+
+
+@dataclass(frozen=True, eq=False)
+class SearchResult:
+    """The outcome of a search.
+
+    Attributes:
+        best_action: the action to take (first plan), or the fixed current action
+            (re-planning); ``None`` when no action is available.
+        root: statistics of the root's actions.
+        after_find: re-planning only: the actions after the current one's outcome 0 (find)
+            (``None`` when that state was never reached or is terminal).
+        after_miss: likewise after outcome 1 (miss).
+        simulations: number of simulations run.
+        stopped_by: ``"iterations"`` or ``"time_limit"``.
+        elapsed: wall time of the search, s.
+        state_nodes: state nodes in the tree.
+        action_nodes: action nodes in the tree.
+        tree_bytes: memory held by the tree's arrays (allocated capacity), bytes.
+    """
+
+    best_action: int | None
+    root: ActionStats
+    after_find: ActionStats | None
+    after_miss: ActionStats | None
+    simulations: int
+    stopped_by: Literal["iterations", "time_limit"]
+    elapsed: float
+    state_nodes: int
+    action_nodes: int
+    tree_bytes: int
+
+    @property
+    def best_after_find(self) -> int | None:
+        """Re-planning: the next action if the current one finds its target."""
+        return None if self.after_find is None else self.after_find.best
+
+    @property
+    def best_after_miss(self) -> int | None:
+        """Re-planning: the next action if the current one misses its target."""
+        return None if self.after_miss is None else self.after_miss.best
+
+
+def _check_limits(iterations: int | None, time_limit: float | None) -> None:
+    if iterations is None and time_limit is None:
+        raise ValueError("give iterations, time_limit or both")
+    if iterations is not None and iterations < 1:
+        raise ValueError(f"iterations must be positive, got {iterations}")
+    if time_limit is not None and not time_limit > 0.0:
+        raise ValueError(f"time_limit must be positive, got {time_limit}")
+
+
+def run_search(simulate: Callable[[Tree, int], int], n_actions: int, iterations: int | None,
+               time_limit: float | None, seed: int | np.random.Generator,
+               fixed: int = -1, start: float | None = None) -> SearchResult:
+    """The ``TreeSearch`` loop of Algorithm 1 around a compiled ``simulate(tree, count)``.
+
+    Simulations run in chunks; between chunks the tree grows when full and the wall clock is
+    checked (from ``start``, a ``time.perf_counter()`` reading, default now). With both limits,
+    whichever comes first stops the search.
+    """
+    _check_limits(iterations, time_limit)
+    start = time.perf_counter() if start is None else start
+    tree = new_tree(seed_value(seed))
+    done = 0
+    chunk = 64
+    while True:
+        todo = chunk if iterations is None else min(chunk, iterations - done)
+        ran = simulate(tree, todo)
+        if ran < todo:
+            tree = grow_tree(tree, n_actions)
+        done += ran
+        if iterations is not None and done >= iterations:
+            stopped_by = "iterations"
+            break
+        if time_limit is not None:
+            elapsed = time.perf_counter() - start
+            left = time_limit - elapsed
+            if left <= 0.0:
+                stopped_by = "time_limit"
+                break
+            chunk = max(1, min(8 * chunk, int(done / elapsed * min(left, 0.05)) + 1))
+        else:
+            chunk = min(8 * chunk, 65536)
+    return _result(tree, fixed, stopped_by, time.perf_counter() - start)
+
+
+def search_mdp(env: tuple, root: tuple, n_actions: int, max_depth: int, work: np.ndarray,
+               iterations: int | None = None, time_limit: float | None = None,
+               seed: int | np.random.Generator = 0, exploration: float = DEFAULT_EXPLORATION,
+               policy: tuple = UniformRandom(), fixed: int = -1,
+               start: float | None = None) -> SearchResult:
+    """Search the registered MDP of ``env`` from ``root`` (a tuple of arrays, not modified).
+
+    Args:
+        env: the MDP's constant data, an instance of a class registered with
+            :func:`hptrack.planning.mdp.register_mdp`.
+        root: the root state.
+        n_actions: number of actions of the MDP.
+        max_depth: most transitions of one history.
+        work: the MDP's scratch.
+        iterations, time_limit: stop after this many simulations / this wall time (s),
+            whichever comes first.
+        seed: an integer or a :class:`numpy.random.Generator` (one ``uint64`` is drawn from it).
+        exploration: UCB1 constant ``c`` on values normalised to the observed return range.
+        policy: the rollout policy (:mod:`hptrack.planning.rollout`).
+        fixed: re-planning mode: the root's only action (``-1``: a first plan).
+        start: a ``time.perf_counter()`` reading the time limit counts from (default now).
+    """
+    state = tuple(np.array(a, copy=True) for a in root)
+
+    def simulate(tree: Tree, count: int) -> int:
+        return run_simulations(tree, env, root, state, work, policy, n_actions, max_depth,
+                               fixed, float(exploration), count)
+
+    return run_search(simulate, n_actions, iterations, time_limit, seed, fixed, start)
+
+
+def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
+           time_limit: float | None = None, seed: int | np.random.Generator = 0,
+           exploration: float = DEFAULT_EXPLORATION,
+           policy: tuple = UniformRandom()) -> SearchResult:
+    """Plan from ``problem``'s root state with Algorithm 1 (``TreeSearch``) on the sub-task MDP.
+
+    Args:
+        problem: root state and model; with ``current_action`` set, re-planning mode: the root's
+            only action is the current one and the result gives the best next action after
+            each of its outcomes (Algorithm 1 lines 9-12).
+        iterations: stop after this many simulations.
+        time_limit: stop once this wall time (s) has passed, checked between chunks of
+            simulations. With both limits, whichever comes first.
+        seed: an integer or a :class:`numpy.random.Generator` (one ``uint64`` is drawn from it).
+            The same seed and number of simulations give the same tree and plan.
+        exploration: UCB1 constant ``c`` on values normalised to the observed return range.
+        policy: the rollout policy (default the paper's uniformly random one).
+
+    Raises:
+        ValueError: no limit given, a limit not positive, or a current action that cannot be
+            carried out in the remaining budget.
+    """
+    _check_limits(iterations, time_limit)
+    start = time.perf_counter()
+    env = subtask_mdp.SubtaskEnv(problem.model(),
+                                 subtask_mdp.new_memo(problem.n_targets, problem.n_steps))
+    root = problem.root_state()
+    fixed = -1 if problem.current_action is None else problem.current_action
+    if fixed >= 0 and not subtask_mdp.is_available(env, root, fixed):
+        raise ValueError(f"current action {fixed} cannot be carried out in the remaining budget")
+    return search_mdp(env, root, problem.n_targets, problem.n_steps + 2, subtask_mdp.new_work(),
+                      iterations, time_limit, seed, exploration, policy, fixed, start)
+
+
+def _result(tree: Tree, fixed: int, stopped_by: str, elapsed: float) -> SearchResult:
+    root = node_stats(tree, 0)
+    empty = np.zeros(0, dtype=np.int64)
+    if root is None:
+        root = ActionStats(empty, empty, np.zeros(0), np.zeros(0), empty, empty)
+    after_find = after_miss = None
+    if fixed >= 0 and root.actions.size:
+        children = tree.a_child[int(tree.s_first[0])]
+        after_find = None if children[0] < 0 else node_stats(tree, int(children[0]))
+        after_miss = None if children[1] < 0 else node_stats(tree, int(children[1]))
+    return SearchResult(
+        best_action=root.best, root=root, after_find=after_find, after_miss=after_miss,
+        simulations=int(tree.counts[2]), stopped_by=stopped_by, elapsed=elapsed,
+        state_nodes=int(tree.counts[0]), action_nodes=int(tree.counts[1]),
+        tree_bytes=sum(array.nbytes for array in tree))

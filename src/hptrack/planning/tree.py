@@ -1,0 +1,165 @@
+"""The search tree as preallocated arrays indexed by node id (no Python object per node), in the
+spirit of mctx: state nodes ``s_*`` and action (chance) nodes ``a_*``.
+
+A state node stores its visit count ``N(N^s)``, its first action slot and the number of slots;
+an action node stores its action, the expansion results (``p`` of outcome 0, and one integer
+payload per outcome that the MDP needs to replay the transition, e.g. a duration), ``N(N^a)``,
+``V(N^a)`` and its two children (outcome 0, outcome 1). States themselves are not stored: the
+search rebuilds them from the root by replaying the stored transitions.
+
+:func:`select` is UCB1 (paper Algorithm 1, line 23) and :func:`backup` the running-mean backup
+(lines 31-33); both are the tree's, whatever the MDP.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+UNVISITED = -2
+"""``Tree.s_first`` of a state node created but never visited."""
+LEAF = -1
+"""``Tree.s_first`` of a state node visited once (rolled out, no action slots yet)."""
+TERMINAL = -3
+"""``Tree.s_first`` of a terminal state node (value cached in ``Tree.s_value``)."""
+
+
+class Tree(NamedTuple):
+    """The search tree as arrays (state nodes ``s_*``, action nodes ``a_*``).
+
+    ``counts`` holds ``[state nodes, action nodes, simulations run]``; ``value_range`` the
+    smallest and largest return seen; ``rng`` the random stream's state.
+    """
+
+    s_first: np.ndarray
+    s_count: np.ndarray
+    s_visits: np.ndarray
+    s_value: np.ndarray
+    a_target: np.ndarray
+    a_p: np.ndarray
+    a_find: np.ndarray
+    a_miss: np.ndarray
+    a_visits: np.ndarray
+    a_value: np.ndarray
+    a_child: np.ndarray
+    counts: np.ndarray
+    value_range: np.ndarray
+    rng: np.ndarray
+
+
+_FILL = {
+    "s_first": (UNVISITED, np.int32), "s_count": (0, np.int8), "s_visits": (0, np.int32),
+    "s_value": (np.nan, np.float64), "a_target": (0, np.int8), "a_p": (-1.0, np.float64),
+    "a_find": (0, np.int32), "a_miss": (0, np.int32), "a_visits": (0, np.int32),
+    "a_value": (0.0, np.float64), "a_child": (-1, np.int32),
+}
+"""Initial value and dtype of each node array of :class:`Tree`."""
+
+
+def new_tree(seed: int, capacity: int = 1024) -> Tree:
+    """An empty tree holding only the root (state node 0), with the random stream seeded."""
+    arrays = {name: np.full((capacity, 2) if name == "a_child" else capacity, fill, dtype=dtype)
+              for name, (fill, dtype) in _FILL.items()}
+    return Tree(**arrays, counts=np.array([1, 0, 0], dtype=np.int64),
+                value_range=np.array([np.inf, -np.inf]), rng=np.array([seed], dtype=np.uint64))
+
+
+def grow_tree(tree: Tree, n_actions: int) -> Tree:
+    """The tree with its state (action) arrays doubled if one more state node (``n_actions``
+    more action nodes) might not fit: what one simulation can add at most."""
+    arrays = tree._asdict()
+    for prefix, size, need in (("s_", tree.s_first.shape[0], tree.counts[0] + 1),
+                               ("a_", tree.a_target.shape[0], tree.counts[1] + n_actions)):
+        if need <= size:
+            continue
+        extra = max(size, need - size)
+        for name, (fill, dtype) in _FILL.items():
+            if name.startswith(prefix):
+                old = arrays[name]
+                arrays[name] = np.concatenate(
+                    [old, np.full((extra, *old.shape[1:]), fill, dtype=dtype)])
+    return Tree(**arrays)
+
+
+@numba.njit(cache=True)
+def select(tree, s, exploration):
+    """UCB1 (Algorithm 1 line 23) over the action slots of state node ``s``: the first unvisited
+    action, else ``argmax V_hat + c sqrt(ln N(s) / N(a))`` with values normalised to ``[0, 1]``
+    by the smallest and largest return seen so far."""
+    first = tree.s_first[s]
+    count = tree.s_count[s]
+    for x in range(first, first + count):
+        if tree.a_visits[x] == 0:
+            return x
+    low, high = tree.value_range[0], tree.value_range[1]
+    scale = 1.0 / (high - low) if high > low else 0.0
+    log_n = math.log(tree.s_visits[s])
+    best = first
+    best_score = -np.inf
+    for x in range(first, first + count):
+        score = ((tree.a_value[x] - low) * scale
+                 + exploration * math.sqrt(log_n / tree.a_visits[x]))
+        if score > best_score:
+            best_score = score
+            best = x
+    return best
+
+
+@numba.njit(cache=True)
+def backup(tree, path_state, path_action, depth, ret):
+    """Running-mean backup of the return ``ret`` along the path (Algorithm 1 lines 31-33):
+    ``N(N^s) += 1``, ``N(N^a) += 1``, ``V(N^a) += (ret - V(N^a)) / N(N^a)``."""
+    for d in range(depth):
+        x = path_action[d]
+        tree.s_visits[path_state[d]] += 1
+        tree.a_visits[x] += 1
+        tree.a_value[x] += (ret - tree.a_value[x]) / tree.a_visits[x]
+    tree.value_range[0] = min(tree.value_range[0], ret)
+    tree.value_range[1] = max(tree.value_range[1], ret)
+    tree.counts[2] += 1
+
+
+@dataclass(frozen=True, eq=False)
+class ActionStats:
+    """The actions of one state node and their statistics (arrays of equal length).
+
+    Attributes:
+        actions: action indices (target indices in the sub-task MDP).
+        visits: ``N(N^a)``.
+        values: ``V(N^a)``, the mean return (``-U``) over the simulations through the action.
+        p_find: probability of outcome 0, "find" (NaN if never expanded).
+        find_steps: the outcome-0 payload (the sub-task's duration if found, steps).
+        miss_steps: the outcome-1 payload (its duration if missed, steps).
+    """
+
+    actions: np.ndarray
+    visits: np.ndarray
+    values: np.ndarray
+    p_find: np.ndarray
+    find_steps: np.ndarray
+    miss_steps: np.ndarray
+
+    @property
+    def best(self) -> int | None:
+        """``argmax V`` over the visited actions (Algorithm 1 lines 12-13), ``None`` if none."""
+        visited = np.flatnonzero(self.visits > 0)
+        if visited.size == 0:
+            return None
+        return int(self.actions[visited[np.argmax(self.values[visited])]])
+
+
+def node_stats(tree: Tree, s: int) -> ActionStats | None:
+    """The statistics of state node ``s``'s actions (``None`` if it has no action slots)."""
+    first = int(tree.s_first[s])
+    if first < 0:
+        return None
+    xs = slice(first, first + int(tree.s_count[s]))
+    p = tree.a_p[xs].copy()
+    p[p < 0.0] = np.nan
+    return ActionStats(tree.a_target[xs].astype(np.int64), tree.a_visits[xs].astype(np.int64),
+                       tree.a_value[xs].copy(), p, tree.a_find[xs].astype(np.int64),
+                       tree.a_miss[xs].astype(np.int64))

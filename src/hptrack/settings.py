@@ -1,0 +1,130 @@
+"""Planner settings as validated data, and part of every result's identity.
+
+Each planner declares its settings as one :class:`PlannerSettings` subclass (pydantic: types,
+ranges, defaults, one docstring line per field with its unit). Options from the command line
+(``-o KEY=VALUE``, values read as YAML scalars) or from Python are validated into it, and a bad
+value is refused with one line that names the planner, the option and the value::
+
+    planner 'mcts': option exploration must be > 0, got -1
+
+:meth:`PlannerSettings.canonical` is the settings' canonical JSON (every field, defaults
+included, keys sorted); :meth:`PlannerSettings.digest` hashes it. The benchmark store keys every
+episode by it, so a run with another value of any option never reuses another run's rows.
+
+The generic effort flags of the CLI (``--iterations``, ``--time-limit``) map to a planner's own
+fields through ``effort_fields``; a planner without such a notion has none, and its results do
+not claim an effort.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from typing import Any, ClassVar, Self
+
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from hptrack.interface import InputError
+
+_PHRASES = {
+    "greater_than": "must be > {gt}",
+    "greater_than_equal": "must be >= {ge}",
+    "less_than": "must be < {lt}",
+    "less_than_equal": "must be <= {le}",
+    "int_parsing": "must be an integer",
+    "int_type": "must be an integer",
+    "int_from_float": "must be a whole number",
+    "float_parsing": "must be a number",
+    "float_type": "must be a number",
+    "finite_number": "must be a finite number",
+    "bool_parsing": "must be true or false",
+    "bool_type": "must be true or false",
+    "string_type": "must be a text",
+    "missing": "is required",
+}
+
+
+def _phrase(error: dict) -> str:
+    template = _PHRASES.get(error["type"])
+    if template is None:
+        return error["msg"].removeprefix("Value error, ")
+    return template.format(**{k: f"{v:g}" if isinstance(v, int | float) else v
+                              for k, v in (error.get("ctx") or {}).items()})
+
+
+def _json_value(value: Any) -> Any:
+    """``value`` in strict JSON: non-finite floats as strings, tuples as lists."""
+    if isinstance(value, tuple | list):
+        return [_json_value(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
+
+
+class PlannerSettings(BaseModel):
+    """Base of every planner's settings: frozen, no unknown options, finite numbers unless a
+    field says otherwise."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False,
+                              validate_default=True)
+
+    effort_fields: ClassVar[dict[str, str]] = {}
+    """Generic effort flag (``iterations``, ``time_limit``) -> the field it sets."""
+
+    @classmethod
+    def from_options(cls, planner: str, options: dict[str, Any] | None = None) -> Self:
+        """Validate ``options`` (strings are parsed by each field's type).
+
+        Raises:
+            InputError: one line naming the planner, the option and the value.
+        """
+        options = dict(options or {})
+        try:
+            return cls.model_validate(options)
+        except ValidationError as err:
+            first = err.errors()[0]
+            option = ".".join(str(p) for p in first["loc"]) or "settings"
+            if first["type"] == "extra_forbidden":
+                known = ", ".join(sorted(cls.model_fields)) or "none"
+                raise InputError(f"planner {planner!r}: unknown option {option} "
+                                 f"(its options: {known})") from None
+            shown = f", got {first['input']!r}" if first["type"] != "missing" else ""
+            if not first["loc"]:  # a check across fields: the message names them
+                raise InputError(f"planner {planner!r}: {_phrase(first)}") from None
+            raise InputError(f"planner {planner!r}: option {option} {_phrase(first)}"
+                             f"{shown}") from None
+
+    @classmethod
+    def effort_options(cls, iterations: int | None, time_limit: float | None
+                       ) -> dict[str, Any]:
+        """The options that the generic effort flags set on this planner (none if it has no
+        such notion)."""
+        out = {}
+        for flag, value in (("iterations", iterations), ("time_limit", time_limit)):
+            if value is not None and flag in cls.effort_fields:
+                out[cls.effort_fields[flag]] = value
+        return out
+
+    def as_json(self) -> dict[str, Any]:
+        """Every field, in strict JSON types."""
+        return {k: _json_value(v) for k, v in self.model_dump().items()}
+
+    def canonical(self) -> str:
+        """Canonical JSON of every field (sorted keys, no spaces): part of a result's identity."""
+        return json.dumps(self.as_json(), sort_keys=True, separators=(",", ":"))
+
+    def digest(self) -> str:
+        """A short hash of :meth:`canonical`."""
+        return hashlib.sha256(self.canonical().encode()).hexdigest()[:16]
+
+    def effort_label(self) -> str:
+        """The effort fields that are set, e.g. ``"iterations=100000"`` (``"none"`` without)."""
+        values = self.model_dump()
+        parts = [f"{flag}={values[name]}" for flag, name in sorted(self.effort_fields.items())
+                 if values.get(name) is not None]
+        return ",".join(parts) or "none"
+
+
+class NoSettings(PlannerSettings):
+    """A planner without options."""

@@ -1,0 +1,227 @@
+"""One simulator step as a compiled kernel, and :class:`World`, the simulated mission it steps.
+
+A step ``k -> k+1`` (``tau`` seconds) is the simulator's (:mod:`hptrack.sim.episode`): the agent
+moves straight towards its waypoint by at most ``v_a tau``; every true target moves with ``F`` and
+``Q`` noise; every belief is predicted one step (Eq. (1)); every target whose true position lies
+within ``w/2`` of the agent is measured, ``z = [x, y] + L e`` (``L L' = R``), and Kalman-updated.
+Sensing also happens at step 0. The kernels call the model kernels of :mod:`hptrack.models`
+(prediction, true motion, Kalman update, ``log det``); they re-derive none of them.
+
+Randomness is the simulator's: ``SeedSequence(seed).spawn(4)`` gives the streams of the true
+initial states, the target motion, the measurement noise and the planner. The motion stream gives
+``n x 4`` unit normals per step and the measurement stream ``2`` per measured target, in target
+order. A Generator's normals do not depend on how the draws are split, so :class:`World` draws
+them in blocks (:class:`NormalBlock`) and the kernels consume them in the simulator's order: the
+same seed gives the same mission as :func:`hptrack.sim.episode.run_episode`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from hptrack.interface import MissionSpec, Observation
+from hptrack.models.beliefs import logdet_xy
+from hptrack.models.measurement import kalman_update
+from hptrack.models.motion import (
+    advance_true_state,
+    mean_position_at,
+    motion_noise_factors,
+    predict_covariance,
+)
+from hptrack.scenario.model import Scenario
+from hptrack.sim.episode import initial_true_states
+
+BLOCK_STEPS = 256
+"""Steps of random normals drawn at a time."""
+
+
+@numba.njit(cache=True)
+def move_agent(agent, waypoint, max_step):
+    """Holonomic move in place: straight towards ``waypoint`` by at most ``max_step`` m."""
+    dx = waypoint[0] - agent[0]
+    dy = waypoint[1] - agent[1]
+    dist = math.hypot(dx, dy)
+    if dist <= max_step:
+        agent[0] = waypoint[0]
+        agent[1] = waypoint[1]
+    else:
+        scale = max_step / dist
+        agent[0] = agent[0] + dx * scale
+        agent[1] = agent[1] + dy * scale
+
+
+@numba.njit(cache=True)
+def sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, logdets):
+    """Measure and update every target within the footprint (``|p - agent|^2 <= radius2``).
+
+    Consumes two normals of ``e`` from ``e_pos`` per measured target (target order), writes
+    ``seen`` and the per-target ``log det Sigma^xy`` into ``logdets``; returns the new ``e_pos``
+    and ``U``.
+    """
+    z = np.empty(2)
+    total = 0.0
+    for i in range(truth.shape[0]):
+        dx = truth[i, 0] - agent[0]
+        dy = truth[i, 1] - agent[1]
+        inside = dx * dx + dy * dy <= radius2
+        seen[i] = inside
+        if inside:
+            e0 = e[e_pos]
+            e1 = e[e_pos + 1]
+            e_pos += 2
+            z[0] = truth[i, 0] + (e0 * factor[0, 0] + e1 * factor[0, 1])
+            z[1] = truth[i, 1] + (e0 * factor[1, 0] + e1 * factor[1, 1])
+            kalman_update(means[i], covs[i], z, noise, means[i], covs[i])
+        c = covs[i]
+        logdets[i] = logdet_xy(c[0, 0], c[0, 1], c[1, 1])
+        total += logdets[i]
+    return e_pos, total
+
+
+@numba.njit(cache=True)
+def world_step(agent, waypoint, max_step, truth, z_motion, sqrt_q, means, covs, q, tau,
+               c_per_step, radius2, noise, factor, e, e_pos, seen, logdets):
+    """One simulator step in place (module docstring): move, true motion with the unit normals
+    ``z_motion`` ``(n, 4)``, predict one step, sense. Returns the new ``e_pos`` and ``U``."""
+    move_agent(agent, waypoint, max_step)
+    l11, l21, l22 = motion_noise_factors(tau, c_per_step)
+    steps = tau / tau
+    elapsed = steps * tau
+    for i in range(truth.shape[0]):
+        advance_true_state(truth, i, z_motion[i], sqrt_q[i], l11, l21, l22, tau)
+        x, y = mean_position_at(means[i], elapsed)
+        means[i, 0] = x
+        means[i, 1] = y
+        predict_covariance(covs[i], q[i], steps, tau, c_per_step, covs[i])
+    return sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, logdets)
+
+
+class NormalBlock:
+    """Unit normals of one Generator, drawn ``size`` at a time and handed out in order.
+
+    ``take(count)`` needs ``count <= size``; the values are those of drawing them one call at a
+    time.
+    """
+
+    def __init__(self, rng: np.random.Generator, size: int) -> None:
+        self.rng = rng
+        self.values = rng.standard_normal(size)
+        self.pos = 0
+
+    def ensure(self, count: int) -> None:
+        """Make at least ``count`` unused values available from ``pos``."""
+        if self.pos + count > self.values.shape[0]:
+            rest = self.values[self.pos:]
+            self.values = np.concatenate([rest, self.rng.standard_normal(self.pos)])
+            self.pos = 0
+
+
+class World:
+    """A simulated mission of ``scenario`` (true targets, agent, beliefs), advanced by
+    :meth:`step`; after construction, step 0 (the first sensing) is done.
+
+    Args:
+        scenario: the mission.
+        seed: overrides ``scenario.seed`` (as :func:`hptrack.sim.episode.run_episode`).
+
+    Attributes (read them, do not write them):
+        mission: the mission facts.
+        step_index: current step ``k``.
+        agent: ``(2,)`` agent position, m.
+        truth: ``(n, 4)`` true target states.
+        means, covariances: ``(n, 4)``, ``(n, 4, 4)`` beliefs.
+        seen: ``(n,)`` which targets were measured at this step.
+        logdets: ``(n,)`` per-target ``log det Sigma^xy``.
+        uncertainty: ``U = sum(logdets)``.
+        planner_seed: the planner's stream of the seed.
+    """
+
+    def __init__(self, scenario: Scenario, seed: int | None = None) -> None:
+        seed = scenario.seed if seed is None else seed
+        self.seed = int(seed)
+        truth_seq, motion_seq, sensor_seq, self.planner_seed = (
+            np.random.SeedSequence(self.seed).spawn(4))
+        mission = scenario.mission_spec()
+        self.mission: MissionSpec = mission
+        n = mission.n_targets
+        self.n_steps = mission.n_steps
+        self.truth = np.ascontiguousarray(
+            initial_true_states(scenario, np.random.default_rng(truth_seq)))
+        self.agent = np.array(scenario.agent.position, dtype=float)
+        self.means = np.ascontiguousarray(scenario.means())
+        self.covariances = np.ascontiguousarray(scenario.covariances())
+        self.q = np.ascontiguousarray(mission.process_noise, dtype=float)
+        self._sqrt_q = np.sqrt(self.q)
+        self._noise = np.array(mission.measurement_noise, dtype=float)
+        self._factor = np.linalg.cholesky(self._noise)
+        self._radius2 = (0.5 * mission.sensor_diameter) ** 2
+        self._motion = NormalBlock(np.random.default_rng(motion_seq), BLOCK_STEPS * n * 4)
+        self._sensor = NormalBlock(np.random.default_rng(sensor_seq), BLOCK_STEPS * n * 2)
+        self._waypoint = np.empty(2)
+        self.seen = np.zeros(n, dtype=bool)
+        self.logdets = np.empty(n)
+        self.step_index = 0
+        self._sense()
+
+    @property
+    def n_targets(self) -> int:
+        return self.truth.shape[0]
+
+    @property
+    def time(self) -> float:
+        """Elapsed time, s."""
+        return self.step_index * self.mission.time_step
+
+    @property
+    def remaining_budget(self) -> float:
+        """Budget left, s."""
+        return self.mission.budget - self.time
+
+    @property
+    def done(self) -> bool:
+        """The budget is spent."""
+        return self.step_index >= self.n_steps
+
+    def _sense(self) -> None:
+        n = self.n_targets
+        self._sensor.ensure(2 * n)
+        self._sensor.pos, self.uncertainty = sense(
+            self.agent, self.truth, self.means, self.covariances, self._radius2, self._noise,
+            self._factor, self._sensor.values, self._sensor.pos, self.seen, self.logdets)
+
+    def step(self, waypoint_x: float, waypoint_y: float) -> float:
+        """Advance one step with the agent flying towards ``(waypoint_x, waypoint_y)`` m;
+        returns ``U`` after it.
+
+        Raises:
+            RuntimeError: the budget is already spent.
+        """
+        if self.step_index >= self.n_steps:
+            raise RuntimeError("the mission's budget is spent; start a new World")
+        n = self.n_targets
+        motion, sensor = self._motion, self._sensor
+        motion.ensure(4 * n)
+        sensor.ensure(2 * n)
+        z = motion.values[motion.pos:motion.pos + 4 * n].reshape(n, 4)
+        motion.pos += 4 * n
+        wp = self._waypoint
+        wp[0] = waypoint_x
+        wp[1] = waypoint_y
+        m = self.mission
+        sensor.pos, self.uncertainty = world_step(
+            self.agent, wp, m.step_length, self.truth, z, self._sqrt_q, self.means,
+            self.covariances, self.q, m.time_step, m.c_per_step, self._radius2, self._noise,
+            self._factor, sensor.values, sensor.pos, self.seen, self.logdets)
+        self.step_index += 1
+        return self.uncertainty
+
+    def observation(self) -> Observation:
+        """What a planner sees now (read-only copies)."""
+        arrays = [self.agent.copy(), self.means.copy(), self.covariances.copy(),
+                  self.seen.copy()]
+        for a in arrays:
+            a.flags.writeable = False
+        return Observation(self.step_index, self.time, self.remaining_budget, *arrays)

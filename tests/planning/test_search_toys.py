@@ -1,0 +1,205 @@
+"""The tree search (paper Algorithm 1) apart from the sub-task MDP, on toy MDPs whose answers are
+known exactly: a one-action problem (the running-mean backup), a two-armed bandit (exact visit
+counts from the textbook UCB1 rule and the published splitmix64 stream) and a three-step gamble
+solved by expectimax."""
+
+import math
+from functools import cache
+from typing import NamedTuple
+
+import numba
+import numpy as np
+import pytest
+
+from hptrack.planning import MdpKernels, register_mdp, search_mdp
+from hptrack.planning.search import DEFAULT_EXPLORATION
+
+MASK64 = 2**64 - 1
+
+
+class Stream:
+    """splitmix64 (Steele, Lea, Flood 2014) with the search's seeding: an independent model of
+    the search's random draws."""
+
+    def __init__(self, seed: int) -> None:
+        self.state = int(np.random.SeedSequence(seed).generate_state(1, np.uint64)[0])
+
+    def uniform(self) -> float:
+        self.state = (self.state + 0x9E3779B97F4A7C15) & MASK64
+        z = self.state
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & MASK64
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & MASK64
+        z ^= z >> 31
+        return (z >> 11) * 2.0**-53
+
+
+# --- a bandit: one pull of one of the arms, win (p) or lose ---------------------------------
+class Bandit(NamedTuple):
+    p: np.ndarray
+    win: np.ndarray
+    lose: np.ndarray
+
+
+@numba.njit
+def bandit_copy(env, src, dst):
+    dst[0][0] = src[0][0]
+    dst[0][1] = src[0][1]
+
+
+@numba.njit
+def bandit_available(env, state, a):
+    return state[0][0] < 0
+
+
+@numba.njit
+def bandit_expand(env, state, a, work):
+    return env.p[a], 0, 0
+
+
+@numba.njit
+def bandit_apply(env, state, a, found, payload, work):
+    state[0][0] = a
+    state[0][1] = 1 if found else 0
+
+
+@numba.njit
+def bandit_value(env, state):
+    a = state[0][0]
+    return env.win[a] if state[0][1] == 1 else env.lose[a]
+
+
+register_mdp(Bandit, MdpKernels(bandit_copy, bandit_available, bandit_expand, bandit_apply,
+                                bandit_value))
+
+
+def bandit_search(p, win, lose, iterations, seed):
+    env = Bandit(np.array(p, float), np.array(win, float), np.array(lose, float))
+    root = (np.array([-1, 0], dtype=np.int64),)
+    return search_mdp(env, root, len(p), 2, np.zeros(1), iterations=iterations, seed=seed)
+
+
+def test_running_mean_after_one_two_and_three_simulations():
+    """One action, win 1 or lose 0 with p = 0.5. The first simulation expands the root and rolls
+    out (no action statistic yet); each later one backs its return up into the action's running
+    mean: V = r_2, then (r_2 + r_3) / 2, then (r_2 + r_3 + r_4) / 3."""
+    seed = 11
+    stream = Stream(seed)
+    stream.uniform()  # simulation 1: the rollout's choice of the only action
+    stream.uniform()  # ... and its outcome
+    returns = [1.0 if stream.uniform() < 0.5 else 0.0 for _ in range(3)]
+    assert 0.0 < sum(returns) < 3.0  # the seed gives both outcomes, so the mean is informative
+    for sims, expected in ((1, None), (2, returns[0]), (3, np.mean(returns[:2])),
+                           (4, np.mean(returns))):
+        result = bandit_search([0.5], [1.0], [0.0], sims, seed)
+        if expected is None:
+            assert result.root.actions.size == 0  # the root is a leaf: no action slots yet
+        else:
+            assert result.root.visits.tolist() == [sims - 1]
+            assert result.root.values[0] == pytest.approx(expected, rel=1e-12)
+
+
+def reference_ucb1(p, win, lose, iterations, seed, c=DEFAULT_EXPLORATION):
+    """Algorithm 1 on a one-pull bandit, by the book: the first simulation rolls out with a
+    uniformly random arm; then unvisited arms first, else UCB1 on values normalised by the
+    range of returns seen; running-mean backups."""
+    stream = Stream(seed)
+    arms = len(p)
+    visits, values = [0] * arms, [0.0] * arms
+    arm = int(stream.uniform() * arms)
+    ret = win[arm] if stream.uniform() < p[arm] else lose[arm]
+    low = high = ret
+    for n in range(iterations - 1):
+        unvisited = [a for a in range(arms) if visits[a] == 0]
+        if unvisited:
+            arm = unvisited[0]
+        else:
+            scale = 1.0 / (high - low) if high > low else 0.0
+            scores = [(values[a] - low) * scale + c * math.sqrt(math.log(n) / visits[a])
+                      for a in range(arms)]
+            arm = int(np.argmax(scores))
+        ret = win[arm] if stream.uniform() < p[arm] else lose[arm]
+        visits[arm] += 1
+        values[arm] += (ret - values[arm]) / visits[arm]
+        low, high = min(low, ret), max(high, ret)
+    return visits, values
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_exact_visit_counts_on_a_two_armed_bandit(seed):
+    p, win, lose = [0.3, 0.7], [1.0, 1.0], [0.0, 0.0]
+    visits, values = reference_ucb1(p, win, lose, 300, seed)
+    result = bandit_search(p, win, lose, 300, seed)
+    assert result.root.visits.tolist() == visits
+    np.testing.assert_allclose(result.root.values, values, rtol=1e-12)
+    assert visits[1] > visits[0]  # the better arm gets most of the simulations
+    assert result.best_action == 1
+
+
+# --- a three-step gamble: each step, pursue one of three bets ---------------------------------
+class Gamble(NamedTuple):
+    p: np.ndarray
+    reward: np.ndarray
+    steps: int
+    goal: float
+
+
+@numba.njit
+def gamble_copy(env, src, dst):
+    dst[0][0] = src[0][0]
+    dst[0][1] = src[0][1]
+
+
+@numba.njit
+def gamble_available(env, state, a):
+    return state[0][0] < env.steps
+
+
+@numba.njit
+def gamble_expand(env, state, a, work):
+    return env.p[a], env.reward[a], 0
+
+
+@numba.njit
+def gamble_apply(env, state, a, found, payload, work):
+    state[0][0] += 1
+    state[0][1] += payload
+
+
+@numba.njit
+def gamble_value(env, state):
+    return -(state[0][1] - env.goal) ** 2
+
+
+register_mdp(Gamble, MdpKernels(gamble_copy, gamble_available, gamble_expand, gamble_apply,
+                                gamble_value))
+
+GAMBLE = Gamble(np.array([0.9, 0.5, 0.25]), np.array([1, 2, 4]), 3, 5.0)
+
+
+@cache
+def gamble_value_exact(t: int, score: int) -> float:
+    """Expectimax: the optimal expected value of a state."""
+    if t == GAMBLE.steps:
+        return -(score - GAMBLE.goal) ** 2
+    return max(gamble_q_exact(t, score, a) for a in range(3))
+
+
+def gamble_q_exact(t: int, score: int, a: int) -> float:
+    p, r = GAMBLE.p[a], int(GAMBLE.reward[a])
+    return p * gamble_value_exact(t + 1, score + r) + (1 - p) * gamble_value_exact(t + 1, score)
+
+
+def test_search_finds_the_expectimax_optimum_and_its_values():
+    exact = [gamble_q_exact(0, 0, a) for a in range(3)]
+    optimum = int(np.argmax(exact))
+    assert sorted(exact)[-1] - sorted(exact)[-2] > 0.3  # a clear optimum
+    errors = []
+    for sims in (1000, 10000, 100000):
+        result = search_mdp(GAMBLE, (np.zeros(2, dtype=np.int64),), 3, 4, np.zeros(1),
+                            iterations=sims, seed=5)
+        assert result.best_action == optimum
+        most = int(np.argmax(result.root.visits))
+        assert result.root.actions[most] == optimum
+        errors.append(abs(result.root.values[most] - exact[optimum]))
+    assert errors[0] > errors[1] > errors[2]
+    assert errors[2] < 0.15  # -5.65 against the exact -5.56 after 100,000 simulations
