@@ -3,3 +3,37 @@
 import matplotlib
 
 matplotlib.use("Agg")
+
+
+from dataclasses import dataclass  # noqa: E402
+
+import pytest  # noqa: E402
+
+
+@dataclass
+class CliResult:
+    """Exit code and captured output of one ``hptrack`` command."""
+
+    code: int
+    out: str
+    err: str
+
+    @property
+    def error_lines(self) -> list[str]:
+        return [line for line in self.err.splitlines() if line.strip()]
+
+
+@pytest.fixture
+def cli(capsys):
+    """Run ``hptrack ARGS...`` through its real entry point (exit codes and error policy
+    included) and return a :class:`CliResult`."""
+    from hptrack.cli.app import main
+
+    def run(*args) -> CliResult:
+        capsys.readouterr()
+        with pytest.raises(SystemExit) as exit_:
+            main([str(a) for a in args])
+        captured = capsys.readouterr()
+        return CliResult(exit_.value.code, captured.out, captured.err)
+
+    return run

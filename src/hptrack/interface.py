@@ -19,7 +19,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from hptrack.models.measurement import PositionMeasurementModel
+from hptrack.models.measurement import PositionMeasurementModel, check_noise_covariance
 from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
 
 DEFAULT_MEASUREMENT_NOISE = 10.0
@@ -67,8 +67,10 @@ class MissionSpec:
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
         if self.process_noise_form not in ("continuous", "paper_text"):
             raise ValueError(f"unknown process_noise_form {self.process_noise_form!r}")
-        noise = np.array(self.measurement_noise, dtype=float)
+        noise = check_noise_covariance(self.measurement_noise)
         q = np.array(self.process_noise, dtype=float).reshape(-1)
+        if not np.all(np.isfinite(q) & (q >= 0.0)):
+            raise ValueError(f"process_noise must be finite and >= 0, got {q.tolist()}")
         noise.flags.writeable = False
         q.flags.writeable = False
         object.__setattr__(self, "measurement_noise", noise)

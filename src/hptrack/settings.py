@@ -42,6 +42,7 @@ _PHRASES = {
     "bool_type": "must be true or false",
     "string_type": "must be a text",
     "missing": "is required",
+    "literal_error": "must be {expected}",
 }
 
 

@@ -3,21 +3,20 @@
 import numpy as np
 import pytest
 
-from hptrack.models.measurement import PositionMeasurementModel
-from hptrack.models.motion import ConstantVelocityModel
-from hptrack.sim.interface import MissionSpec, Observation
+from hptrack.interface import MissionSpec, Observation
 
 PRIOR = np.array([[900.0, 100.0, 0.0, 0.0], [100.0, 800.0, 0.0, 0.0], [0.0, 0.0, 0.3, 0.0],
                   [0.0, 0.0, 0.0, 0.3]])
 """A homogeneous prior covariance (m^2, (m/s)^2) shared by the targets of these tests."""
 
 
-def _mission(n: int, q: float = 3e-4, budget: float = 900.0,
-             form: str = "continuous") -> MissionSpec:
-    """``n`` homogeneous targets, the notes' defaults (tau 0.5 s, 30 m/s, w 100 m, R 10 I)."""
-    return MissionSpec(time_step=0.5, budget=budget, agent_speed=30.0,
-                       motion=ConstantVelocityModel(0.5, form),
-                       sensor=PositionMeasurementModel(),
+def _mission(n: int, q: float = 3e-4, budget: float = 900.0, form: str = "continuous",
+             noise: np.ndarray | None = None) -> MissionSpec:
+    """``n`` homogeneous targets, the project's defaults (tau 0.5 s, 30 m/s, w 100 m, R = 10 I
+    unless ``noise`` gives another 2x2 ``R``)."""
+    noise = 10.0 * np.eye(2) if noise is None else noise
+    return MissionSpec(time_step=0.5, budget=budget, agent_speed=30.0, sensor_diameter=100.0,
+                       measurement_noise=noise, process_noise_form=form,
                        process_noise=np.full(n, q), target_ids=tuple(f"t{i}" for i in range(n)))
 
 

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hptrack.baselines.arvi import ArviParams, ArviPlanner, prune
+from hptrack.baselines.arvi import ArviPlanner, ArviSettings, prune
 from hptrack.baselines.information import expand, mean_positions
 from hptrack.models.beliefs import position_logdet
 from hptrack.scenario import Scenario, TargetSpec
@@ -19,8 +19,8 @@ STATIC_PRIOR = ((900.0, 100.0, 0.0, 0.0), (100.0, 800.0, 0.0, 0.0), (0.0, 0.0, 0
                 (0.0, 0.0, 0.0, 0.3))
 
 
-def planner_for(mission, obs, **params):
-    planner = ArviPlanner(ArviParams(**params))
+def planner_for(mission, obs, **settings):
+    planner = ArviPlanner(ArviSettings(**settings))
     planner.reset(mission, obs, np.random.default_rng(0))
     return planner
 
@@ -44,14 +44,15 @@ def test_flies_straight_to_a_reachable_target_and_stays_on_it(make_mission, make
     assert np.flatnonzero(record.detections[:, 0])[0] == 37
     assert record.detections[37:, 0].all()
     assert record.info["decisions"] == 12  # 120 steps, one search per 10-step primitive
-    assert record.info["params"]["delta_schedule_m"] == ["inf", 150.0, 100.0, 75.0, 50.0]
+    assert record.info["settings"]["delta_schedule_m"] == ["inf", 150.0, 100.0, 75.0, 50.0]
 
 
 def test_hovers_when_nothing_is_reachable(make_mission, make_observation):
     mission, obs = make_mission(1), make_observation([[3000.0, 0.0, 0.0, 0.0]])
     plan, stats = planner_for(mission, obs).search(obs)
     np.testing.assert_array_equal(plan, [HOVER] * 12)
-    _, predicted = mission.motion.predict(obs.means, obs.covariances, mission.process_noise, 120)
+    _, predicted = mission.motion.predict(obs.means, obs.covariances, mission.process_noise,
+                                          120 * mission.time_step)
     growth = position_logdet(predicted) - position_logdet(obs.covariances)
     assert stats.predicted_cost == pytest.approx(growth.sum(), rel=1e-12)
 
@@ -74,7 +75,7 @@ def test_anytime_search_returns_the_best_pass_and_exact_vi_is_exhaustive(make_mi
     mission, obs = make_mission(2), make_observation(means)
     planner = planner_for(mission, obs, horizon=3)
     mp = mean_positions(obs.means, 0.5, 30)
-    passes = [planner.run_pass(obs, mp, 3, d, e) for d, e in planner.params.passes()]
+    passes = [planner.run_pass(obs, mp, 3, d, e) for d, e in planner.settings.passes()]
     assert len({p.cost for p in passes}) > 1
     plan, stats = planner.search(obs)
     assert stats.predicted_cost == min(p.cost for p in passes)
@@ -82,7 +83,7 @@ def test_anytime_search_returns_the_best_pass_and_exact_vi_is_exhaustive(make_mi
     # Exhaustive: all 9^3 sequences.
     pos, covs = obs.agent_position[None], obs.covariances[None]
     for level in range(3):
-        pos, covs, unc = expand(planner.spec, planner.step_displacements,
+        pos, covs, unc = expand(planner.mission, planner.step_displacements,
                                 mp[level * 10:(level + 1) * 10 + 1], pos, covs)
     costs = unc - position_logdet(obs.covariances).sum()
     best = int(np.argmin(costs))
@@ -96,7 +97,8 @@ def test_time_limit_stops_after_the_first_pass_and_default_is_deterministic(make
                                                                             make_observation):
     means = [[400.0, 300.0, -2.0, 1.0], [-500.0, 150.0, 1.0, 0.0]]
     mission, obs = make_mission(2), make_observation(means)
-    _, stats = planner_for(mission, obs, time_limit_s=0.0).search(obs)
+    # a limit of 0 is refused; 1 ns is spent before the first pass ends
+    _, stats = planner_for(mission, obs, time_limit_s=1e-9).search(obs)
     assert stats.passes == 1
     a = planner_for(mission, obs).search(obs)
     b = planner_for(mission, obs).search(obs)

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from hptrack.baselines.arvi import ArviParams, ArviPlanner
-from hptrack.baselines.astar import AStarParams, AStarPlanner
+from hptrack.baselines.arvi import ArviPlanner, ArviSettings
+from hptrack.baselines.astar import AStarPlanner, AStarSettings
 from hptrack.baselines.information import expand, mean_positions
 from hptrack.models.beliefs import position_logdet
 from hptrack.scenario import Scenario, TargetSpec
@@ -18,21 +18,21 @@ STATIC_PRIOR = ((900.0, 100.0, 0.0, 0.0), (100.0, 800.0, 0.0, 0.0), (0.0, 0.0, 0
                 (0.0, 0.0, 0.0, 0.3))
 
 
-def planner_for(mission, obs, **params):
-    planner = AStarPlanner(AStarParams(**params))
+def planner_for(mission, obs, **settings):
+    planner = AStarPlanner(AStarSettings(**settings))
     planner.reset(mission, obs, np.random.default_rng(0))
     return planner
 
 
 def exhaustive_costs(planner, obs, horizon, kind):
     """Cost of every one of the 9^horizon sequences, in lexicographic order."""
-    k = planner.params.control_steps
+    k = planner.settings.control_steps
     mp = mean_positions(obs.means, 0.5, horizon * k)
     pos, covs = obs.agent_position[None], obs.covariances[None]
     total = np.zeros(1)
     previous = np.array([position_logdet(obs.covariances).sum()])
     for level in range(horizon):
-        pos, covs, unc = expand(planner.spec, planner.step_displacements,
+        pos, covs, unc = expand(planner.mission, planner.step_displacements,
                                 mp[level * k:(level + 1) * k + 1], pos, covs)
         step = unc - np.repeat(previous, 9) if kind == "difference" else unc
         total = np.repeat(total, 9) + step
@@ -85,7 +85,7 @@ def test_optimal_like_exact_value_iteration_on_random_beliefs(make_mission, make
     means = np.column_stack([rng.uniform(-300, 300, (3, 2)), rng.uniform(-3, 3, (3, 2))])
     mission, obs = make_mission(3), make_observation(means)
     _, astar = planner_for(mission, obs, horizon=4).search(obs)
-    exact = ArviPlanner(ArviParams(horizon=4, delta_schedule_m=(0.0,), epsilon_schedule=(0.0,)))
+    exact = ArviPlanner(ArviSettings(horizon=4, delta_schedule_m=(0.0,), epsilon_schedule=(0.0,)))
     exact.reset(mission, obs, np.random.default_rng(0))
     _, vi = exact.search(obs)
     assert astar.predicted_cost == pytest.approx(vi.predicted_cost, abs=1e-9)
@@ -97,7 +97,8 @@ def test_expansion_cap_returns_the_most_promising_open_node(make_mission, make_o
     plan, stats = planner_for(mission, obs, max_expansions=1).search(obs)
     np.testing.assert_array_equal(plan, [EAST] + [HOVER] * 5)
     assert stats.capped and stats.nodes_expanded == 1
-    _, timed = planner_for(mission, obs, time_limit_s=0.0).search(obs)
+    # a limit of 0 is refused; 1 ns is spent before the first expansion
+    _, timed = planner_for(mission, obs, time_limit_s=1e-9).search(obs)
     assert timed.capped and timed.nodes_expanded == 0
     assert math.isfinite(timed.predicted_cost)
 

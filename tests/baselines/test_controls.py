@@ -5,16 +5,17 @@ import math
 import numpy as np
 import pytest
 
-from hptrack.baselines.arvi import ArviParams, ArviPlanner
-from hptrack.baselines.astar import AStarParams
+from hptrack.baselines.arvi import ArviPlanner, ArviSettings
+from hptrack.baselines.astar import AStarSettings
 from hptrack.baselines.controls import (
     HOVER,
     DecisionStats,
-    PrimitiveParams,
     PrimitivePlanner,
-    params_from_options,
+    PrimitiveSettings,
     step_directions,
 )
+from hptrack.interface import InputError
+from hptrack.registry import make_planner
 
 
 def test_control_set_is_hover_then_eight_headings_counter_clockwise_from_east():
@@ -52,7 +53,7 @@ def fly(planner, mission, observation, n_steps):
 def test_plans_are_flown_primitive_by_primitive_and_replanned_on_schedule(
         make_mission, make_observation, replan_period, searches):
     mission = make_mission(1)
-    planner = FixedPlan(PrimitiveParams(control_steps=2, replan_period=replan_period))
+    planner = FixedPlan(PrimitiveSettings(control_steps=2, replan_period=replan_period))
 
     def observation(position, k):
         return make_observation([[5000.0, 0.0, 0.0, 0.0]], agent=position, step=k)
@@ -67,7 +68,7 @@ def test_plans_are_flown_primitive_by_primitive_and_replanned_on_schedule(
 
 def test_horizon_is_cut_to_the_primitives_left_in_the_budget(make_mission, make_observation):
     mission = make_mission(1, budget=100.0)  # 200 steps
-    planner = ArviPlanner(ArviParams(horizon=12))
+    planner = ArviPlanner(ArviSettings(horizon=12))
     obs = make_observation([[0.0, 0.0, 0.0, 0.0]], step=0)
     planner.reset(mission, obs, np.random.default_rng(0))
     for step, expected in [(0, 12), (90, 11), (181, 2), (190, 1), (199, 1)]:
@@ -77,17 +78,48 @@ def test_horizon_is_cut_to_the_primitives_left_in_the_budget(make_mission, make_
 
 
 def test_options_from_the_command_line_are_parsed_by_field():
-    params = params_from_options(ArviParams, {"horizon": "8", "delta_schedule_m": "inf,100",
-                                              "time_limit_s": "0.5", "cost": "sum"})
-    assert params == ArviParams(horizon=8, delta_schedule_m=(math.inf, 100.0),
-                                time_limit_s=0.5, cost="sum")
-    assert params_from_options(ArviParams, {"time_limit_s": "none"}).time_limit_s is None
-    yaml_list = params_from_options(ArviParams, {"delta_schedule_m": [math.inf, 100]})
+    settings = ArviSettings.from_options("arvi", {"horizon": "8", "delta_schedule_m": "inf,100",
+                                                  "time_limit_s": "0.5", "cost": "sum"})
+    assert settings == ArviSettings(horizon=8, delta_schedule_m=(math.inf, 100.0),
+                                    time_limit_s=0.5, cost="sum")
+    # the CLI reads "none" as None before validation (hptrack.cli.common.parse_value)
+    assert ArviSettings.from_options("arvi", {"time_limit_s": None}).time_limit_s is None
+    yaml_list = ArviSettings.from_options("arvi", {"delta_schedule_m": [math.inf, 100]})
     assert yaml_list.delta_schedule_m == (math.inf, 100.0)
     assert isinstance(yaml_list.delta_schedule_m[1], float)
-    assert params_from_options(AStarParams, {"max_expansions": 50}).max_expansions == 50
-    assert ArviPlanner.from_options(time_limit="1.5").params.time_limit_s == 1.5
-    with pytest.raises(ValueError, match="unknown ArviParams options: \\['horizn'\\]"):
-        params_from_options(ArviParams, {"horizn": 3})
+    assert AStarSettings.from_options("astar", {"max_expansions": 50}).max_expansions == 50
+    # the generic --time-limit flag sets ARVI's time_limit_s; ARVI has no notion of iterations
+    effort = ArviSettings.effort_options(iterations=100, time_limit=1.5)
+    assert effort == {"time_limit_s": 1.5}
+    assert make_planner("arvi", effort).settings.time_limit_s == 1.5
+    with pytest.raises(InputError, match="planner 'arvi': unknown option horizn"):
+        ArviSettings.from_options("arvi", {"horizn": 3})
     with pytest.raises(ValueError, match="epsilon_schedule needs one value or one per delta"):
-        ArviParams(delta_schedule_m=(100.0, 50.0), epsilon_schedule=(1.0, 2.0, 3.0))
+        ArviSettings(delta_schedule_m=(100.0, 50.0), epsilon_schedule=(1.0, 2.0, 3.0))
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    ({"horizon": "abc"}, "option horizon must be an integer, got 'abc'"),
+    ({"horizon": 0}, "option horizon must be >= 1, got 0"),
+    ({"control_steps": 2.5}, "option control_steps"),
+    ({"delta_schedule_m": "nan"}, "option delta_schedule_m"),
+    ({"delta_schedule_m": "100,-1"}, "option delta_schedule_m"),
+    ({"time_limit_s": 0}, "option time_limit_s must be > 0"),
+    ({"epsilon_schedule": "1,2,3"}, "option epsilon_schedule needs one value or one per"),
+])
+def test_bad_options_are_refused_in_one_line_naming_planner_option_and_value(options, message):
+    with pytest.raises(InputError, match=f"^planner 'arvi': {message}") as err:
+        ArviSettings.from_options("arvi", options)
+    assert "\n" not in str(err.value)
+
+
+def test_settings_are_frozen_and_stored_with_the_episode_info():
+    settings = ArviSettings(horizon=3)
+    with pytest.raises(ValueError):
+        settings.horizon = 4
+    planner = ArviPlanner(settings)
+    assert planner.settings is settings
+    info = planner.episode_info()
+    assert info["settings"] == settings.as_json()
+    assert info["settings"]["delta_schedule_m"] == ["inf", 150.0, 100.0, 75.0, 50.0]
+    assert info["decisions"] == 0

@@ -2,25 +2,17 @@ import json
 
 import numpy as np
 import pytest
-import typer
-from typer.testing import CliRunner
 
-from hptrack.cli.coverage import register
 from hptrack.scenario import random_scenario, save_scenario
 
-app = typer.Typer()
-register(app)
-runner = CliRunner()
 
-
-def test_coverage_command_writes_a_plan_anyone_can_simulate(tmp_path):
+def test_coverage_command_writes_a_plan_anyone_can_simulate(cli, tmp_path):
     path = tmp_path / "s.yaml"
     save_scenario(random_scenario(2, seed=8), path)
-    result = runner.invoke(app, ["coverage", str(path), "--target", "t2", "--delay", "100",
-                                 "--json", str(tmp_path / "c.json"),
-                                 "--plot", str(tmp_path / "c.png")])
-    assert result.exit_code == 0, result.output
-    assert "p_find" in result.output
+    result = cli("coverage", path, "--target", "t2", "--delay", "100",
+                 "--json", tmp_path / "c.json", "--plot", tmp_path / "c.png")
+    assert result.code == 0, result.err
+    assert "p_find" in result.out
     plan = json.loads((tmp_path / "c.json").read_text())
     for key in ("t_cutoff", "p_find", "expected_time", "intercept_time", "cdf", "positions",
                 "belief_at_departure"):
@@ -36,12 +28,12 @@ def test_coverage_command_writes_a_plan_anyone_can_simulate(tmp_path):
     assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
 
 
-def test_coverage_command_errors(tmp_path):
+def test_coverage_command_errors(cli, tmp_path):
     path = tmp_path / "s.yaml"
     save_scenario(random_scenario(1, seed=8), path)
-    result = runner.invoke(app, ["coverage", str(path), "--target", "nope"])
-    assert result.exit_code == 2 and "unknown target" in result.output
-    result = runner.invoke(app, ["coverage", str(path), "--target", "t1", "--delay", "0.2"])
-    assert result.exit_code == 2 and "whole number" in result.output
-    result = runner.invoke(app, ["coverage", str(path), "--target", "t1", "--delay", "900"])
-    assert result.exit_code == 2 and "no budget" in result.output
+    for args, needle in ((["--target", "nope"], "'nope' is not a target"),
+                         (["--target", "t1", "--delay", "0.2"], "whole number"),
+                         (["--target", "t1", "--delay", "900"], "no budget")):
+        result = cli("coverage", path, *args)
+        assert result.code == 2 and needle in result.err, result.err
+        assert len(result.error_lines) == 1

@@ -9,6 +9,7 @@ from hptrack.coverage.intercept import (
     intercept_path,
     intercept_steps,
     intercept_time,
+    intercept_waypoint,
     plan_intercept,
 )
 
@@ -97,3 +98,20 @@ def test_path_flies_straight_at_full_speed_and_meets_the_mean(seed):
     steps = np.hypot(*np.diff(path, axis=0).T)
     assert np.all(steps <= 15.0 * (1 + 1e-12))
     np.testing.assert_allclose(steps[:-1], 15.0, rtol=1e-12)
+
+
+def test_path_at_chosen_steps_and_single_waypoints_match_the_whole_path():
+    agent = np.array([-200.0, 50.0])
+    plan = plan_intercept(agent, np.array([700.0, 400.0]), np.array([1.5, -2.0]), 30.0, 0.5,
+                          100.0)
+    whole = intercept_path(agent, plan, 15.0)
+    chosen = np.array([0, 3, plan.steps - 1, plan.steps, plan.steps + 40])
+    got = intercept_path(agent, plan, 15.0, chosen)
+    np.testing.assert_array_equal(got[:4], whole[chosen[:4]])
+    np.testing.assert_array_equal(got[4], plan.start)  # after arrival it stays at the start
+    for j in chosen:
+        np.testing.assert_array_equal(intercept_waypoint(agent, plan, 15.0, int(j)),
+                                      got[list(chosen).index(j)])
+    at_once = plan_intercept(agent, agent + [10.0, 0.0], np.zeros(2), 30.0, 0.5, 100.0)
+    np.testing.assert_array_equal(intercept_path(agent, at_once, 15.0, np.arange(3)),
+                                  [agent] * 3)

@@ -1,16 +1,17 @@
 import numpy as np
 import pytest
 
-from hptrack.coverage.subtask import CoveragePlanner, CoverageSubtask
+from hptrack.baselines.coverage import CoveragePlanner, CoverageSettings
+from hptrack.coverage.estimator import estimate_coverage
+from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.experiments.coverage_validation import ValidationConfig, case_rows, draw_case
-from hptrack.models.measurement import PositionMeasurementModel
-from hptrack.models.motion import ConstantVelocityModel
+from hptrack.interface import InputError, MissionSpec, Observation
+from hptrack.registry import make_planner
 from hptrack.scenario import random_scenario
 from hptrack.sim.episode import run_episode
-from hptrack.sim.interface import MissionSpec, Observation
 
-MISSION = MissionSpec(time_step=0.5, budget=900.0, agent_speed=30.0,
-                      motion=ConstantVelocityModel(), sensor=PositionMeasurementModel(),
+MISSION = MissionSpec(time_step=0.5, budget=900.0, agent_speed=30.0, sensor_diameter=100.0,
+                      measurement_noise=10.0 * np.eye(2), process_noise_form="continuous",
                       process_noise=np.array([3e-4, 2e-4]), target_ids=("a", "b"))
 MEAN = np.array([700.0, -400.0, 2.0, 1.0])
 COV = np.diag([1500.0, 900.0, 0.4, 0.3])
@@ -36,7 +37,7 @@ def test_plan_flies_intercept_then_spiral_from_the_belief_centre():
     assert 0.0 < task.p_find < 1.0 and 0.0 < task.expected_time < task.cutoff_time
     assert task.end_step == n + task.estimate.cutoff_steps
     # the covariance the estimate starts from is the prior propagated n steps
-    _, covs = MISSION.motion.predict(MEAN[None], COV[None], 3e-4, n)
+    _, covs = MISSION.motion.predict(MEAN[None], COV[None], 3e-4, n * 0.5)
     np.testing.assert_allclose(task.start_covariance, covs[0])
 
 
@@ -61,8 +62,22 @@ def test_short_budget_cuts_the_plan():
     task = CoverageSubtask(np.zeros(2), MEAN, COV, 3e-4, MISSION, 40.0)
     assert task.estimate.budget_limited
     assert task.total_steps == 80 == task.intercept.steps + task.estimate.cutoff_steps
+    assert task.planned_positions().shape == (81, 2)  # by default up to the budget's end
     never = CoverageSubtask(np.zeros(2), MEAN, COV, 3e-4, MISSION, 5.0)
     assert never.p_find == 0.0 and never.total_steps == 10
+
+
+def test_without_a_budget_the_plan_runs_to_the_cutoff():
+    unbounded = CoverageSubtask(np.zeros(2), MEAN, COV, 3e-4, MISSION, None)
+    short = CoverageSubtask(np.zeros(2), MEAN, COV, 3e-4, MISSION, 40.0)
+    n = unbounded.intercept.steps
+    assert n == short.intercept.steps
+    expected = estimate_coverage(unbounded.start_covariance, 3e-4, MISSION)
+    assert not unbounded.estimate.budget_limited
+    assert unbounded.estimate.cutoff_steps == expected.cutoff_steps > 80 - n
+    assert unbounded.p_find == expected.p_find > short.p_find
+    assert unbounded.total_steps == n + expected.cutoff_steps
+    np.testing.assert_array_equal(unbounded.planned_positions()[:81], short.planned_positions())
 
 
 def test_mean_inside_the_footprint_spirals_from_the_agent_at_once():
@@ -80,13 +95,17 @@ def test_bad_inputs():
         CoverageSubtask(np.zeros(2), [0.0, 900.0, 40.0, 0.0], COV, 3e-4, MISSION, 900.0)
     with pytest.raises(ValueError, match="mean"):
         CoverageSubtask(np.zeros(2), [0.0, np.nan, 1.0, 0.0], COV, 3e-4, MISSION, 900.0)
-    with pytest.raises(ValueError, match="unknown target"):
-        CoveragePlanner("zz").reset(MISSION, observation(0, np.zeros(2)), None)
+    with pytest.raises(InputError, match="option target 'zz' is not a target of the scenario"):
+        CoveragePlanner(CoverageSettings(target="zz")).reset(MISSION, observation(0, np.zeros(2)),
+                                                             None)
+    with pytest.raises(InputError, match="planner 'coverage': option target is required"):
+        make_planner("coverage", {})
 
 
 def test_coverage_planner_finds_and_then_follows_its_target():
     scenario = random_scenario(2, seed=4).model_copy(update={"budget": 150.0})
-    record = run_episode(scenario, CoveragePlanner("t2"), seed=11)
+    record = run_episode(scenario, make_planner("coverage", {"target": "t2"}), seed=11)
+    assert record.info["settings"] == {"target": "t2"}
     subtasks = record.info["subtasks"]
     assert subtasks[0]["outcome"] == "found"
     first = subtasks[0]["end_step"]

@@ -1,24 +1,35 @@
 import json
+import multiprocessing
+import sqlite3
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
 from hptrack.baselines.stationary import StationaryPlanner
-from hptrack.cli.app import app
+from hptrack.experiments import benchmark as benchmark_module
 from hptrack.experiments.benchmark import (
     BenchmarkConfig,
-    never_observed_uncertainty,
     reductions,
     run_benchmark,
     scenario_for,
     summarise,
 )
-from hptrack.experiments.store import ResultStore
+from hptrack.experiments.store import EpisodeKey, ResultStore
+from hptrack.interface import InputError
+from hptrack.registry import planner_settings
 from hptrack.scenario import random_scenario
 from hptrack.sim.episode import run_episode
 
-CONFIG = BenchmarkConfig(planners=("greedy", "stationary"), target_counts=(2, 3), scenarios=2)
+
+def config(planners=("greedy", "stationary"), options=None, **kw):
+    options = options or {}
+    settings = {p: planner_settings(p, options.get(p)) for p in planners}
+    kw.setdefault("target_counts", (2, 3))
+    kw.setdefault("scenarios", 2)
+    return BenchmarkConfig(planners=planners, settings=settings, **kw)
+
+
+CONFIG = config()
 
 
 def test_interrupted_run_keeps_finished_episodes_and_resumes_without_duplicates(tmp_path):
@@ -51,9 +62,9 @@ def test_never_observed_equals_a_mission_that_sees_nothing():
     scenario = random_scenario(3, seed=1, agent={"position": (1e6, 1e6)})
     record = run_episode(scenario, StationaryPlanner())
     assert not record.detections.any()
-    assert never_observed_uncertainty(scenario) == pytest.approx(record.uncertainty, rel=1e-12)
-    # the notes' scale: about 25.65 per target with the paper's priors and the default Q
-    values = [never_observed_uncertainty(random_scenario(1, seed=s)) for s in range(300)]
+    assert scenario.never_observed_uncertainty() == pytest.approx(record.uncertainty, rel=1e-12)
+    # the scale of docs/protocols.md: about 25.65 per target with the paper's priors and Q
+    values = [random_scenario(1, seed=s).never_observed_uncertainty() for s in range(300)]
     assert np.mean(values) == pytest.approx(25.65, abs=0.1)
 
 
@@ -74,12 +85,86 @@ def test_scenarios_follow_seeds_and_setting():
     assert scenario_for(key) == random_scenario(key.n_targets, key.seed, homogeneous=True)
 
 
-def test_benchmark_command_end_to_end(tmp_path):
-    result = CliRunner().invoke(app, [
-        "benchmark", "--targets", "2", "--scenarios", "2", "--planners", "greedy,stationary",
-        "--db", str(tmp_path / "b.db"), "--out", str(tmp_path / "out"),
-        "--json", str(tmp_path / "b.json")])
-    assert result.exit_code == 0, result.output
+def test_a_different_option_never_reuses_another_settings_rows(tmp_path):
+    store = ResultStore(tmp_path / "b.db")
+    small = config(("astar",), {"astar": {"horizon": 2}}, target_counts=(2,), scenarios=1)
+    other = config(("astar",), {"astar": {"horizon": 3}}, target_counts=(2,), scenarios=1)
+    assert run_benchmark(small, store) == 1
+    assert run_benchmark(small, store) == 0  # resumed: nothing to do
+    assert run_benchmark(other, store) == 1  # another horizon: its own episode
+    rows = store.rows()
+    assert len(rows) == 2
+    horizons = sorted(json.loads(r.key.settings)["horizon"] for r in rows)
+    assert horizons == [2, 3]
+    assert len({r.key.settings_hash for r in rows}) == 2
+    assert rows[0].key.settings_hash == planner_settings(
+        "astar", json.loads(rows[0].key.settings)).digest()
+
+
+def _run_in_process(path, delay_s, queue):
+    """A second benchmark process on the same database (for the claim test)."""
+    import time
+
+    from hptrack.experiments import benchmark
+
+    real = benchmark.run_one
+
+    def slow(key):
+        time.sleep(delay_s)
+        return real(key)
+
+    benchmark.run_one = slow
+    store = ResultStore(path)
+    queue.put(run_benchmark(config(scenarios=3), store))
+
+
+def test_two_runs_on_one_database_share_the_work(tmp_path):
+    path = tmp_path / "b.db"
+    ResultStore(path).close()
+    queue = multiprocessing.get_context("spawn").Queue()
+    procs = [multiprocessing.get_context("spawn").Process(target=_run_in_process,
+                                                          args=(path, 0.3, queue))
+             for _ in range(2)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(timeout=300)
+    counts = sorted(queue.get(timeout=5) for _ in procs)
+    total = len(config(scenarios=3).keys())
+    assert sum(counts) == total  # every episode ran exactly once
+    assert min(counts) > 0  # and both runs did part of it
+    rows = ResultStore(path).rows()
+    assert len(rows) == len({r.key for r in rows}) == total
+
+
+def test_claims_of_a_dead_run_are_released(tmp_path):
+    store = ResultStore(tmp_path / "b.db")
+    key = CONFIG.keys()[0]
+    with sqlite3.connect(tmp_path / "b.db") as db:
+        db.execute("INSERT INTO claims VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                   (*key._id(), store._host, 2**22 + 12345, 0.0))
+    assert not store.claim(key)
+    assert store.release_stale_claims() == 1
+    assert store.claim(key)
+
+
+def test_a_file_that_is_not_a_results_database_is_refused(tmp_path):
+    text = tmp_path / "notes.db"
+    text.write_text("not sqlite\n" * 100)
+    with pytest.raises(InputError, match="not an hptrack results database"):
+        ResultStore(text)
+    other = tmp_path / "other.db"
+    with sqlite3.connect(other) as db:
+        db.execute("CREATE TABLE things (x)")
+    with pytest.raises(InputError, match="another layout"):
+        ResultStore(other)
+
+
+def test_benchmark_command_end_to_end(cli, tmp_path):
+    result = cli("benchmark", "--targets", 2, "--scenarios", 2, "--planners",
+                 "greedy,stationary", "--db", tmp_path / "b.db", "--out", tmp_path / "out",
+                 "--json", tmp_path / "b.json")
+    assert result.code == 0, result.err
     data = json.loads((tmp_path / "b.json").read_text())
     assert set(data) == {"greedy", "stationary"}
     assert data["greedy"]["2"]["episodes"] == 2
@@ -87,3 +172,4 @@ def test_benchmark_command_end_to_end(tmp_path):
                  "trajectories.png"):
         assert (tmp_path / "out" / name).exists(), name
     assert "never observed" in (tmp_path / "out" / "table.md").read_text()
+    assert "greedy: none" in (tmp_path / "out" / "table.md").read_text()  # no effort claimed

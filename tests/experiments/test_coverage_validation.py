@@ -4,11 +4,6 @@ import math
 
 import numpy as np
 import pytest
-import typer
-from typer.testing import CliRunner
-
-from hptrack.cli.coverage import register
-from hptrack.coverage.estimator import CoverageSettings
 from hptrack.experiments.coverage_validation import (
     CASES_FILE,
     ValidationConfig,
@@ -19,19 +14,16 @@ from hptrack.experiments.coverage_validation import (
     run_validation,
     summarise,
 )
-
-app = typer.Typer()
-register(app)
-runner = CliRunner()
+from hptrack.interface import MissionSpec
 
 
-def test_command_runs_end_to_end_and_resumes(tmp_path):
+def test_command_runs_end_to_end_and_resumes(cli, tmp_path):
     out = tmp_path / "val"
     args = ["validate-coverage", "--cases", "3", "--runs", "300", "--delays", "0,100",
             "--seed", "5", "--out", str(out), "--json", str(tmp_path / "mape.json")]
-    result = runner.invoke(app, args)
-    assert result.exit_code == 0, result.output
-    assert "MAPE" in result.output and "3.58" in result.output  # the paper's figure alongside
+    result = cli(*args)
+    assert result.code == 0, (result.out + result.err)
+    assert "MAPE" in (result.out + result.err) and "3.58" in (result.out + result.err)  # the paper's figure alongside
     mape = json.loads((tmp_path / "mape.json").read_text())
     assert set(mape) == {"0", "100"}
     for values in mape.values():
@@ -43,21 +35,21 @@ def test_command_runs_end_to_end_and_resumes(tmp_path):
     assert sorted((r["case"], r["delay"]) for r in first) == [
         (c, d) for c in range(3) for d in (0.0, 100.0)]
     # Resume with more cases: the three done are kept as they are, one case is added.
-    result = runner.invoke(app, args[:2] + ["4"] + args[3:])
-    assert result.exit_code == 0, result.output
+    result = cli(*args[:2] + ["4"] + args[3:])
+    assert result.code == 0, (result.out + result.err)
     rows = read_rows(out / CASES_FILE)
     assert len(rows) == 8 and rows[:6] == first
     # Another configuration in the same folder is refused.
-    result = runner.invoke(app, args[:4] + ["301"] + args[5:])
-    assert result.exit_code == 2 and "another configuration" in result.output
+    result = cli(*args[:4] + ["301"] + args[5:])
+    assert result.code == 2 and "another configuration" in (result.out + result.err)
 
 
-def test_bad_options_exit_with_one_line(tmp_path):
-    result = runner.invoke(app, ["validate-coverage", "--delays", "0,0.3", "--out",
+def test_bad_options_exit_with_one_line(cli, tmp_path):
+    result = cli(*["validate-coverage", "--delays", "0,0.3", "--out",
                                  str(tmp_path)])
-    assert result.exit_code == 2 and "whole number" in result.output
-    result = runner.invoke(app, ["validate-coverage", "--delays", "a,b", "--out", str(tmp_path)])
-    assert result.exit_code == 2 and "--delays" in result.output
+    assert result.code == 2 and "whole number" in (result.out + result.err)
+    result = cli(*["validate-coverage", "--delays", "a,b", "--out", str(tmp_path)])
+    assert result.code == 2 and "--delays" in (result.out + result.err)
 
 
 def test_rows_do_not_depend_on_workers_or_order(tmp_path):
@@ -70,7 +62,7 @@ def test_rows_do_not_depend_on_workers_or_order(tmp_path):
 
 
 def test_detection_in_the_intercept_flight_counts_at_coverage_time_zero():
-    settings = CoverageSettings()
+    settings = MissionSpec()
     case = draw_case(0, 0)
     plan = plan_coverage(case, 0, settings)
     n = plan.intercept_steps
@@ -86,7 +78,7 @@ def test_detection_in_the_intercept_flight_counts_at_coverage_time_zero():
 
 
 def test_simulated_detections_match_an_independent_step_by_step_simulation():
-    settings = CoverageSettings()
+    settings = MissionSpec()
     case = draw_case(3, 0)
     plan = plan_coverage(case, 100 * 2, settings)
     first_any, _ = first_detections(plan, case.q, settings, 4000, np.random.default_rng(2))

@@ -24,8 +24,9 @@ def test_unseen_targets_score_exactly_the_closed_form(form):
     record = run_episode(scenario, StationaryPlanner())
     assert not record.detections.any()
     motion = scenario.motion_model()
+    mission = scenario.mission_spec()
     _, covs = motion.predict(scenario.means(), scenario.covariances(), scenario.process_noise(),
-                             scenario.mission_spec().n_steps)
+                             mission.n_steps * mission.time_step)
     np.testing.assert_allclose(record.per_target_logdet, position_logdet(covs), rtol=1e-10)
     assert record.uncertainty == pytest.approx(position_logdet(covs).sum(), rel=1e-10)
 
@@ -122,3 +123,24 @@ def test_observation_is_read_only_and_has_no_truth():
     with pytest.raises(ValueError):
         obs.means[0, 0] = 1.0
     assert obs.remaining_budget == 2.0 and obs.time == 0.0
+
+
+def test_the_planners_episode_info_is_stored_with_the_record():
+    class Counting(StationaryPlanner):
+        name = "counting"
+
+        def reset(self, mission, observation, rng):
+            super().reset(mission, observation, rng)
+            self.calls = 0
+
+        def act(self, observation):
+            self.calls += 1
+            return super().act(observation)
+
+        def episode_info(self):
+            return {"acts": self.calls, **super().episode_info()}
+
+    record = run_episode(Scenario(budget=5.0, targets=far_scenario().targets), Counting())
+    assert record.planner == "counting"
+    assert record.info["acts"] == 10  # one waypoint per step of the 5 s budget
+    assert record.info["settings"] == {}

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Annotated, Any, ClassVar
 
 import numpy as np
-from pydantic import AfterValidator, BeforeValidator, Field
+from pydantic import BeforeValidator, Field
 
 from hptrack.settings import PlannerSettings
 
@@ -49,16 +49,11 @@ def _schedule(value: Any) -> Any:
     return value
 
 
-def _no_nan(values: tuple[float, ...]) -> tuple[float, ...]:
-    if any(math.isnan(v) for v in values):
-        raise ValueError(f"must not contain NaN, got {values}")
-    return values
-
-
 NonNegativeOrInf = Annotated[float, Field(ge=0.0, allow_inf_nan=True)]
 Schedule = Annotated[tuple[NonNegativeOrInf, ...], BeforeValidator(_schedule),
-                     AfterValidator(_no_nan), Field(min_length=1)]
-"""A tuple of non-negative numbers (``inf`` allowed); ``-o`` takes them comma-separated."""
+                     Field(min_length=1)]
+"""A tuple of non-negative numbers (``inf`` allowed, NaN refused by ``ge``); ``-o`` takes them
+comma-separated."""
 
 
 class PrimitiveSettings(PlannerSettings):

@@ -13,7 +13,6 @@ import traceback
 from pathlib import Path
 from typing import Annotated
 
-import click
 import matplotlib
 import numpy as np
 import typer
@@ -212,25 +211,48 @@ def _register_commands() -> None:
 _register_commands()
 
 
+def _is(err: BaseException, name: str) -> bool:
+    """Whether ``err`` is a command-line framework exception called ``name`` (click's, or the
+    copy of click that typer vendors)."""
+    return any(cls.__name__ == name for cls in type(err).__mro__)
+
+
+def _given(err: Exception, argv: list[str]) -> str:
+    """`` (got VALUE)`` for a bad option value, taken from the command line."""
+    opts = getattr(getattr(err, "param", None), "opts", None) or []
+    for i, token in enumerate(argv):
+        for opt in opts:
+            if token == opt and i + 1 < len(argv):
+                return f" (got {argv[i + 1]!r})"
+            if token.startswith(opt + "="):
+                return f" (got {token[len(opt) + 1:]!r})"
+    return ""
+
+
+def _refuse(message: str) -> None:
+    message = " ".join(message.split())
+    error_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False,
+                        soft_wrap=True)
+    sys.exit(2)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``hptrack`` script (exit codes: 0 done, 1 a bug, 2 bad input)."""
     try:
         code = app(args=argv, prog_name="hptrack", standalone_mode=False)
-    except click.exceptions.UsageError as err:
-        error_console.print(f"[bold red]error:[/] {escape(err.format_message())}",
-                            highlight=False, soft_wrap=True)
-        sys.exit(2)
     except InputError as err:
-        message = " ".join(str(err).split())
-        error_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False,
-                            soft_wrap=True)
-        sys.exit(2)
-    except (KeyboardInterrupt, click.exceptions.Abort):
+        _refuse(str(err))
+    except KeyboardInterrupt:
         error_console.print("interrupted", highlight=False)
         sys.exit(130)
-    except click.exceptions.Exit as err:
-        sys.exit(err.exit_code)
-    except Exception:
+    except Exception as err:
+        if _is(err, "Exit"):
+            sys.exit(err.exit_code)
+        if _is(err, "Abort"):
+            error_console.print("interrupted", highlight=False)
+            sys.exit(130)
+        if _is(err, "UsageError"):
+            _refuse(err.format_message() + _given(err, sys.argv[1:] if argv is None else argv))
         traceback.print_exc()
         error_console.print("[bold red]This is a bug in hptrack, not a problem with your input: "
                             "please report it with the traceback above.[/]", highlight=False)

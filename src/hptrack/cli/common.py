@@ -74,8 +74,8 @@ def planner_options(pairs: list[str] | None, planners: tuple[str, ...]) -> dict[
         elif len(planners) == 1:
             out[planners[0]][key] = parse_value(value)
         else:
-            raise InputError(f"--option {pair!r}: say which planner, PLANNER.{key}=VALUE "
-                             f"(running: {', '.join(planners)})")
+            choices = " or ".join(f"{p}.{key}={value}" for p in planners)
+            raise InputError(f"--option {pair!r}: say which planner, {choices}")
     return out
 
 

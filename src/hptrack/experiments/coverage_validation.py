@@ -38,7 +38,7 @@ import numpy as np
 
 from hptrack.coverage.estimator import CoverageEstimate
 from hptrack.coverage.subtask import CoverageSubtask
-from hptrack.interface import MissionSpec
+from hptrack.interface import InputError, MissionSpec
 from hptrack.models.motion import advance_true_state, motion_noise_factors
 from hptrack.scenario.random import random_mean, random_prior
 
@@ -313,8 +313,8 @@ def _check_config(out_dir: Path, config: ValidationConfig) -> None:
     if path.exists():
         stored = json.loads(path.read_text())
         if stored != identity:
-            raise ValueError(f"{out_dir} holds results of another configuration ({stored}); "
-                             "use another --out folder")
+            raise InputError(f"--out {out_dir} holds results of another configuration "
+                             f"({stored}); use another --out folder")
     else:
         path.write_text(json.dumps(identity, indent=2) + "\n")
 

@@ -15,9 +15,10 @@ constant data) registered with :func:`hptrack.planning.mdp.register_mdp` and the
 A rollout policy is a class of ``policy`` (a ``NamedTuple`` of its parameters, possibly empty)
 registered with :func:`hptrack.planning.rollout.register_policy` and a kernel ``choose(policy, env, state, rng,
 candidates) -> a`` (:mod:`hptrack.planning.rollout`); the search takes a policy instance as an
-argument. Numba compiles one version of the search per (env, policy) class and caches it on
-disk, so a new process plans at once (passing the kernels as function arguments would compile
-the whole search anew in every process, several seconds).
+argument. Numba compiles one version of the search per (env, policy) class; the sub-task MDP's
+is cached on disk (:func:`run_subtask_simulations`), so a new process plans at once, while
+another MDP's is compiled once per process (passing the kernels as function arguments would
+make even the paper's search uncacheable: several seconds of compilation in every process).
 
 The search is a pure function of ``(env, root, policy, seed, number of simulations)``: the same
 inputs give the same tree, whether the simulations ran in one call or in chunks between
@@ -78,7 +79,7 @@ DEFAULT_EXPLORATION = 0.5
 """UCB1 constant ``c`` on values normalised to the observed return range."""
 
 
-@numba.njit(cache=True)
+@numba.njit
 def rollout(env, state, forced, policy, rng, candidates, work):
     """Run ``policy`` from ``state`` to a terminal state (Algorithm 1 line 21) and return its
     value; ``forced >= 0`` fixes the first action (re-planning at the root)."""
@@ -96,7 +97,7 @@ def rollout(env, state, forced, policy, rng, candidates, work):
     return mdp_value(env, state)
 
 
-@numba.njit(cache=True)
+@numba.njit
 def _open_slots(tree, env, s, state, fixed, n_actions):
     """Allocate the action slots of state node ``s`` (its available actions, in order; only
     ``fixed`` at the root in re-planning mode)."""
@@ -113,7 +114,7 @@ def _open_slots(tree, env, s, state, fixed, n_actions):
     tree.s_count[s] = count
 
 
-@numba.njit(cache=True)
+@numba.njit
 def _catch_up(tree, env, path_action, path_found, applied, depth, root, state, work):
     """Bring the scratch state from path level ``applied`` (``-1``: not reset yet) to ``depth``
     by re-applying the stored transitions from the root; returns ``depth``."""
@@ -128,7 +129,7 @@ def _catch_up(tree, env, path_action, path_found, applied, depth, root, state, w
     return depth
 
 
-@numba.njit(cache=True)
+@numba.njit
 def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
                     exploration, n_simulations):
     """Run up to ``n_simulations`` simulations (Algorithm 1, ``Simulate`` from the root) and
@@ -201,6 +202,19 @@ def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, 
             s = child
         backup(tree, path_state, path_action, depth, ret)
     return n_simulations
+
+
+@numba.njit(cache=True)
+def run_subtask_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
+                            exploration, n_simulations):
+    """:func:`run_simulations` on the paper's sub-task MDP, compiled once and cached on disk.
+
+    The generic loop is not cached itself: its cache index would hold the signature of every
+    MDP it ever ran on (test toys included), and another process that cannot import one of
+    them could not read it.
+    """
+    return run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
+                           exploration, n_simulations)
 
 
 @dataclass(frozen=True, eq=False)
@@ -311,10 +325,12 @@ def search_mdp(env: tuple, root: tuple, n_actions: int, max_depth: int, work: np
         start: a ``time.perf_counter()`` reading the time limit counts from (default now).
     """
     state = tuple(np.array(a, copy=True) for a in root)
+    kernel = (run_subtask_simulations if isinstance(env, subtask_mdp.SubtaskEnv)
+              else run_simulations)
 
     def simulate(tree: Tree, count: int) -> int:
-        return run_simulations(tree, env, root, state, work, policy, n_actions, max_depth,
-                               fixed, float(exploration), count)
+        return kernel(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
+                      float(exploration), count)
 
     return run_search(simulate, n_actions, iterations, time_limit, seed, fixed, start)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import yaml
@@ -66,7 +67,9 @@ def format_validation_error(error: ValidationError) -> str:
         loc = ".".join(str(p) for p in item["loc"]) or "scenario"
         msg = item["msg"].removeprefix("Value error, ")
         value = item.get("input")
-        shown = "" if isinstance(value, dict | list) or "value" in msg else f" (value {value!r})"
+        large = isinstance(value, float) and math.isfinite(value) and abs(value) >= 1e6
+        text = f"{value:g}" if large else repr(value)
+        shown = "" if isinstance(value, dict) or "value" in msg else f" (value {text})"
         parts.append(f"{loc}: {msg}{shown}")
     return "; ".join(parts)
 

@@ -15,7 +15,7 @@ import math
 from typing import Annotated, Any, Self
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
 from hptrack.interface import MissionSpec
 from hptrack.models.beliefs import position_logdet
@@ -90,22 +90,23 @@ class TargetSpec(BaseModel):
     process_noise: Annotated[Real, Field(ge=0.0, le=1e6)]
     truth: tuple[Coordinate, Coordinate, Real, Real] | None = None
 
-    @model_validator(mode="after")
-    def _covariance(self) -> Self:
-        cov = np.asarray(self.covariance, dtype=float)
+    @field_validator("covariance")
+    @classmethod
+    def _covariance(cls, value: Matrix4) -> Matrix4:
+        cov = np.asarray(value, dtype=float)
         if not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-9):
             raise ValueError(f"covariance is not symmetric: {cov.tolist()}")
         with np.errstate(all="ignore"):
             eig = np.linalg.eigvalsh(cov) if np.all(np.isfinite(cov * cov)) else None
         if eig is None or not np.all(np.isfinite(eig)):
-            raise ValueError(f"covariance entries are too large: {cov.tolist()}")
+            raise ValueError(f"entries are too large: {cov.tolist()}")
         if eig[0] <= 0.0:
             raise ValueError(f"covariance is not positive definite: {cov.tolist()}")
         pos = np.linalg.eigvalsh(cov[:2, :2])
         if pos[0] < MIN_POSITION_CONDITION * pos[1]:
-            raise ValueError(f"covariance: the position block {cov[:2, :2].tolist()} is "
-                             "degenerate (its ellipse is flatter than 1e-12)")
-        return self
+            raise ValueError(f"the position block {cov[:2, :2].tolist()} is degenerate (its "
+                             "ellipse is flatter than 1e-12)")
+        return value
 
 
 class Scenario(BaseModel):

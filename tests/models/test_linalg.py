@@ -1,0 +1,35 @@
+import numpy as np
+import pytest
+
+from hptrack.models.linalg import matmul4, solve4
+
+
+@pytest.mark.parametrize("transpose_b", [False, True])
+def test_matmul4_is_the_matrix_product(transpose_b):
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(size=(4, 4)), rng.normal(size=(4, 4))
+    out = np.full((4, 4), np.nan)
+    matmul4(a, b, out, transpose_b)
+    np.testing.assert_allclose(out, a @ (b.T if transpose_b else b), rtol=1e-14, atol=1e-14)
+
+
+@pytest.mark.parametrize("columns", [1, 4, 8])
+@pytest.mark.parametrize("seed", range(3))
+def test_solve4_is_the_linear_solve(columns, seed):
+    rng = np.random.default_rng(seed)
+    m = rng.normal(size=(4, 4))
+    x = rng.normal(size=(4, columns))
+    out = np.full((4, columns), np.nan)
+    solve4(m.copy(), x.copy(), out)
+    np.testing.assert_allclose(out, np.linalg.solve(m, x), rtol=1e-11, atol=1e-12)
+
+
+def test_solve4_pivots_on_a_zero_leading_entry():
+    # Without row exchanges the first elimination step would divide by m[0, 0] = 0.
+    m = np.array([[0.0, 2.0, 1.0, 0.0], [3.0, 1.0, 0.0, 1.0], [1.0, 0.0, 4.0, 2.0],
+                  [0.0, 1.0, 1.0, 5.0]])
+    x = np.arange(8.0).reshape(4, 2)
+    out = np.empty((4, 2))
+    solve4(m.copy(), x.copy(), out)
+    np.testing.assert_allclose(m @ out, x, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(out, np.linalg.solve(m, x), rtol=1e-13, atol=1e-13)
