@@ -141,8 +141,8 @@ def test_missing_input_is_refused(cli):
 
 @pytest.mark.parametrize("content, needles", [
     (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", ["s.yaml", "not a UTF-8 text file"]),
-    ("targets: [\n".encode(), ["s.yaml", "malformed YAML"]),
-    ("budget: 60\nbudget: 90\ntargets: []\n".encode(), ["s.yaml", "duplicated key 'budget'"]),
+    (b"targets: [\n", ["s.yaml", "malformed YAML"]),
+    (b"budget: 60\nbudget: 90\ntargets: []\n", ["s.yaml", "duplicated key 'budget'"]),
     ("caf\xe9: 1\n".encode("latin-1"), ["s.yaml", "not a UTF-8 text file"]),
     (b"seed: 1\x00\n", ["s.yaml", "binary"]),
 ])

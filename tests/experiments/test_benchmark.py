@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from hptrack.baselines.stationary import StationaryPlanner
-from hptrack.experiments import benchmark as benchmark_module
 from hptrack.experiments.benchmark import (
     BenchmarkConfig,
     reductions,
@@ -14,7 +13,7 @@ from hptrack.experiments.benchmark import (
     scenario_for,
     summarise,
 )
-from hptrack.experiments.store import EpisodeKey, ResultStore
+from hptrack.experiments.store import ResultStore
 from hptrack.interface import InputError
 from hptrack.registry import planner_settings
 from hptrack.scenario import random_scenario

@@ -14,7 +14,6 @@ of it and turns each into one waypoint per simulator step.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass

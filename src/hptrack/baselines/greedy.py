@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from hptrack.models.beliefs import position_logdet
 from hptrack.interface import MissionSpec, Observation
+from hptrack.models.beliefs import position_logdet
 from hptrack.settings import NoSettings
 
 

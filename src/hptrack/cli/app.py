@@ -111,6 +111,9 @@ def simulate(
                                                      help="Save the episode (.npz).")] = None,
     belief_stride: Annotated[int, typer.Option(
         help="Store the beliefs every this many steps (the last is always stored).")] = 1,
+    animate_path: Annotated[Path | None, typer.Option(
+        "--animate", help="Also write an animation of the mission (.gif, or .mp4 with ffmpeg).")
+                            ] = None,
 ) -> None:
     """Plan and simulate one mission; print the per-target summary and U."""
     check_seed(seed)
@@ -118,6 +121,10 @@ def simulate(
         raise InputError(f"--belief-stride must be a positive integer, got {belief_stride}")
     for path, name in ((json_path, "--json"), (plot, "--plot"), (record_path, "--record")):
         check_output_path(path, name)
+    if animate_path is not None:
+        from hptrack.cli.animate import check_animation_output
+
+        check_animation_output(animate_path, "--animate")
     drawn = random and seed is None
     if drawn:
         seed = draw_seed()
@@ -151,6 +158,10 @@ def simulate(
 
         save_mission_figure(record, str(plot))
         console.print(f"figure written to {escape(str(plot))}")
+    if animate_path is not None:
+        from hptrack.cli.animate import write_animation
+
+        write_animation(record, animate_path)
 
 
 def _print_summary(record) -> None:
@@ -202,8 +213,9 @@ def list_planners() -> None:
 
 
 def _register_commands() -> None:
-    from hptrack.cli import benchmark, coverage
+    from hptrack.cli import animate, benchmark, coverage
 
+    animate.register(app)
     benchmark.register(app)
     coverage.register(app)
 

@@ -11,8 +11,8 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from hptrack.cli.common import (
     SETTING_HELP,
     check_output_dir,
-    check_seed,
     check_output_path,
+    check_seed,
     console,
     planner_settings_for,
     write_json,
@@ -78,6 +78,11 @@ def benchmark(
         planner_entry(name)
     counts = _int_list(targets, "--targets")
     settings = planner_settings_for(names, option, iterations, time_limit)
+    for name in (figure_planners or "").split(","):
+        if name.strip() and name.strip() not in names:
+            raise InputError(f"--figure-planners: {name.strip()!r} is not among --planners")
+    if figure_targets is not None and figure_targets not in counts:
+        raise InputError(f"--figure-targets {figure_targets} is not among --targets {targets}")
     check_output_dir(out, "--out")
     check_output_path(json_path, "--json")
     config = BenchmarkConfig(planners=names, settings=settings, target_counts=counts,
@@ -114,8 +119,7 @@ def _write_report(config, rows, out: Path, figure_planners: str | None,
     from hptrack.experiments.report import markdown_tables, write_csv
     from hptrack.experiments.store import EpisodeKey
     from hptrack.sim.episode import run_episode
-    from hptrack.viz.benchmark import plot_uncertainty_boxes
-    from hptrack.viz.mission import plot_mission
+    from hptrack.viz.benchmark import plot_trajectories, plot_uncertainty_boxes
 
     out.mkdir(parents=True, exist_ok=True)
     paper = (("ARVI (paper)", "A* with heuristic (paper)", "hierarchical, homogeneous (paper)")
@@ -138,15 +142,14 @@ def _write_report(config, rows, out: Path, figure_planners: str | None,
     names = ([p.strip() for p in figure_planners.split(",")] if figure_planners
              else list(config.planners))
     n_figure = figure_targets or max(config.target_counts)
-    fig = Figure(figsize=(6.5 * len(names), 6.0))
-    for i, name in enumerate(names):
-        if name not in config.settings:
-            raise InputError(f"--figure-planners: {name!r} is not among --planners")
+    records = []
+    for name in names:
         key = EpisodeKey(name, n_figure, config.first_seed, config.setting,
                          config.settings[name].canonical())
-        record = run_episode(scenario_for(key), planner_for(key))
-        plot_mission(fig.add_subplot(1, len(names), i + 1), record)
-    fig.tight_layout()
+        records.append(run_episode(scenario_for(key), planner_for(key)))
+    fig = Figure(figsize=(6.0 * len(names) + 1.0, 6.5))
+    plot_trajectories(fig, records, [f"{r.planner}, n = {n_figure}, seed {config.first_seed}: "
+                                     f"U = {r.uncertainty:.2f}" for r in records])
     fig.savefig(out / "trajectories.png", dpi=110)
     console.print(f"tables and figures written to {out}")
 

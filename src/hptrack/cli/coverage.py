@@ -10,13 +10,12 @@ from typing import Annotated
 
 import numpy as np
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from hptrack.cli.common import check_output_dir, check_output_path, check_seed, console, write_json
 from hptrack.coverage import CoverageSubtask
-from hptrack.interface import InputError, MissionSpec
 from hptrack.experiments.coverage_validation import (
     PAPER_MAPE,
     ValidationConfig,
@@ -27,6 +26,7 @@ from hptrack.experiments.coverage_validation import (
     summarise,
     write_reports,
 )
+from hptrack.interface import InputError, MissionSpec
 from hptrack.models.motion import ProcessNoiseForm
 from hptrack.scenario import load_scenario
 

@@ -1,13 +1,13 @@
 """The estimator-accuracy experiment: the paper's first table and its CDF figure (Sec. V-A).
 
-Protocol (``docs/protocols.md``, "Estimator validation"): for each random single-target case and each departure
-delay ``t_d``, the agent waits ``t_d`` at its start, intercepts the belief mean and flies the
-shifting spiral until ``t_cutoff`` (Secs. IV-A, IV-B). The agent path and the estimate are fixed;
-``runs`` target trajectories are sampled from the prior and the motion model, and each is checked
-for detection (``|target - agent| <= w/2``) at every step from departure. Detections during the
-intercept flight count at coverage time 0. Empirical ``P_find`` is the fraction detected by
-``t_cutoff``; empirical ``E[T_find]`` is the mean detection time of those found, in seconds from
-the start of the coverage, the same clock as the estimate. ``MAPE = mean |est - emp| / emp * 100``.
+Protocol (``docs/protocols.md``, "Estimator validation"): for each random single-target case and
+each departure delay ``t_d``, the agent waits ``t_d`` at its start, intercepts the belief mean and
+flies the shifting spiral until ``t_cutoff`` (Secs. IV-A, IV-B). The agent path and the estimate are
+fixed; ``runs`` target trajectories are sampled from the prior and the motion model, and each is
+checked for detection (``|target - agent| <= w/2``) at every step from departure. Detections during
+the intercept flight count at coverage time 0. Empirical ``P_find`` is the fraction detected by
+``t_cutoff``; empirical ``E[T_find]`` is the mean detection time of those found, in seconds from the
+start of the coverage, the same clock as the estimate. ``MAPE = mean |est - emp| / emp * 100``.
 
 Two variants are recorded for the write-up: the sensor switched off during the intercept flight
 (only detections on the spiral count), and times measured from departure instead of from the
@@ -15,12 +15,12 @@ start of the coverage (the estimate then adds the intercept flight).
 
 The agent's path is the hierarchical planner's own sub-task (:class:`~hptrack.coverage.subtask.
 CoverageSubtask`), and the true motion is :func:`hptrack.models.motion.advance_true_state`, the
-simulator's. Sampling: no detection is checked while the agent waits, so the true state at
-departure is drawn exactly from the belief propagated ``t_d`` (Eq. (1) in closed form); from
-there trajectories are advanced step by step, all runs at once, with the process noise drawn in
-blocks of steps and runs dropped once detected. Randomness: the case ``i`` is drawn from ``SeedSequence(seed,
-spawn_key=(i, 0))`` and its Monte Carlo for a delay of ``d`` steps from ``spawn_key=(i, 1 + d)``,
-so every number depends only on ``(seed, case, delay)``, whatever the worker count or order.
+simulator's. Sampling: no detection is checked while the agent waits, so the true state at departure
+is drawn exactly from the belief propagated ``t_d`` (Eq. (1) in closed form); from there
+trajectories are advanced step by step, all runs at once, with the process noise drawn in blocks of
+steps and runs dropped once detected. Randomness: the case ``i`` is drawn from ``SeedSequence(seed,
+spawn_key=(i, 0))`` and its Monte Carlo for a delay of ``d`` steps from ``spawn_key=(i, 1 + d)``, so
+every number depends only on ``(seed, case, delay)``, whatever the worker count or order.
 """
 
 from __future__ import annotations

@@ -50,7 +50,7 @@ from hptrack.interface import MissionSpec, Observation, Planner
 from hptrack.models.measurement import check_noise_covariance
 from hptrack.models.motion import ConstantVelocityModel
 from hptrack.registry import make_planner, planner_settings
-from hptrack.sim.episode import move_towards
+from hptrack.sim.step import move_towards
 
 __all__ = ["STONESOUP_TO_HPTRACK", "FootprintPositionSensor", "HoverSensorManager",
            "HptrackSensorManager", "hptrack_beliefs", "process_noise_of"]

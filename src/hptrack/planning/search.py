@@ -1,9 +1,10 @@
 """Monte Carlo tree search (paper Sec. IV-C-3, Algorithm 1; re-planning Sec. IV-C-4, Algorithm 1
 lines 9-12), apart from the MDP it searches and its rollout policy.
 
-The search takes its model as compiled functions, in the spirit of mctx's ``recurrent_fn``. An
-MDP with chance nodes of two outcomes is a class of ``env`` (a ``NamedTuple`` of the MDP's
-constant data) registered with :func:`hptrack.planning.mdp.register_mdp` and these kernels, all taking ``env`` first:
+The search takes its model as compiled functions, in the spirit of mctx's ``recurrent_fn``. An MDP
+with chance nodes of two outcomes is a class of ``env`` (a ``NamedTuple`` of the MDP's constant
+data) registered with :func:`hptrack.planning.mdp.register_mdp` and these kernels, all taking
+``env`` first:
 
 * ``copy_state(env, src, dst)``: copy a state (a tuple of arrays) into scratch;
 * ``is_available(env, state, a) -> bool``; a state without an available action is terminal;
@@ -13,12 +14,12 @@ constant data) registered with :func:`hptrack.planning.mdp.register_mdp` and the
 * ``value(env, state) -> float``: the return of a terminal state (``-U`` in this project).
 
 A rollout policy is a class of ``policy`` (a ``NamedTuple`` of its parameters, possibly empty)
-registered with :func:`hptrack.planning.rollout.register_policy` and a kernel ``choose(policy, env, state, rng,
-candidates) -> a`` (:mod:`hptrack.planning.rollout`); the search takes a policy instance as an
-argument. Numba compiles one version of the search per (env, policy) class; the sub-task MDP's
-is cached on disk (:func:`run_subtask_simulations`), so a new process plans at once, while
-another MDP's is compiled once per process (passing the kernels as function arguments would
-make even the paper's search uncacheable: several seconds of compilation in every process).
+registered with :func:`hptrack.planning.rollout.register_policy` and a kernel ``choose(policy, env,
+state, rng, candidates) -> a`` (:mod:`hptrack.planning.rollout`); the search takes a policy instance
+as an argument. Numba compiles one version of the search per (env, policy) class; the sub-task MDP's
+is cached on disk (:func:`run_subtask_simulations`), so a new process plans at once, while another
+MDP's is compiled once per process (passing the kernels as function arguments would make even the
+paper's search uncacheable: several seconds of compilation in every process).
 
 The search is a pure function of ``(env, root, policy, seed, number of simulations)``: the same
 inputs give the same tree, whether the simulations ran in one call or in chunks between

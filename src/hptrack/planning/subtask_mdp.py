@@ -38,11 +38,12 @@ is available only when ``n_i < N - t``. Outcomes:
   action list.
 
 Either way the agent ends at the target's estimated position and every other belief grows by the
-time spent. A sub-task lasts at least one step (so a history always advances in time). Choosing
-the target found by the previous sub-task again follows it to the end of the budget with its
-detection guaranteed: it is measured at every step, its covariance follows the Riccati recursion
-(:func:`hptrack.models.riccati.measured_covariance`). At the end of the budget, or when no action is available, the value
-of the state is ``-U`` with ``U = sum_i log det Sigma^xy_i`` at step ``N`` (Sec. III).
+time spent. A sub-task lasts at least one step (so a history always advances in time). Choosing the
+target found by the previous sub-task again follows it to the end of the budget with its detection
+guaranteed: it is measured at every step, its covariance follows the Riccati recursion
+(:func:`hptrack.models.riccati.measured_covariance`). At the end of the budget, or when no action is
+available, the value of the state is ``-U`` with ``U = sum_i log det Sigma^xy_i`` at step ``N``
+(Sec. III).
 """
 
 from __future__ import annotations

@@ -32,10 +32,20 @@ from hptrack.models.motion import (
     predict_covariance,
 )
 from hptrack.scenario.model import Scenario
-from hptrack.sim.episode import initial_true_states
 
 BLOCK_STEPS = 256
 """Steps of random normals drawn at a time."""
+
+
+def initial_true_states(scenario: Scenario, rng: np.random.Generator) -> np.ndarray:
+    """True initial states ``(n, 4)``: given ones, or draws from each target's prior."""
+    states = np.empty((len(scenario.targets), 4))
+    for i, target in enumerate(scenario.targets):
+        if target.truth is not None:
+            states[i] = target.truth
+        else:
+            states[i] = rng.multivariate_normal(target.mean, target.covariance, method="cholesky")
+    return states
 
 
 @numba.njit(cache=True)
@@ -53,15 +63,22 @@ def move_agent(agent, waypoint, max_step):
         agent[1] = agent[1] + dy * scale
 
 
+def move_towards(position: np.ndarray, waypoint: np.ndarray, max_step: float) -> np.ndarray:
+    """Holonomic move: a new position straight towards ``waypoint`` by at most ``max_step`` m
+    (:func:`move_agent` on a copy)."""
+    agent = np.array(position, dtype=float)
+    move_agent(agent, np.asarray(waypoint, dtype=float), float(max_step))
+    return agent
+
+
 @numba.njit(cache=True)
-def sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, logdets):
+def sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, logdets, z):
     """Measure and update every target within the footprint (``|p - agent|^2 <= radius2``).
 
     Consumes two normals of ``e`` from ``e_pos`` per measured target (target order), writes
-    ``seen`` and the per-target ``log det Sigma^xy`` into ``logdets``; returns the new ``e_pos``
-    and ``U``.
+    ``seen`` and the per-target ``log det Sigma^xy`` into ``logdets`` (``z``: a scratch ``(2,)``
+    for the measurement); returns the new ``e_pos`` and ``U``.
     """
-    z = np.empty(2)
     total = 0.0
     for i in range(truth.shape[0]):
         dx = truth[i, 0] - agent[0]
@@ -83,7 +100,7 @@ def sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, log
 
 @numba.njit(cache=True)
 def world_step(agent, waypoint, max_step, truth, z_motion, sqrt_q, means, covs, q, tau,
-               c_per_step, radius2, noise, factor, e, e_pos, seen, logdets):
+               c_per_step, radius2, noise, factor, e, e_pos, seen, logdets, z):
     """One simulator step in place (module docstring): move, true motion with the unit normals
     ``z_motion`` ``(n, 4)``, predict one step, sense. Returns the new ``e_pos`` and ``U``."""
     move_agent(agent, waypoint, max_step)
@@ -96,14 +113,14 @@ def world_step(agent, waypoint, max_step, truth, z_motion, sqrt_q, means, covs, 
         means[i, 0] = x
         means[i, 1] = y
         predict_covariance(covs[i], q[i], steps, tau, c_per_step, covs[i])
-    return sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, logdets)
+    return sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, logdets, z)
 
 
 class NormalBlock:
     """Unit normals of one Generator, drawn ``size`` at a time and handed out in order.
 
-    ``take(count)`` needs ``count <= size``; the values are those of drawing them one call at a
-    time.
+    Call ``ensure(count)`` (``count <= size``), read ``values[pos:pos + count]`` and advance
+    ``pos``: the values are those of drawing them one call at a time.
     """
 
     def __init__(self, rng: np.random.Generator, size: int) -> None:
@@ -161,6 +178,7 @@ class World:
         self._motion = NormalBlock(np.random.default_rng(motion_seq), BLOCK_STEPS * n * 4)
         self._sensor = NormalBlock(np.random.default_rng(sensor_seq), BLOCK_STEPS * n * 2)
         self._waypoint = np.empty(2)
+        self._z = np.empty(2)
         self.seen = np.zeros(n, dtype=bool)
         self.logdets = np.empty(n)
         self.step_index = 0
@@ -190,7 +208,7 @@ class World:
         self._sensor.ensure(2 * n)
         self._sensor.pos, self.uncertainty = sense(
             self.agent, self.truth, self.means, self.covariances, self._radius2, self._noise,
-            self._factor, self._sensor.values, self._sensor.pos, self.seen, self.logdets)
+            self._factor, self._sensor.values, self._sensor.pos, self.seen, self.logdets, self._z)
 
     def step(self, waypoint_x: float, waypoint_y: float) -> float:
         """Advance one step with the agent flying towards ``(waypoint_x, waypoint_y)`` m;
@@ -214,7 +232,7 @@ class World:
         sensor.pos, self.uncertainty = world_step(
             self.agent, wp, m.step_length, self.truth, z, self._sqrt_q, self.means,
             self.covariances, self.q, m.time_step, m.c_per_step, self._radius2, self._noise,
-            self._factor, sensor.values, sensor.pos, self.seen, self.logdets)
+            self._factor, sensor.values, sensor.pos, self.seen, self.logdets, self._z)
         self.step_index += 1
         return self.uncertainty
 

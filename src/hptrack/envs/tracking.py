@@ -1,0 +1,261 @@
+"""``hptrack/Tracking-v0``: the step-level tracking problem as a Gymnasium environment.
+
+One environment step is one simulator step of ``tau`` = 0.5 s (:class:`hptrack.sim.step.World`,
+the simulator's compiled step: same seed, same mission as :func:`hptrack.sim.episode.run_episode`).
+The agent is holonomic. Actions:
+
+* ``action_type="discrete"`` (default): ``Discrete(13)``; action ``k < 12`` flies at full speed
+  ``v_a`` on the heading ``30 k`` degrees (counter-clockwise from the x axis), action 12 hovers;
+* ``action_type="box"``: ``Box(-1, 1, (2,))``, the velocity as a fraction of ``v_a`` per axis
+  (a vector longer than 1 is flown at ``v_a`` in its direction).
+
+Observation: :mod:`hptrack.envs.observation`. Reward: ``-(U_k - U_{k-1}) / n``, so an episode's
+rewards sum to ``-(U_K - U_0) / n``. An episode is truncated when the budget is spent
+(``terminated`` is always False). ``info``: ``U``, ``per_target_logdet`` ``(n,)``,
+``never_observed_U`` (the scenario's ``U`` if nothing is measured after the start),
+``detected`` ``(n,)`` and ``step``.
+
+:class:`MissionEnv` holds what both environments share (scenarios, the world, the observation,
+``info``, rendering); :class:`TrackingEnv` adds the step-level actions.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from hptrack.envs.observation import ObservationLayout
+from hptrack.interface import InputError
+from hptrack.scenario.model import Scenario
+from hptrack.scenario.random import random_scenario
+from hptrack.sim.record import EpisodeRecord
+from hptrack.sim.step import World
+
+SETTINGS = ("heterogeneous", "homogeneous")
+"""Random-scenario settings (paper Sec. V-A)."""
+N_HEADINGS = 12
+HOVER = N_HEADINGS
+"""The discrete action that keeps the agent in place."""
+HEADINGS = tuple((math.cos(math.radians(30.0 * k)), math.sin(math.radians(30.0 * k)))
+                 for k in range(N_HEADINGS)) + ((0.0, 0.0),)
+"""Unit displacement of each discrete action (hover last)."""
+RESET_OPTIONS = ("scenario", "seed")
+
+
+def _target_range(n_targets: int | tuple[int, int]) -> tuple[int, int]:
+    if isinstance(n_targets, int | np.integer) and not isinstance(n_targets, bool):
+        lo = hi = int(n_targets)
+    elif (isinstance(n_targets, tuple | list) and len(n_targets) == 2
+          and all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in n_targets)):
+        lo, hi = int(n_targets[0]), int(n_targets[1])
+    else:
+        raise InputError(f"n_targets must be an int or a (min, max) pair, got {n_targets!r}")
+    if not 1 <= lo <= hi:
+        raise InputError(f"n_targets must be at least 1 (min <= max), got {n_targets!r}")
+    return lo, hi
+
+
+def action_waypoint(action_type: str, action: Any, agent: np.ndarray, step_length: float
+                    ) -> tuple[float, float]:
+    """The waypoint (m) an action of ``action_type`` (``"discrete"`` or ``"box"``) gives an agent
+    at ``agent`` moving at most ``step_length`` m per step (module docstring): the environment's
+    rule, also for flying a learned policy as a planner in the simulator.
+
+    Raises:
+        ValueError: an action outside the space (a Box action only needs to be finite).
+    """
+    if action_type == "discrete":
+        k = int(action)
+        if not 0 <= k < len(HEADINGS):
+            raise ValueError(f"action must be in 0..{len(HEADINGS) - 1}, got {action!r}")
+        ux, uy = HEADINGS[k]
+    else:
+        a = np.asarray(action, dtype=float)
+        if a.shape != (2,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be 2 finite numbers, got {action!r}")
+        ux, uy = float(a[0]), float(a[1])
+    return float(agent[0]) + step_length * ux, float(agent[1]) + step_length * uy
+
+
+class MissionEnv(gym.Env):
+    """Common base of the environments (module docstring of :mod:`hptrack.envs.tracking`).
+
+    Args:
+        n_targets: targets of the random scenarios: an int (default 4), or an inclusive
+            ``(min, max)`` range drawn per episode (needs ``max_targets``).
+        setting: ``"heterogeneous"`` (default: priors and ``q`` per target) or
+            ``"homogeneous"`` (one prior and ``q`` per scenario).
+        max_targets: pad the observation to this many target slots and append a mask
+            (episodes may then have any ``n <= max_targets``); default: no padding, ``n`` slots.
+        render_mode: ``None`` or ``"rgb_array"`` (the mission figure of the episode so far).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
+
+    def __init__(self, n_targets: int | tuple[int, int] = 4, setting: str = "heterogeneous",
+                 max_targets: int | None = None, render_mode: str | None = None) -> None:
+        self._n_range = _target_range(n_targets)
+        if setting not in SETTINGS:
+            raise InputError(f"setting must be one of {', '.join(SETTINGS)}, got {setting!r}")
+        if max_targets is not None and (isinstance(max_targets, bool) or not isinstance(
+                max_targets, int | np.integer) or max_targets < self._n_range[1]):
+            raise InputError(f"max_targets must be an int >= n_targets {n_targets!r}, "
+                             f"got {max_targets!r}")
+        if self._n_range[0] != self._n_range[1] and max_targets is None:
+            raise InputError(f"n_targets={n_targets!r} varies per episode: give max_targets")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise InputError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.setting = setting
+        self.render_mode = render_mode
+        self.max_targets = None if max_targets is None else int(max_targets)
+        self.layout = ObservationLayout(
+            self._n_range[1] if max_targets is None else int(max_targets), max_targets is not None)
+        low, high = self.layout.bounds()
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.world: World | None = None
+        self.scenario: Scenario | None = None
+        self.never_observed_uncertainty = math.nan
+        self._history: list[tuple[np.ndarray, ...]] = []
+
+    # --- episodes ----------------------------------------------------------------------------
+    def _draw_scenario(self) -> Scenario:
+        lo, hi = self._n_range
+        n = int(self.np_random.integers(lo, hi + 1))
+        seed = int(self.np_random.integers(2**63))
+        return random_scenario(n, seed=seed, homogeneous=self.setting == "homogeneous")
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[np.ndarray, dict]:
+        """Start an episode: ``options={"scenario": Scenario}`` flies that scenario with its own
+        seed (or ``options["seed"]``), exactly as the simulator; otherwise a random scenario of
+        the env's setting is drawn from the env's generator (seeded by ``seed``)."""
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        if unknown:
+            raise InputError(f"reset options: unknown {', '.join(map(repr, unknown))} "
+                             f"(known: {', '.join(RESET_OPTIONS)})")
+        scenario = options.get("scenario")
+        if scenario is None:
+            scenario = self._draw_scenario()
+        elif not isinstance(scenario, Scenario):
+            raise InputError(f"reset option scenario must be a Scenario, got {type(scenario)}")
+        n = len(scenario.targets)
+        if n > self.layout.n_slots or (not self.layout.masked and n != self.layout.n_slots):
+            raise InputError(f"reset option scenario has {n} targets; this env observes "
+                             f"{self.layout.n_slots}" + ("" if self.layout.masked else
+                                                         " (give max_targets to pad)"))
+        self.scenario = scenario
+        self.world = World(scenario, options.get("seed"))
+        self.never_observed_uncertainty = scenario.never_observed_uncertainty()
+        self._history = []
+        self._record()
+        return self._observation(), self._info()
+
+    @property
+    def n_targets(self) -> int:
+        """Targets of the current episode."""
+        return self._world().n_targets
+
+    def _world(self) -> World:
+        if self.world is None:
+            raise RuntimeError("call reset() before step()")
+        return self.world
+
+    def _advance(self, waypoint_x: float, waypoint_y: float) -> None:
+        """One simulator step towards the waypoint (m), recorded when rendering."""
+        self._world().step(waypoint_x, waypoint_y)
+        self._record()
+
+    def _check_running(self) -> World:
+        world = self._world()
+        if world.done:
+            raise RuntimeError("the episode was truncated at the end of the budget; call reset()")
+        return world
+
+    def _observation(self) -> np.ndarray:
+        w = self._world()
+        return self.layout.encode(w.agent, w.means, w.logdets, w.seen,
+                                  w.remaining_budget / w.mission.budget)
+
+    def _info(self) -> dict[str, Any]:
+        w = self._world()
+        return {"U": w.uncertainty, "per_target_logdet": w.logdets.copy(),
+                "never_observed_U": self.never_observed_uncertainty,
+                "detected": w.seen.copy(), "step": w.step_index}
+
+    # --- rendering ---------------------------------------------------------------------------
+    def _record(self) -> None:
+        if self.render_mode is not None:
+            w = self._world()
+            self._history.append((w.agent.copy(), w.truth.copy(), w.seen.copy(), w.means.copy(),
+                                  w.covariances.copy()))
+
+    def episode_record(self) -> EpisodeRecord:
+        """The episode so far as an :class:`~hptrack.sim.record.EpisodeRecord` (only with
+        ``render_mode="rgb_array"``, which keeps the history)."""
+        if self.render_mode is None:
+            raise RuntimeError("the episode history is kept only with render_mode='rgb_array'")
+        w = self._world()
+        agent, truth, seen, means, covs = (np.stack(a) for a in zip(*self._history, strict=True))
+        m = w.mission
+        return EpisodeRecord(
+            planner=self.spec.id if self.spec is not None else type(self).__name__, seed=w.seed,
+            target_ids=m.target_ids, time_step=m.time_step, sensor_diameter=m.sensor_diameter,
+            agent_path=agent, true_states=truth, belief_steps=np.arange(len(self._history)),
+            belief_means=means, belief_covariances=covs, detections=seen,
+            per_target_logdet=w.logdets.copy())
+
+    def render(self) -> np.ndarray | None:
+        """The mission figure of the episode so far (:func:`hptrack.viz.mission.plot_mission`)
+        as an RGB array ``(640, 640, 3)`` uint8; ``None`` without ``render_mode``."""
+        if self.render_mode is None:
+            return None
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        from hptrack.viz.mission import plot_mission
+
+        fig = Figure(figsize=(6.4, 6.4), dpi=100, layout="constrained")
+        canvas = FigureCanvasAgg(fig)
+        ax = fig.add_subplot()
+        artists = plot_mission(ax, self.episode_record())
+        fig.colorbar(artists["agent"], ax=ax, label="agent time (s)", shrink=0.8)
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+class TrackingEnv(MissionEnv):
+    """``hptrack/Tracking-v0`` (module docstring).
+
+    Args:
+        action_type: ``"discrete"`` (13 actions, default) or ``"box"`` (velocity fraction).
+        **kwargs: :class:`MissionEnv`'s.
+    """
+
+    def __init__(self, action_type: str = "discrete", **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        if action_type == "discrete":
+            self.action_space = spaces.Discrete(len(HEADINGS))
+        elif action_type == "box":
+            self.action_space = spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+        else:
+            raise InputError(f"action_type must be 'discrete' or 'box', got {action_type!r}")
+        self.action_type = action_type
+
+    def waypoint(self, action: Any) -> tuple[float, float]:
+        """Where ``action`` sends the agent this step, m."""
+        w = self._world()
+        return action_waypoint(self.action_type, action, w.agent, w.mission.step_length)
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        world = self._check_running()
+        before = world.uncertainty
+        x, y = self.waypoint(action)
+        self._advance(x, y)
+        reward = -(world.uncertainty - before) / world.n_targets
+        return self._observation(), float(reward), False, world.done, self._info()
