@@ -15,6 +15,13 @@ The scenario is drawn from the paper's distributions (Sec. V-A): 900 s budget, t
 
     python3 benchmarks/bench_mcts.py                  # n = 2..6, 10 s searches
     python3 benchmarks/bench_mcts.py --duration 2 --targets 6
+
+``--compare SRC`` times another checkout's code side by side in the same run (each ``n`` of the
+two in turn, in fresh processes) and prints the ratios new / old, e.g. the code before a
+refactor::
+
+    git worktree add /tmp/hptrack-before 9dd0bbd
+    python3 benchmarks/bench_mcts.py --compare /tmp/hptrack-before/src
 """
 
 from __future__ import annotations
@@ -75,19 +82,40 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=10.0,
                         help="length of the long search, s (default 10)")
     parser.add_argument("--seed", type=int, default=0, help="scenario seed")
+    parser.add_argument("--compare", metavar="SRC",
+                        help="another checkout's src/ folder, timed side by side")
     parser.add_argument("--worker", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker is not None:
         print(json.dumps(worker(args.worker, args.seed, args.duration)))
         return
 
-    def run(n: int, duration: float) -> dict:
-        out = subprocess.run([sys.executable, __file__, "--worker", str(n), "--seed",
-                              str(args.seed), "--duration", str(duration)],
-                             check=True, capture_output=True, text=True)
+    def run(n: int, duration: float, src: str | None = None) -> dict:
+        env = dict(os.environ)
+        if src is not None:
+            env["PYTHONPATH"] = os.pathsep.join([src, env.get("PYTHONPATH", "")])
+        out = subprocess.run([sys.executable, "-W", "ignore", __file__, "--worker", str(n),
+                              "--seed", str(args.seed), "--duration", str(duration)],
+                             check=True, capture_output=True, text=True, env=env,
+                             cwd=src or None)
         return json.loads(out.stdout.strip().splitlines()[-1])
 
     run(args.targets[0], 0.1)  # compile and cache the kernels
+    if args.compare:
+        run(args.targets[0], 0.1, args.compare)
+        print(f"side by side with {args.compare}: ratios new / old (higher is faster)")
+        header = ("n", "sims/s first 2000", f"sims/s {args.duration:g} s", "sims/CPU-s",
+                  "first plan s (old, new)")
+        print(" | ".join(header))
+        print(" | ".join("---" for _ in header))
+        for n in args.targets:
+            old = run(n, args.duration, args.compare)
+            new = run(n, args.duration)
+            print(f"{n} | {new['fresh_2000_per_s'] / old['fresh_2000_per_s']:.3f} | "
+                  f"{new['long_per_s'] / old['long_per_s']:.3f} | "
+                  f"{new['long_per_cpu_s'] / old['long_per_cpu_s']:.3f} | "
+                  f"{old['first_plan_s']:.2f}, {new['first_plan_s']:.2f}", flush=True)
+        return
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; long search "
           f"{args.duration:g} s; scenario seed {args.seed}")
     header = ("n", "import s", "first plan s", "sims/s first 2000", f"sims/s {args.duration:g} s",

@@ -1,7 +1,7 @@
 """hptrack: hierarchical planning for long-horizon multi-target tracking with one UAV.
 
 Implements Yuan, Moon, Cao and Scherer, "Hierarchical Planning for Long-Horizon Multi-Target
-Tracking Under Target Motion Uncertainty" (the paper in ``shared/paper``). SI units throughout:
+Tracking Under Target Motion Uncertainty" (``docs/model.md``). SI units throughout:
 metres, seconds, metres per second.
 """
 

@@ -1,4 +1,4 @@
-"""Coverage outcome estimator (paper Sec. IV-B, Eqs. (6)-(8); notes "Coverage sub-task").
+"""Coverage outcome estimator (paper Sec. IV-B, Eqs. (6)-(8); ``docs/model.md``).
 
 During a spiral coverage that starts from the belief covariance ``Sigma`` (4x4) the covered area
 grows linearly, ``S_cover(k) = v_a w k tau + pi (w/2)^2``, while the position covariance grows

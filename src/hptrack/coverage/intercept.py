@@ -1,5 +1,5 @@
-"""Interception of a moving belief mean (paper Sec. IV-C, "Node Expansion"; notes "Coverage
-sub-task").
+"""Interception of a moving belief mean (paper Sec. IV-C, "Node Expansion";
+``docs/model.md``, "The coverage sub-task").
 
 Before the shifting spiral of Sec. IV-A starts, the agent flies in a straight line at its full
 speed ``v_a`` to the point where the belief mean, moving at the estimated velocity ``v_hat``, can

@@ -3,13 +3,17 @@ of several planners side by side."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from matplotlib.axes import Axes
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
-from hptrack.experiments.store import EpisodeRow
 from hptrack.sim.record import EpisodeRecord
 from hptrack.viz.mission import plot_mission
+
+if TYPE_CHECKING:
+    from hptrack.experiments.store import EpisodeRow
 
 
 def plot_uncertainty_boxes(ax: Axes, rows: list[EpisodeRow], n_targets: int) -> dict:
