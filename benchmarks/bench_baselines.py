@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from hptrack.experiments.benchmark import never_observed_uncertainty
+from hptrack.cli.common import planner_options
 from hptrack.registry import make_planner
 from hptrack.scenario.random import random_scenario
 from hptrack.sim.episode import run_episode
@@ -34,7 +34,7 @@ def warm_up(planner_names: list[str], options: dict) -> None:
     """Compile (or load) every kernel with a short mission, so timings exclude it."""
     scenario = random_scenario(2, seed=10_000, homogeneous=True, budget=20.0)
     for name in planner_names:
-        run_episode(scenario, make_planner(name, **options.get(name, {})))
+        run_episode(scenario, make_planner(name, options.get(name, {})))
 
 
 def measure(name: str, n_targets: int, seeds: range, options: dict) -> dict:
@@ -42,7 +42,7 @@ def measure(name: str, n_targets: int, seeds: range, options: dict) -> dict:
     times, expanded, capped, walls, u, never = [], [], [], [], [], []
     for seed in seeds:
         scenario = random_scenario(n_targets, seed=seed, homogeneous=True)
-        planner = make_planner(name, **options)
+        planner = make_planner(name, options)
         start = time.perf_counter()
         record = run_episode(scenario, planner, belief_stride=scenario.mission_spec().n_steps)
         walls.append(time.perf_counter() - start)
@@ -50,7 +50,7 @@ def measure(name: str, n_targets: int, seeds: range, options: dict) -> dict:
         expanded += [d.nodes_expanded for d in planner.decisions]
         capped += [d.capped for d in planner.decisions]
         u.append(record.uncertainty)
-        never.append(never_observed_uncertainty(scenario))
+        never.append(scenario.never_observed_uncertainty())
     times_ms = 1e3 * np.array(times)
     return {
         "mean_ms": times_ms.mean(), "p95_ms": np.percentile(times_ms, 95),
@@ -58,16 +58,6 @@ def measure(name: str, n_targets: int, seeds: range, options: dict) -> dict:
         "mission_s": np.mean(walls), "mission_max_s": np.max(walls),
         "u": np.mean(u), "never": np.mean(never),
     }
-
-
-def parse_options(pairs: list[str]) -> dict:
-    """``["arvi.horizon=8", ...]`` to ``{"arvi": {"horizon": "8"}}`` (parsed by the planner)."""
-    options: dict = {}
-    for pair in pairs:
-        key, _, value = pair.partition("=")
-        planner, _, name = key.partition(".")
-        options.setdefault(planner, {})[name] = value
-    return options
 
 
 def main() -> None:
@@ -79,7 +69,7 @@ def main() -> None:
     parser.add_argument("-o", "--option", action="append", default=[])
     args = parser.parse_args()
     names = [p for p in args.planners.split(",") if p]
-    options = parse_options(args.option)
+    options = planner_options(args.option, tuple(names))
     warm_up(names, options)
     seeds = range(args.first_seed, args.first_seed + args.scenarios)
     header = (f"{'planner':8} {'n':>2} {'decision ms mean':>16} {'p95':>7} {'max':>7} "

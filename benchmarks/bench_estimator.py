@@ -18,13 +18,8 @@ import time
 import numba
 import numpy as np
 
-from hptrack.coverage import (
-    CoverageSettings,
-    ShiftingSpiral,
-    coverage_outcome,
-    estimate_coverage,
-    intercept_steps,
-)
+from hptrack.coverage import ShiftingSpiral, coverage_outcome, estimate_coverage, intercept_steps
+from hptrack.interface import MissionSpec
 from hptrack.scenario.random import random_mean, random_prior
 
 
@@ -38,7 +33,7 @@ def estimate_all(covs, qs, tau, c_per_step, speed, diameter, max_steps):
     return total
 
 
-def start_covariances(n: int, settings: CoverageSettings, seed: int = 0
+def start_covariances(n: int, settings: MissionSpec, seed: int = 0
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Beliefs of the paper's distributions left unobserved 0 to 600 s, then intercepted from the
     origin: ``(means, covariances at the start of coverage, q)``."""
@@ -47,10 +42,12 @@ def start_covariances(n: int, settings: CoverageSettings, seed: int = 0
     means, covs, qs = np.empty((n, 4)), np.empty((n, 4, 4)), np.empty(n)
     for i in range(n):
         cov, q = random_prior(rng)
-        m, c = motion.predict(random_mean(rng)[None], cov[None], q, rng.integers(0, 1201))
-        steps = intercept_steps(0.0, 0.0, *m[0], settings.speed, settings.time_step,
-                                0.5 * settings.sensor_diameter)
-        means[i], covs[i], qs[i] = m[0], motion.predict(m, c, q, steps)[1][0], q
+        m, c = motion.predict(random_mean(rng)[None], cov[None], q,
+                              rng.integers(0, 1201) * settings.time_step)
+        steps = intercept_steps(0.0, 0.0, *m[0], settings.agent_speed, settings.time_step,
+                                settings.sensor_radius)
+        start = motion.predict(m, c, q, steps * settings.time_step)[1][0]
+        means[i], covs[i], qs[i] = m[0], start, q
     return means, covs, qs
 
 
@@ -58,9 +55,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=20000, help="beliefs per measurement")
     args = parser.parse_args()
-    settings = CoverageSettings()
+    settings = MissionSpec()
     means, covs, qs = start_covariances(args.n, settings)
-    call = (settings.time_step, settings.motion.c_per_step, settings.speed,
+    call = (settings.time_step, settings.c_per_step, settings.agent_speed,
             settings.sensor_diameter, 1800)
     estimate_all(covs[:10], qs[:10], *call)  # compile
     best = math.inf
@@ -80,7 +77,7 @@ def main() -> None:
     elapsed = time.perf_counter() - start
     print(f"wrapper: {m / elapsed:12,.0f} estimates/s  ({elapsed / m * 1e6:.1f} us each)")
 
-    spiral = ShiftingSpiral(np.zeros(2), means[0, 2:], covs[0, :2, :2], settings.speed,
+    spiral = ShiftingSpiral(np.zeros(2), means[0, 2:], covs[0, :2, :2], settings.agent_speed,
                             settings.time_step, settings.sensor_diameter)
     spiral.positions(10)
     start = time.perf_counter()
