@@ -213,11 +213,12 @@ def list_planners() -> None:
 
 
 def _register_commands() -> None:
-    from hptrack.cli import animate, benchmark, coverage
+    from hptrack.cli import animate, benchmark, coverage, flight
 
     animate.register(app)
     benchmark.register(app)
     coverage.register(app)
+    flight.register(app)
 
 
 _register_commands()

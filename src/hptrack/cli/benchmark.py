@@ -1,11 +1,14 @@
-"""``hptrack benchmark``: the paper's multi-target comparison, resumable, on K workers."""
+"""``hptrack benchmark``: the paper's multi-target comparison, resumable, on K workers or a Dask
+cluster."""
 
 from __future__ import annotations
 
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from hptrack.cli.common import (
@@ -47,7 +50,16 @@ def benchmark(
     option: Annotated[list[str] | None, typer.Option(
         "--option", "-o", help="Planner option PLANNER.KEY=VALUE (KEY=VALUE with one planner).")
                       ] = None,
-    workers: Annotated[int, typer.Option(help="Worker processes.")] = 1,
+    workers: Annotated[int | None, typer.Option(
+        help="Episodes in flight: worker processes (default 1), or with Dask tasks submitted at "
+             "once (default: the cluster's worker threads).")] = None,
+    scheduler: Annotated[str | None, typer.Option(
+        help="Run episodes on the Dask scheduler at this address (e.g. tcp://host:8786).")
+                         ] = None,
+    dask_local: Annotated[int | None, typer.Option(
+        help="Run episodes on a local Dask cluster of this many worker processes.")] = None,
+    scheduler_timeout: Annotated[float, typer.Option(
+        help="Seconds to wait for the --scheduler to answer.")] = 10.0,
     db: Annotated[Path, typer.Option(help="SQLite results file (resumable).")
                   ] = Path("results/benchmark.db"),
     out: Annotated[Path, typer.Option(help="Folder for tables and figures.")
@@ -67,8 +79,13 @@ def benchmark(
     check_seed(first_seed, "--first-seed")
     if scenarios < 1:
         raise InputError(f"--scenarios must be a positive integer, got {scenarios}")
-    if workers < 1:
+    if workers is not None and workers < 1:
         raise InputError(f"--workers must be a positive integer, got {workers}")
+    dask = scheduler is not None or dask_local is not None
+    if dask:
+        from hptrack.experiments.dask_cluster import check_dask_options
+
+        check_dask_options(scheduler, dask_local, scheduler_timeout)
     if iterations is not None and time_limit is not None:
         raise InputError("give --iterations or --time-limit, not both")
     names = tuple(dict.fromkeys(p.strip() for p in planners.split(",") if p.strip()))
@@ -87,21 +104,34 @@ def benchmark(
     check_output_path(json_path, "--json")
     config = BenchmarkConfig(planners=names, settings=settings, target_counts=counts,
                              scenarios=scenarios, homogeneous=homogeneous, first_seed=first_seed)
-    store = ResultStore(db)
-    with Progress(TextColumn("[bold]benchmark"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), TextColumn("{task.description}"),
-                  console=console) as progress:
-        task = progress.add_task("", total=None)
+    with ExitStack() as stack:
+        store = ResultStore(db)
+        stack.callback(store.close)
+        executor, in_flight = None, workers or 1
+        if dask:
+            from hptrack.experiments.dask_cluster import dask_executor
 
-        def on_done(row, finished, total):
-            progress.update(task, completed=finished, total=total,
-                            description=f"{row.key.planner} n={row.key.n_targets} "
-                                        f"seed={row.key.seed}: U={row.uncertainty:.2f}")
+            pool = stack.enter_context(dask_executor(scheduler, dask_local, scheduler_timeout))
+            if workers is None and pool.threads == 0:
+                raise InputError(f"--scheduler {scheduler}: the cluster has no workers yet; "
+                                 "give --workers N (episodes in flight)")
+            executor, in_flight = pool.executor, workers or pool.threads
+            console.print(f"Dask scheduler {escape(pool.address)}: {pool.threads} worker "
+                          f"threads, {in_flight} episodes in flight")
+        with Progress(TextColumn("[bold]benchmark"), BarColumn(), MofNCompleteColumn(),
+                      TimeElapsedColumn(), TextColumn("{task.description}"),
+                      console=console) as progress:
+            task = progress.add_task("", total=None)
 
-        ran = run_benchmark(config, store, workers=workers, on_done=on_done)
-    keys = set(config.keys())
-    rows = [r for r in store.rows() if r.key in keys]
-    store.close()
+            def on_done(row, finished, total):
+                progress.update(task, completed=finished, total=total,
+                                description=f"{row.key.planner} n={row.key.n_targets} "
+                                            f"seed={row.key.seed}: U={row.uncertainty:.2f}")
+
+            ran = run_benchmark(config, store, workers=in_flight, on_done=on_done,
+                                executor=executor)
+        keys = set(config.keys())
+        rows = [r for r in store.rows() if r.key in keys]
     console.print(f"{ran} episodes run now, {len(rows)} of {len(keys)} in the table ({db})")
     _write_report(config, rows, out, figure_planners, figure_targets)
     if json_path:

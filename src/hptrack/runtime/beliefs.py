@@ -1,0 +1,126 @@
+"""Target beliefs on a clock: each target's belief as a short time-ordered history of its
+measurements, so that a measurement that arrives late (within a tolerance) is filtered in its
+time order and the belief at any recent time is exact.
+
+Per target ``i`` the history keeps a *base* (the belief after every measurement older than the
+horizon, at that measurement's time) and the measurements since, each with its posterior. A new
+measurement at time ``t`` is inserted in time order; the posteriors from there on are recomputed
+(predicted in closed form over each gap with :meth:`ConstantVelocityModel.predict`, Eq. (1), and
+updated with :func:`~hptrack.models.measurement.kalman_update`). The belief at time ``T`` is the
+last posterior at or before ``T`` predicted to ``T``. The horizon is the newest measurement time
+minus the tolerance: a measurement older than it is refused.
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass
+
+import numpy as np
+
+from hptrack.models.measurement import kalman_update
+from hptrack.models.motion import ConstantVelocityModel
+
+
+@dataclass
+class _Entry:
+    """One accepted measurement of one target and the belief after it."""
+
+    t: float
+    seq: int
+    z: np.ndarray
+    noise: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+
+
+class BeliefTimeline:
+    """Beliefs over ``n`` targets with per-target measurement histories (module docstring).
+
+    Args:
+        means: ``(n, 4)`` prior means at time ``start_s``.
+        covariances: ``(n, 4, 4)`` prior covariances.
+        process_noise: ``(n,)`` ``q``, m^2/s^3.
+        motion: the motion model.
+        tolerance_s: how far behind the newest measurement a measurement may be, s.
+        start_s: time of the priors, s (the mission start).
+    """
+
+    def __init__(self, means: np.ndarray, covariances: np.ndarray, process_noise: np.ndarray,
+                 motion: ConstantVelocityModel, tolerance_s: float, start_s: float = 0.0
+                 ) -> None:
+        n = len(means)
+        self._q = np.asarray(process_noise, dtype=float)
+        self._motion = motion
+        self.tolerance_s = float(tolerance_s)
+        self._base_t = np.full(n, float(start_s))
+        self._base_mean = np.array(means, dtype=float)
+        self._base_cov = np.array(covariances, dtype=float)
+        self._entries: list[list[_Entry]] = [[] for _ in range(n)]
+        self._keys: list[list[tuple[float, int]]] = [[] for _ in range(n)]
+        self.newest_s = float(start_s)
+        """Time of the newest accepted measurement (the priors' time before any), s."""
+
+    @property
+    def horizon_s(self) -> float:
+        """The oldest time a new measurement may have, s."""
+        return self.newest_s - self.tolerance_s
+
+    def is_duplicate(self, i: int, t: float, z: np.ndarray) -> bool:
+        """Whether target ``i`` already has a measurement ``z`` at time ``t``."""
+        keys = self._keys[i]
+        j = bisect.bisect_left(keys, (t - 1e-9, -1))
+        while j < len(keys) and keys[j][0] <= t + 1e-9:
+            if np.array_equal(self._entries[i][j].z, z):
+                return True
+            j += 1
+        return False
+
+    def add(self, i: int, t: float, z: np.ndarray, noise: np.ndarray, seq: int) -> None:
+        """Filter measurement ``z`` (2,) m of target ``i`` taken at ``t`` s with noise ``R``
+        (2, 2) m^2; ``seq`` orders measurements of the same time. The caller has checked that
+        ``t >= horizon_s``."""
+        key = (float(t), int(seq))
+        pos = bisect.bisect_right(self._keys[i], key)
+        entry = _Entry(float(t), int(seq), np.array(z, dtype=float),
+                       np.ascontiguousarray(noise, dtype=float), np.empty(4), np.empty((4, 4)))
+        self._keys[i].insert(pos, key)
+        self._entries[i].insert(pos, entry)
+        self._refilter(i, pos)
+        self.newest_s = max(self.newest_s, float(t))
+        self._settle()
+
+    def _state_before(self, i: int, pos: int) -> tuple[float, np.ndarray, np.ndarray]:
+        if pos == 0:
+            return self._base_t[i], self._base_mean[i], self._base_cov[i]
+        e = self._entries[i][pos - 1]
+        return e.t, e.mean, e.cov
+
+    def _refilter(self, i: int, pos: int) -> None:
+        t, mean, cov = self._state_before(i, pos)
+        for e in self._entries[i][pos:]:
+            m, c = self._motion.predict(mean[None], cov[None], self._q[i], max(e.t - t, 0.0))
+            kalman_update(m[0], c[0], e.z, e.noise, e.mean, e.cov)
+            t, mean, cov = e.t, e.mean, e.cov
+
+    def _settle(self) -> None:
+        """Fold measurements older than the horizon into the bases."""
+        horizon = self.horizon_s
+        for i, entries in enumerate(self._entries):
+            while entries and entries[0].t < horizon:
+                e = entries.pop(0)
+                self._keys[i].pop(0)
+                self._base_t[i], self._base_mean[i], self._base_cov[i] = e.t, e.mean, e.cov
+
+    def at(self, time_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Beliefs ``(n, 4)``, ``(n, 4, 4)`` at ``time_s`` from every measurement taken at or
+        before it (a target whose base is newer is given at its base time)."""
+        n = len(self._entries)
+        src_t = np.empty(n)
+        src_mean = np.empty((n, 4))
+        src_cov = np.empty((n, 4, 4))
+        for i in range(n):
+            pos = bisect.bisect_right(self._keys[i], (float(time_s), np.iinfo(np.int64).max))
+            src_t[i], src_mean[i], src_cov[i] = self._state_before(i, pos)
+        return self._motion.predict(src_mean, src_cov, self._q,
+                                    np.maximum(float(time_s) - src_t, 0.0))

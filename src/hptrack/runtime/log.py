@@ -1,0 +1,170 @@
+"""The mission log: JSON lines, one record per event or decision, flushed as each is written.
+
+Every record is a JSON object with ``kind`` (``header`` first, then ``odometry``,
+``detection``, ``tick``, ``plan``, ``late``, ``mode``, ``end``, and the adapters' ``status`` and
+``safety``), ``t`` the mission time in s where it has one, ``wall`` the wall-clock time (Unix
+s) when it was written, and ``seq`` its line number from 0. Non-finite numbers of rejected
+inputs are written as the strings ``"nan"``, ``"inf"``, ``"-inf"`` so that every line is strict
+JSON. :func:`read_log` reads a log back; a last line cut short by a crash or a kill is dropped
+and reported, so a log always replays up to where it ends.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from hptrack.interface import InputError
+
+LOG_VERSION = 1
+"""Format version written in the header record."""
+
+
+def json_ready(value: Any) -> Any:
+    """``value`` as strict-JSON data: arrays and tuples as lists, numpy scalars as Python
+    numbers, non-finite floats as ``"nan"``/``"inf"``/``"-inf"``."""
+    if isinstance(value, np.ndarray):
+        return json_ready(value.tolist())
+    if isinstance(value, dict):
+        return {str(k): json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_ready(v) for v in value]
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        value = float(value)
+        return value if math.isfinite(value) else str(value)
+    return value
+
+
+def log_float(value: Any) -> float:
+    """A number read back from a log (the strings ``"nan"``, ``"inf"``, ``"-inf"`` included);
+    anything else that is not a number is NaN."""
+    if isinstance(value, bool):
+        return math.nan
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def log_array(value: Any) -> np.ndarray:
+    """A nested list read back from a log as a float array (bad entries NaN)."""
+    if isinstance(value, list | tuple):
+        parts = [log_array(v) for v in value]
+        try:
+            return np.array(parts, dtype=float)
+        except ValueError:  # ragged: keep the shape error for the controller to reject
+            return np.full(len(parts), math.nan)
+    return np.array(log_float(value))
+
+
+class MissionLog:
+    """Writes records as JSON lines (flushed per line) and keeps them in memory.
+
+    Args:
+        path: the file to write (created or truncated); ``None`` keeps the records in memory
+            only.
+        clock: wall clock for each record's ``wall`` field, s.
+    """
+
+    def __init__(self, path: str | Path | None = None,
+                 clock: Callable[[], float] = time.time) -> None:
+        self.path = None if path is None else Path(path)
+        self._clock = clock
+        self._lock = threading.Lock()
+        self.records: list[dict] = []
+        self._file: IO[str] | None = None
+        if self.path is not None:
+            self._file = open(self.path, "w", encoding="utf-8", buffering=1)  # noqa: SIM115
+
+    def write(self, record: dict) -> dict:
+        """Append ``record`` (``wall`` and ``seq`` are added) and flush it to the file."""
+        with self._lock:
+            full = {**json_ready(record), "wall": self._clock(), "seq": len(self.records)}
+            if self._file is not None:
+                self._file.write(json.dumps(full, allow_nan=False) + "\n")
+                self._file.flush()
+            self.records.append(full)
+            return full
+
+    def close(self) -> None:
+        """Close the file (records stay in memory)."""
+        with self._lock:
+            if self._file is not None:
+                self._file.close()
+                self._file = None
+
+    def __enter__(self) -> MissionLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass(frozen=True)
+class LogContents:
+    """A mission log read back.
+
+    Attributes:
+        header: the first record (mission, planner, seed, controller settings).
+        records: every record after the header, in order.
+        truncated: the last line was cut short (a crashed or killed run) and was dropped.
+    """
+
+    header: dict
+    records: list[dict]
+    truncated: bool
+
+
+def read_log(path: str | Path) -> LogContents:
+    """Read a mission log written by :class:`MissionLog`.
+
+    Raises:
+        InputError: the file cannot be read, has no header, or has a malformed line other
+            than the last one.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        raise InputError(f"{path}: cannot read the mission log ({err.strerror})") from None
+    except UnicodeDecodeError as err:
+        raise InputError(f"{path}: not a mission log (not UTF-8 text at byte {err.start})"
+                         ) from None
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    records: list[dict] = []
+    truncated = False
+    for number, line in enumerate(lines, start=1):
+        try:
+            record = json.loads(line)
+            if not isinstance(record, dict) or "kind" not in record:
+                raise ValueError("not a log record")
+        except ValueError:
+            if number == len(lines) and not text.endswith("\n"):
+                truncated = True
+                break
+            if number == 1:
+                raise InputError(f"{path}: not a mission log (line 1 is not a JSON record)"
+                                 ) from None
+            raise InputError(f"{path}: line {number} is not a mission-log record: "
+                             f"{line[:80]!r}") from None
+        records.append(record)
+    if not records or records[0]["kind"] != "header":
+        raise InputError(f"{path}: not a mission log (no header record on line 1)")
+    if records[0].get("version") != LOG_VERSION:
+        raise InputError(f"{path}: mission-log version {records[0].get('version')!r} is not "
+                         f"supported (this hptrack reads version {LOG_VERSION})")
+    return LogContents(records[0], records[1:], truncated)

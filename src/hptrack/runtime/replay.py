@@ -1,0 +1,179 @@
+"""Replay a mission log: the same events, in the same order, through a fresh controller.
+
+The controller is rebuilt from the log's header (scenario, planner and its settings, seed,
+controller settings). Each odometry and detection record is fed again, accepted or not; the
+records a ``setpoint`` call made are grouped by their call number and the call is made again at
+the same mission time. The planner runs in the caller's thread, and only when the log says its
+outcome was delivered (:class:`~hptrack.runtime.worker.ReplayRunner`), so no wall clock is
+involved: the beliefs, the ticks, the observations, the planner's decisions and the setpoint
+modes are reproduced, and every difference from the log is reported. A planner whose effort is
+wall time (``mcts`` with a time limit) may decide differently on replay; one with an iteration
+budget decides the same.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+from hptrack.interface import InputError
+from hptrack.registry import make_planner
+from hptrack.runtime.controller import ControllerSettings, MissionController
+from hptrack.runtime.log import MissionLog, log_array, log_float, read_log
+from hptrack.runtime.worker import ReplayRunner
+from hptrack.scenario.io import format_validation_error, parse_scenario
+from hptrack.sim.record import EpisodeRecord
+
+MAX_LISTED_MISMATCHES = 20
+
+
+@dataclass
+class ReplayResult:
+    """A replayed mission.
+
+    Attributes:
+        controller: the replaying controller (its own log in memory).
+        record: the mission (true target states where the log has them, else NaN).
+        summary: JSON-ready summary (``U``, the logged ``U``, mismatches, counts, ends).
+    """
+
+    controller: MissionController
+    record: EpisodeRecord
+    summary: dict[str, Any]
+
+
+def _close(a: Any, b: Any) -> bool:
+    a, b = log_array(a), log_array(b)
+    return a.shape == b.shape and bool(np.allclose(a, b, rtol=1e-9, atol=1e-9, equal_nan=True))
+
+
+def _differences(logged: list[dict], replayed: list[dict]) -> list[str]:
+    """What the replayed records of one step do differently from the logged ones."""
+    out = []
+    kinds = [r["kind"] for r in logged], [r["kind"] for r in replayed]
+    if kinds[0] != kinds[1]:
+        return [f"records {kinds[0]} became {kinds[1]}"]
+    for old, new in zip(logged, replayed, strict=True):
+        kind = old["kind"]
+        keys = {"odometry": ("accepted", "reason"), "detection": ("accepted", "reason"),
+                "tick": ("k", "submitted", "detected"), "plan": ("k", "status"),
+                "late": ("k",), "mode": ("mode",), "end": ("reason",),
+                "setpoint": ("reason",)}.get(kind, ())
+        for key in keys:
+            if old.get(key) != new.get(key):
+                out.append(f"{kind} {key}: {old.get(key)!r} became {new.get(key)!r}")
+        numbers = {"tick": ("logdet", "means", "agent"), "plan": ("waypoint",),
+                   "mode": ("position",), "end": ("U",)}.get(kind, ())
+        for key in numbers:
+            if not _close(old.get(key), new.get(key)):
+                out.append(f"{kind} {key} differs")
+    return out
+
+
+def replay_log(path: str | Path) -> ReplayResult:
+    """Replay the mission log at ``path`` (module docstring).
+
+    Raises:
+        InputError: an unreadable or malformed log, or a header this hptrack cannot rebuild.
+    """
+    contents = read_log(path)
+    header = contents.header
+    try:
+        scenario = parse_scenario(header["scenario"], f"{path}: header scenario")
+        settings = ControllerSettings(**header["controller"])
+        planner = make_planner(header["planner"], header.get("planner_settings") or {})
+        seed = int(header["seed"])
+    except KeyError as err:
+        raise InputError(f"{path}: the header has no {err.args[0]!r}") from None
+    except ValidationError as err:
+        raise InputError(f"{path}: header controller settings: "
+                         f"{format_validation_error(err)}") from None
+    runner = ReplayRunner()
+    log = MissionLog()
+    controller = MissionController(scenario, planner, seed=seed, settings=settings, log=log,
+                                   runner=runner, header={"source": "replay",
+                                                          "replay_of": str(path)})
+    records = contents.records
+    mismatches: list[str] = []
+    truth: dict[int, np.ndarray] = {}
+    adapter: list[dict] = []
+    logged_end: dict | None = None
+    i = 0
+    while i < len(records):
+        record = records[i]
+        call = record.get("call")
+        before = len(log.records)
+        if call is not None:
+            group = [record]
+            while i + len(group) < len(records) and records[i + len(group)].get("call") == call:
+                group.append(records[i + len(group)])
+            for item in group:
+                if item["kind"] == "plan":
+                    runner.release(item["k"])
+                if item["kind"] == "end":
+                    logged_end = item
+            controller.setpoint(log_float(group[0]["t"]))
+            logged = group
+            i += len(group)
+        else:
+            i += 1
+            kind = record["kind"]
+            logged = [record]
+            if kind in ("odometry", "detection") and "raw" in record:
+                controller.bad_input(kind, record.get("reason", ""), record.get("detail", ""),
+                                     record.get("raw"))
+            elif kind == "odometry":
+                controller.odometry(log_float(record["t"]), log_array(record["position"]))
+            elif kind == "detection":
+                covariance = record.get("covariance")
+                controller.detection(log_float(record["t"]), record.get("target"),
+                                     log_array(record["position"]),
+                                     None if covariance is None else log_array(covariance))
+            elif kind == "plan":
+                runner.release(record["k"])
+                logged = []
+            elif kind == "end":
+                logged_end = record
+                controller.finish(log_float(record["t"]), record["reason"])
+            else:
+                if kind == "truth":
+                    truth[int(record["k"])] = log_array(record["states"])
+                else:
+                    adapter.append(record)
+                continue
+        # a plan that arrived after the end shows in the end record's planner info
+        replayed = [r for r in log.records[before:] if not r.get("after_end")]
+        logged = [r for r in logged if not r.get("after_end")]
+        for problem in _differences(logged, replayed):
+            mismatches.append(f"record {logged[0]['seq'] if logged else '?'}: {problem}")
+    if not controller.finished:
+        last = max((log_float(r.get("t")) for r in records if r.get("t") is not None),
+                   default=0.0)
+        controller.finish(last if math.isfinite(last) else 0.0, "log ended")
+    final_k = round(controller.final["time"] / scenario.time_step)
+    truth_array = (np.array([truth[k] for k in range(final_k + 1)])
+                   if all(k in truth for k in range(final_k + 1)) else None)
+    record = controller.episode_record(truth_array)
+    summary = {
+        "log": str(path), "source": header.get("source"), "planner": header["planner"],
+        "seed": seed, "truncated": contents.truncated, "records": len(records) + 1,
+        "ticks": sum(r["kind"] == "tick" for r in records),
+        "plans": sum(r["kind"] == "plan" for r in records),
+        "mismatches": len(mismatches), "first_mismatches": mismatches[:MAX_LISTED_MISMATCHES],
+        "U": controller.end["U"], "logged_U": None if logged_end is None else logged_end["U"],
+        "ended_by": controller.end["reason"], "time": controller.end["time"],
+        "per_target_logdet": controller.end["per_target_logdet"],
+        "detections": dict(zip(scenario.target_ids, map(int, record.detection_counts()),
+                               strict=True)),
+        "accepted": controller.end["accepted"], "rejected": controller.end["rejected"],
+        "adapter": [{k: v for k, v in r.items() if k not in ("seq",)} for r in adapter
+                    if r["kind"] == "safety"],
+    }
+    controller.close()
+    return ReplayResult(controller, record, summary)
+

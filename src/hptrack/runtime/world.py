@@ -1,0 +1,48 @@
+"""The simulated targets shared by the simulated runner and the vehicle stub: the simulator's
+true initial states and one step of true motion per ``tau`` (the scenario's motion model),
+linearly interpolated between steps so that a sensor may look at any time."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hptrack.scenario.model import Scenario
+from hptrack.sim.step import initial_true_states
+
+
+class TrueTargets:
+    """True target states at whole steps, drawn lazily as time advances.
+
+    Args:
+        scenario: the mission (priors or given truths, ``q``, ``tau``).
+        truth_rng: draws the initial states (when the scenario gives none).
+        motion_rng: draws the motion noise, one call per step in order (as the simulator).
+    """
+
+    def __init__(self, scenario: Scenario, truth_rng: np.random.Generator,
+                 motion_rng: np.random.Generator) -> None:
+        mission = scenario.mission_spec()
+        self._motion, self._q, self.time_step = mission.motion, mission.process_noise, \
+            mission.time_step
+        self._rng = motion_rng
+        self.states: list[np.ndarray] = [initial_true_states(scenario, truth_rng)]
+        """True states ``(n, 4)`` at steps ``0, 1, ...`` drawn so far."""
+
+    def state(self, k: int) -> np.ndarray:
+        """True states at step ``k`` (drawing the steps up to it)."""
+        while len(self.states) <= k:
+            self.states.append(self._motion.sample_motion(self.states[-1], self._q, self._rng))
+        return self.states[k]
+
+    def positions(self, k: int, fraction: float) -> np.ndarray:
+        """True positions ``(n, 2)`` at ``fraction`` (0..1) of the way from step ``k`` to
+        ``k + 1``, m."""
+        here = self.state(k)[:, :2]
+        if fraction <= 0.0:
+            return here.copy()
+        return here + fraction * (self.state(k + 1)[:, :2] - here)
+
+    def positions_at(self, time_s: float) -> np.ndarray:
+        """True positions ``(n, 2)`` at ``time_s`` s from the start, m."""
+        k, rest = divmod(max(float(time_s), 0.0), self.time_step)
+        return self.positions(int(k), rest / self.time_step)

@@ -1,0 +1,163 @@
+"""``hptrack fly`` against ``hptrack vehicle-sim``: two processes talking MAVLink through MAVSDK
+on loopback, a short real-time mission, its safe ends, and the replay of its log."""
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import yaml
+
+pytest.importorskip("mavsdk")
+pytest.importorskip("pymavlink")
+
+from hptrack.runtime.log import read_log  # noqa: E402
+from hptrack.scenario import load_scenario  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+BUDGET_S = 15.0
+CLI = [sys.executable, "-m", "hptrack.cli.flight"]
+
+
+def _free_udp_port():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.fixture
+def dry_run(tmp_path, example_path):
+    """A short copy of the paper-flight example, free ports, and the vehicle stub running."""
+    data = yaml.safe_load(example_path.read_text())
+    data["budget"] = BUDGET_S
+    scenario = tmp_path / "flight.yaml"
+    scenario.write_text(yaml.safe_dump(data))
+    mav, det = _free_udp_port(), _free_udp_port()
+    stats = tmp_path / "vehicle.json"
+    stub = subprocess.Popen(
+        [*CLI, "vehicle-sim", str(scenario), "--mavlink", f"udpout://127.0.0.1:{mav}",
+         "--detections", f"udp://127.0.0.1:{det}", "--duration", "120", "--stats", str(stats)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    fly = [*CLI, "fly", str(scenario), "--connection", f"udpin://127.0.0.1:{mav}",
+           "--detections", f"udp://127.0.0.1:{det}", "--altitude", "5", "--takeoff",
+           "--no-live", "--connect-timeout", "20"]
+    run = {"scenario": scenario, "fly": fly, "stub": stub, "stats": stats,
+           "log": tmp_path / "flight.jsonl"}
+    yield run
+    if stub.poll() is None:
+        stub.send_signal(signal.SIGINT)
+        try:
+            stub.wait(10)
+        except subprocess.TimeoutExpired:
+            stub.kill()
+            stub.wait()
+
+
+def _stop_stub(run):
+    run["stub"].send_signal(signal.SIGINT)
+    out, err = run["stub"].communicate(timeout=10)
+    assert run["stub"].returncode == 0, err
+    return json.loads(run["stats"].read_text())
+
+
+def _records(path, kind):
+    return [r for r in read_log(path).records if r["kind"] == kind]
+
+
+def test_a_dry_run_flies_offboard_detects_ends_in_hold_and_replays(dry_run, tmp_path):
+    start = time.monotonic()
+    fly = subprocess.run([*dry_run["fly"], "--log", str(dry_run["log"])], capture_output=True,
+                         text=True, timeout=60)
+    elapsed = time.monotonic() - start
+    assert fly.returncode == 0, fly.stdout + fly.stderr
+    assert "ended by budget" in fly.stdout
+    stats = _stop_stub(dry_run)
+    log = dry_run["log"]
+
+    # offboard started, and setpoints arrived at the promised rate (>= 10 Hz; 20 Hz is sent)
+    assert any(r["message"].startswith("offboard started") for r in _records(log, "status"))
+    modes = [m["mode"] for m in stats["modes"]]
+    assert modes[:2] == ["hold", "takeoff"] and modes[-2:] == ["offboard", "hold"]
+    assert stats["offboard_setpoint_rate_hz"] >= 15.0
+    assert stats["offboard_max_gap_s"] < 0.5
+
+    # at least one target detected and its belief updated
+    accepted = [r for r in _records(log, "detection") if r["accepted"]]
+    assert accepted
+    end = _records(log, "end")[0]
+    assert end["reason"] == "budget" and end["time"] == BUDGET_S
+    scenario = load_scenario(dry_run["scenario"])
+    mission = scenario.mission_spec()
+    _, unseen = mission.motion.predict(scenario.means(), scenario.covariances(),
+                                       mission.process_noise, BUDGET_S)
+    seen = {r["target"] for r in accepted}
+    for i, tid in enumerate(scenario.target_ids):
+        if tid in seen:
+            unseen_logdet = np.log(np.linalg.det(unseen[i, :2, :2]))
+            assert end["per_target_logdet"][tid] < unseen_logdet - 1.0
+
+    # the mission ended in hold, confirmed by telemetry
+    safety = _records(log, "safety")
+    assert [(s["reason"], s["action"], s["confirmed"]) for s in safety] == [
+        ("budget", "hold", "HOLD")]
+
+    # the log replays with the same beliefs and decisions
+    summary_path, figure = tmp_path / "replay.json", tmp_path / "replay.png"
+    replay = subprocess.run([*CLI, "replay", str(log), "--json", str(summary_path), "--plot",
+                             str(figure)], capture_output=True, text=True, timeout=60)
+    assert replay.returncode == 0, replay.stderr
+    summary = json.loads(summary_path.read_text())
+    assert summary["mismatches"] == 0, summary["first_mismatches"]
+    assert summary["U"] == end["U"] and summary["ended_by"] == "budget"
+    assert figure.read_bytes()[:4] == b"\x89PNG"
+    assert elapsed < BUDGET_S + 30.0
+
+
+def _wait_for_offboard(path, timeout_s=30.0):
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if path.exists() and "offboard started" in path.read_text():
+            return
+        time.sleep(0.1)
+    raise AssertionError("offboard never started")
+
+
+@pytest.mark.parametrize("end", ["interrupt", "geofence", "lost link"])
+def test_safe_ends_switch_to_hold_and_say_why(dry_run, end):
+    log = dry_run["log"]
+    extra = {"interrupt": [], "geofence": ["--max-distance", "10"],
+             "lost link": ["--lost-link", "1"]}[end]
+    fly = subprocess.Popen([*dry_run["fly"], "--log", str(log), *extra],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for_offboard(log)
+        if end == "interrupt":
+            time.sleep(1.0)
+            fly.send_signal(signal.SIGINT)
+        elif end == "lost link":
+            time.sleep(1.0)
+            _stop_stub(dry_run)
+        out, err = fly.communicate(timeout=40)
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+            fly.wait()
+    expected = {"interrupt": ("interrupted", 130), "geofence": ("geofence", 3),
+                "lost link": ("lost link", 3)}[end]
+    assert fly.returncode == expected[1], out + err
+    assert f"ended by {expected[0]}" in out
+    safety = _records(log, "safety")
+    assert len(safety) == 1 and safety[0]["reason"] == expected[0]
+    assert safety[0]["action"] == "hold"
+    end_record = _records(log, "end")[0]
+    assert end_record["reason"] == expected[0] and end_record["time"] < BUDGET_S
+    if end == "lost link":
+        assert safety[0]["confirmed"] is None  # nobody is there to confirm it
+    else:
+        assert safety[0]["confirmed"] == "HOLD"
+        assert _stop_stub(dry_run)["final_mode"] == "hold"
