@@ -50,7 +50,7 @@ from hptrack.interface import Observation, Planner
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import check_noise_covariance
 from hptrack.runtime.beliefs import BeliefTimeline
-from hptrack.runtime.log import LOG_VERSION, MissionLog
+from hptrack.runtime.log import LOG_VERSION, MissionLog, log_float
 from hptrack.runtime.worker import PlannerRunner, PlanOutcome, ThreadedRunner, timed
 from hptrack.scenario.model import Scenario
 from hptrack.sim.record import EpisodeRecord
@@ -108,15 +108,6 @@ def _vector(value: Any, shape: tuple[int, ...]) -> np.ndarray | None:
     except (TypeError, ValueError):
         return None
     return array if array.shape == shape else None
-
-
-def _time(value: Any) -> float:
-    if isinstance(value, bool):
-        return math.nan
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return math.nan
 
 
 def _raw(value: Any) -> Any:
@@ -251,7 +242,7 @@ class MissionController:
         """The vehicle was at ``position`` (2,) m at mission time ``t`` s; ``False`` (logged
         with the reason) if refused."""
         with self._lock:
-            t = _time(t)
+            t = log_float(t)
             p = _vector(position, (2,))
             record = {"kind": "odometry", "t": t,
                       "position": p if p is not None else _raw(position)}
@@ -290,7 +281,7 @@ class MissionController:
         with noise ``covariance`` (2, 2) m^2 (default the scenario's ``R``); ``False``
         (logged with the reason) if refused."""
         with self._lock:
-            t = _time(t)
+            t = log_float(t)
             z = _vector(position, (2,))
             record = {"kind": "detection", "t": t, "target": _raw(target_id),
                       "position": z if z is not None else _raw(position)}
@@ -349,7 +340,7 @@ class MissionController:
             self._calls += 1
             self._call = self._calls
             try:
-                t = _time(t)
+                t = log_float(t)
                 if not math.isfinite(t) or t < self._last_call:
                     self._refuse("setpoint", {"kind": "setpoint", "t": t}, "bad time",
                                  f"time {t} is not finite or before the last call "
@@ -504,7 +495,7 @@ class MissionController:
         record (``U`` of the beliefs at ``min(t, budget)``)."""
         with self._lock:
             if not self.finished:
-                t = _time(t)
+                t = log_float(t)
                 t = self._last_call if not math.isfinite(t) else t
                 self._finish(t, reason, min(max(t, 0.0), self.mission.budget))
             return self.end
