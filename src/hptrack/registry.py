@@ -17,6 +17,7 @@ from hptrack.baselines.coverage import CoveragePlanner, CoverageSettings
 from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.baselines.stationary import StationaryPlanner
 from hptrack.interface import InputError, Planner
+from hptrack.learning.policy_planner import AdfqPlanner, AdfqSettings, Sb3Planner, Sb3Settings
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.settings import NoSettings, PlannerSettings
 
@@ -40,6 +41,10 @@ PLANNERS: dict[str, PlannerEntry] = {
                              "pursues one target (-o target=ID) with coverage sub-tasks"),
     "arvi": PlannerEntry(ArviSettings, ArviPlanner, "Anytime Reduced Value Iteration"),
     "astar": PlannerEntry(AStarSettings, AStarPlanner, "A* with an information heuristic"),
+    "adfq": PlannerEntry(AdfqSettings, AdfqPlanner,
+                         "Deep ADFQ policy (-o model=PATH, epsilon; default: shipped model for n)"),
+    "sb3": PlannerEntry(Sb3Settings, Sb3Planner,
+                        "stable-baselines3 PPO policy (-o model=PATH; default: shipped for n)"),
 }
 
 

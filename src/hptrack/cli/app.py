@@ -213,12 +213,13 @@ def list_planners() -> None:
 
 
 def _register_commands() -> None:
-    from hptrack.cli import animate, benchmark, coverage, flight
+    from hptrack.cli import animate, benchmark, coverage, flight, learn
 
     animate.register(app)
     benchmark.register(app)
     coverage.register(app)
     flight.register(app)
+    learn.register(app)
 
 
 _register_commands()

@@ -1,4 +1,4 @@
-"""Random scenarios with the paper's distributions (Sec. V-A; ``docs/model.md``, "Random scenarios").
+"""Random scenarios with the paper's distributions (Sec. V-A; ``docs/model.md``).
 
 Per target: position mean uniform in [-1000, 1000] m per axis, velocity mean uniform in
 [-3, 3] m/s per axis, position variances uniform in [500, 2000] m^2, correlation uniform in
