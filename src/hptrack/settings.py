@@ -63,6 +63,11 @@ def _json_value(value: Any) -> Any:
     return value
 
 
+def digest_of(canonical: str) -> str:
+    """The short hash of a canonical settings JSON text (a result's settings identity)."""
+    return hashlib.sha256(canonical.encode()).hexdigest()[:16]
+
+
 class PlannerSettings(BaseModel):
     """Base of every planner's settings: frozen, no unknown options, finite numbers unless a
     field says otherwise."""
@@ -117,7 +122,7 @@ class PlannerSettings(BaseModel):
 
     def digest(self) -> str:
         """A short hash of :meth:`canonical`."""
-        return hashlib.sha256(self.canonical().encode()).hexdigest()[:16]
+        return digest_of(self.canonical())
 
     def effort_label(self) -> str:
         """The effort fields that are set, e.g. ``"iterations=100000"`` (``"none"`` without)."""

@@ -11,7 +11,6 @@ of a process that no longer runs (on this host) or older than :data:`STALE_CLAIM
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import socket
@@ -21,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hptrack.interface import InputError
+from hptrack.settings import digest_of
 
 SCHEMA_VERSION = 2
 SCHEMA = """
@@ -75,7 +75,7 @@ class EpisodeKey:
     @property
     def settings_hash(self) -> str:
         """A short hash of :attr:`settings` (the same as the settings' ``digest()``)."""
-        return hashlib.sha256(self.settings.encode()).hexdigest()[:16]
+        return digest_of(self.settings)
 
     def _id(self) -> tuple:
         return (self.planner, self.n_targets, self.seed, self.setting, self.settings_hash)
