@@ -86,7 +86,7 @@ def test_timed_runs_warm_the_kernels_before_the_first_search(monkeypatch):
     """The first timed search of a process must not pay the kernels' loading: reset runs a
     tiny search first (once per process)."""
     calls = []
-    monkeypatch.setattr(hierarchical, "_warmed", False)
+    monkeypatch.setattr(hierarchical, "_warmed", set())
     real = hierarchical.search
     monkeypatch.setattr(hierarchical, "search",
                         lambda *a, **k: calls.append(k.get("iterations")) or real(*a, **k))

@@ -141,7 +141,7 @@ def test_tree_is_independent_of_chunking_and_initial_capacity():
         for n in chunks:
             while n:
                 n -= run_simulations(tree, env, root, state, new_work(), UniformRandom(), 6,
-                                     problem.n_steps + 2, -1, 0.5, n)
+                                     problem.n_steps + 2, -1, 0.5, 0, n)
                 if n:
                     tree = grow_tree(tree, 6)
         return tree

@@ -19,7 +19,8 @@ follows the last found target, or hovers.
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+import json
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -28,12 +29,24 @@ from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.motion import predicted_positions
+from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchResult, search
 from hptrack.planning.subtask_mdp import PlanningProblem
+from hptrack.planning.subtask_rollout import MostUncertain
 from hptrack.settings import PlannerSettings
 
 DEFAULT_ITERATIONS = 100_000
 """Simulations per tree search when neither ``iterations`` nor ``time_limit`` is given."""
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "paper": {"backup": "sampled", "rollout": "uniform"},
+    "improved": {"backup": "max", "rollout": "most_uncertain"},
+}
+"""The search options each preset stands for: the paper's algorithm exactly as written, and the
+improvements measured in ``docs/planner-improvements.md``."""
+
+DEFAULT_PRESET = "paper"
 
 
 class MctsSettings(PlannerSettings):
@@ -45,39 +58,71 @@ class MctsSettings(PlannerSettings):
         time_limit: wall time per tree search, s (the paper uses 30 s). With both, whichever
             comes first.
         exploration: UCB1 constant ``c`` on values normalised to the observed return range.
+        preset: ``"paper"`` (the paper's search, Algorithm 1) or ``"improved"``; it sets the
+            options below that are not given (:data:`PRESETS`).
+        backup: ``"sampled"`` (the paper's running mean), ``"expected"`` or ``"max"``
+            (:mod:`hptrack.planning.tree`).
+        rollout: ``"uniform"`` (the paper's random policy) or ``"most_uncertain"``
+            (:mod:`hptrack.planning.subtask_rollout`).
+        rollout_epsilon: probability of a random action in a ``most_uncertain`` rollout.
     """
 
     iterations: Annotated[int | None, Field(ge=1)] = None
     time_limit: Annotated[float | None, Field(gt=0.0)] = None
     exploration: Annotated[float, Field(gt=0.0)] = DEFAULT_EXPLORATION
+    preset: Literal["paper", "improved"] = DEFAULT_PRESET
+    backup: Literal["sampled", "expected", "max"] | None = None
+    rollout: Literal["uniform", "most_uncertain"] | None = None
+    rollout_epsilon: Annotated[float, Field(ge=0.0, le=1.0)] = 0.1
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
 
     @model_validator(mode="before")
     @classmethod
-    def _default_effort(cls, data: Any) -> Any:
-        if isinstance(data, dict) and data.get("iterations") is None \
-                and data.get("time_limit") is None:
+    def _defaults(cls, data: Any) -> Any:
+        if not isinstance(data, dict):
+            return data
+        if data.get("iterations") is None and data.get("time_limit") is None:
             data = {**data, "iterations": DEFAULT_ITERATIONS}
-        return data
+        preset = PRESETS.get(data.get("preset", DEFAULT_PRESET), {})
+        return {**data, **{k: v for k, v in preset.items() if data.get(k) is None}}
+
+    def canonical(self) -> str:
+        """The identity of the results: the resolved options, without ``preset`` (which only
+        stands for them), and without the options that have the paper's value, so that the
+        paper's search keeps the identity it had before these options existed."""
+        values = self.as_json()
+        values.pop("preset")
+        for key, paper in PRESETS["paper"].items():
+            if values[key] == paper:
+                values.pop(key)
+        if values.get("rollout", "uniform") == "uniform":
+            values.pop("rollout_epsilon")
+        return json.dumps(values, sort_keys=True, separators=(",", ":"))
+
+    def rollout_policy(self) -> tuple:
+        """The rollout policy instance the search takes."""
+        if self.rollout == "most_uncertain":
+            return MostUncertain(self.rollout_epsilon)
+        return UniformRandom()
 
 
-_warmed = False
+_warmed: set[type] = set()
 
 
-def warm_up() -> None:
-    """Load (or compile) the search's kernels once per process with a tiny search, so that the
-    first timed search of a process gets as many simulations as the later ones."""
-    global _warmed
-    if _warmed:
+def warm_up(policy: tuple = UniformRandom()) -> None:
+    """Load (or compile) the search's kernels for ``policy``'s class once per process with a
+    tiny search, so that the first timed search of a process gets as many simulations as the
+    later ones."""
+    if type(policy) in _warmed:
         return
     cov = np.diag([1000.0, 1000.0, 0.4, 0.4])
     for fixed in (None, 0):
         problem = PlanningProblem(np.zeros(2), np.array([[300.0, 0, 1, 0], [-300.0, 0, 0, 1]]),
                                   np.stack([cov, cov]), np.full(2, 3e-4), 60.0, 0.5, 0.5, 30.0,
                                   100.0, 10.0 * np.eye(2), current_action=fixed)
-        search(problem, iterations=64, seed=0)
-    _warmed = True
+        search(problem, iterations=64, seed=0, policy=policy)
+    _warmed.add(type(policy))
 
 
 class HierarchicalPlanner:
@@ -91,6 +136,7 @@ class HierarchicalPlanner:
         self.iterations = self.settings.iterations
         self.time_limit = self.settings.time_limit
         self.exploration = self.settings.exploration
+        self.policy = self.settings.rollout_policy()
 
     # --- planning -------------------------------------------------------------------------
     def _search(self, observation: Observation, current_action: int | None = None,
@@ -99,7 +145,8 @@ class HierarchicalPlanner:
             self._mission, observation, available=self._available, last_found=last_found,
             current_action=current_action)
         result = search(problem, iterations=self.iterations, time_limit=self.time_limit,
-                        seed=self._rng, exploration=self.exploration)
+                        seed=self._rng, exploration=self.exploration, policy=self.policy,
+                        backup=self.settings.backup)
         self._searches.append({"step": observation.step, "simulations": result.simulations,
                                "elapsed_s": result.elapsed, "stopped_by": result.stopped_by})
         return result
@@ -142,7 +189,7 @@ class HierarchicalPlanner:
     def reset(self, mission: MissionSpec, observation: Observation,
               rng: np.random.Generator) -> None:
         if self.time_limit is not None:
-            warm_up()
+            warm_up(self.policy)
         self._mission = mission
         self._rng = rng
         self._available = np.ones(mission.n_targets, dtype=bool)

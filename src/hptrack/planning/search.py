@@ -64,6 +64,7 @@ from hptrack.planning.mdp import mdp_apply, mdp_copy_state, mdp_expand, mdp_is_a
 from hptrack.planning.rollout import UniformRandom, choose_action
 from hptrack.planning.stream import seed_value, uniform
 from hptrack.planning.tree import (
+    BACKUPS,
     LEAF,
     TERMINAL,
     UNVISITED,
@@ -132,13 +133,16 @@ def _catch_up(tree, env, path_action, path_found, applied, depth, root, state, w
 
 @numba.njit
 def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
-                    exploration, n_simulations):
+                    exploration, backup_mode, n_simulations):
     """Run up to ``n_simulations`` simulations (Algorithm 1, ``Simulate`` from the root) and
     return how many ran: it stops early when the tree's arrays might not hold one more
     simulation's nodes (:func:`~hptrack.planning.tree.grow_tree` makes room).
 
     ``root`` is the root state (never modified), ``state`` scratch of the same shapes, ``work``
-    the MDP's scratch; ``max_depth`` bounds the number of sub-tasks of a history.
+    the MDP's scratch; ``max_depth`` bounds the number of sub-tasks of a history;
+    ``backup_mode`` indexes :data:`~hptrack.planning.tree.BACKUPS`. With the expected and max
+    backups, an action's second visit takes the outcome not yet visited (their values are
+    combined with the known ``p``, so both are needed, and the draw no longer weights them).
     """
     candidates = np.empty(n_actions, dtype=np.int64)
     path_state = np.empty(max_depth, dtype=np.int64)
@@ -188,6 +192,9 @@ def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, 
                 tree.a_miss[x] = payload1
             if s == 0 and fixed >= 0 and 0.0 < tree.a_p[x] < 1.0:
                 found = tree.counts[2] % 2 == 1  # re-planning: both outcomes need a plan
+            elif backup_mode > 0 and tree.a_visits[x] > 0 and 0.0 < tree.a_p[x] < 1.0 \
+                    and tree.a_out_visits[x, 0] * tree.a_out_visits[x, 1] == 0:
+                found = tree.a_out_visits[x, 0] == 0
             else:
                 found = uniform(tree.rng) < tree.a_p[x]
             path_state[depth] = s
@@ -201,13 +208,13 @@ def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, 
                 tree.counts[0] += 1
                 tree.a_child[x, outcome] = child
             s = child
-        backup(tree, path_state, path_action, depth, ret)
+        backup(tree, path_state, path_action, path_found, depth, ret, backup_mode)
     return n_simulations
 
 
 @numba.njit(cache=True)
 def run_subtask_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
-                            exploration, n_simulations):
+                            exploration, backup_mode, n_simulations):
     """:func:`run_simulations` on the paper's sub-task MDP, compiled once and cached on disk.
 
     The generic loop is not cached itself: its cache index would hold the signature of every
@@ -215,7 +222,7 @@ def run_subtask_simulations(tree, env, root, state, work, policy, n_actions, max
     them could not read it.
     """
     return run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
-                           exploration, n_simulations)
+                           exploration, backup_mode, n_simulations)
 
 
 @dataclass(frozen=True, eq=False)
@@ -307,7 +314,7 @@ def search_mdp(env: tuple, root: tuple, n_actions: int, max_depth: int, work: np
                iterations: int | None = None, time_limit: float | None = None,
                seed: int | np.random.Generator = 0, exploration: float = DEFAULT_EXPLORATION,
                policy: tuple = UniformRandom(), fixed: int = -1,
-               start: float | None = None) -> SearchResult:
+               start: float | None = None, backup: str = "sampled") -> SearchResult:
     """Search the registered MDP of ``env`` from ``root`` (a tuple of arrays, not modified).
 
     Args:
@@ -324,14 +331,16 @@ def search_mdp(env: tuple, root: tuple, n_actions: int, max_depth: int, work: np
         policy: the rollout policy (:mod:`hptrack.planning.rollout`).
         fixed: re-planning mode: the root's only action (``-1``: a first plan).
         start: a ``time.perf_counter()`` reading the time limit counts from (default now).
+        backup: one of :data:`~hptrack.planning.tree.BACKUPS` (default the paper's).
     """
+    mode = _backup_mode(backup)
     state = tuple(np.array(a, copy=True) for a in root)
     kernel = (run_subtask_simulations if isinstance(env, subtask_mdp.SubtaskEnv)
               else run_simulations)
 
     def simulate(tree: Tree, count: int) -> int:
         return kernel(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
-                      float(exploration), count)
+                      float(exploration), mode, count)
 
     return run_search(simulate, n_actions, iterations, time_limit, seed, fixed, start)
 
@@ -339,7 +348,7 @@ def search_mdp(env: tuple, root: tuple, n_actions: int, max_depth: int, work: np
 def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
            time_limit: float | None = None, seed: int | np.random.Generator = 0,
            exploration: float = DEFAULT_EXPLORATION,
-           policy: tuple = UniformRandom()) -> SearchResult:
+           policy: tuple = UniformRandom(), backup: str = "sampled") -> SearchResult:
     """Plan from ``problem``'s root state with Algorithm 1 (``TreeSearch``) on the sub-task MDP.
 
     Args:
@@ -353,6 +362,8 @@ def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
             The same seed and number of simulations give the same tree and plan.
         exploration: UCB1 constant ``c`` on values normalised to the observed return range.
         policy: the rollout policy (default the paper's uniformly random one).
+        backup: one of :data:`~hptrack.planning.tree.BACKUPS` (default the paper's running
+            mean of sampled returns).
 
     Raises:
         ValueError: no limit given, a limit not positive, or a current action that cannot be
@@ -367,7 +378,13 @@ def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
     if fixed >= 0 and not subtask_mdp.is_available(env, root, fixed):
         raise ValueError(f"current action {fixed} cannot be carried out in the remaining budget")
     return search_mdp(env, root, problem.n_targets, problem.n_steps + 2, subtask_mdp.new_work(),
-                      iterations, time_limit, seed, exploration, policy, fixed, start)
+                      iterations, time_limit, seed, exploration, policy, fixed, start, backup)
+
+
+def _backup_mode(backup: str) -> int:
+    if backup not in BACKUPS:
+        raise ValueError(f"backup must be one of {BACKUPS}, got {backup!r}")
+    return BACKUPS.index(backup)
 
 
 def _result(tree: Tree, fixed: int, stopped_by: str, elapsed: float) -> SearchResult:

@@ -7,8 +7,18 @@ payload per outcome that the MDP needs to replay the transition, e.g. a duration
 ``V(N^a)`` and its two children (outcome 0, outcome 1). States themselves are not stored: the
 search rebuilds them from the root by replaying the stored transitions.
 
-:func:`select` is UCB1 (paper Algorithm 1, line 23) and :func:`backup` the running-mean backup
-(lines 31-33); both are the tree's, whatever the MDP.
+:func:`select` is UCB1 (paper Algorithm 1, line 23) and :func:`backup` the backup; both are the
+tree's, whatever the MDP. Three backups (``BACKUPS``):
+
+* ``"sampled"``, the paper's (lines 31-33): ``V(N^a)`` is the running mean of the returns of the
+  simulations through the action, whose outcomes were drawn from ``p``;
+* ``"expected"``: each action node keeps a running mean per outcome and
+  ``V(N^a) = p V_find + (1 - p) V_miss`` with the known ``p``, so the outcome draws add no noise;
+* ``"max"``: the expected combination of the outcomes' *values*, where a state's value is that
+  of its best action (a Bellman backup; a state visited once is worth its rollout's return).
+  Mean backups average the returns of every action tried below, which the random rollouts drag
+  down; an action whose value is exact from the start (following a target to the end of the
+  budget) then looks better than it is at small effort. The max backup removes that bias.
 """
 
 from __future__ import annotations
@@ -46,6 +56,8 @@ class Tree(NamedTuple):
     a_visits: np.ndarray
     a_value: np.ndarray
     a_child: np.ndarray
+    a_out_visits: np.ndarray
+    a_out_value: np.ndarray
     counts: np.ndarray
     value_range: np.ndarray
     rng: np.ndarray
@@ -55,14 +67,20 @@ _FILL = {
     "s_first": (UNVISITED, np.int32), "s_count": (0, np.int8), "s_visits": (0, np.int32),
     "s_value": (np.nan, np.float64), "a_target": (0, np.int8), "a_p": (-1.0, np.float64),
     "a_find": (0, np.int32), "a_miss": (0, np.int32), "a_visits": (0, np.int32),
-    "a_value": (0.0, np.float64), "a_child": (-1, np.int32),
+    "a_value": (0.0, np.float64), "a_child": (-1, np.int32), "a_out_visits": (0, np.int32),
+    "a_out_value": (0.0, np.float64),
 }
-"""Initial value and dtype of each node array of :class:`Tree`."""
+"""Initial value and dtype of each node array of :class:`Tree` (``a_child``, ``a_out_*``: one
+column per outcome)."""
+
+BACKUPS = ("sampled", "expected", "max")
+"""The backups of :func:`backup`, by code (index)."""
+PAIRED = ("a_child", "a_out_visits", "a_out_value")
 
 
 def new_tree(seed: int, capacity: int = 1024) -> Tree:
     """An empty tree holding only the root (state node 0), with the random stream seeded."""
-    arrays = {name: np.full((capacity, 2) if name == "a_child" else capacity, fill, dtype=dtype)
+    arrays = {name: np.full((capacity, 2) if name in PAIRED else capacity, fill, dtype=dtype)
               for name, (fill, dtype) in _FILL.items()}
     return Tree(**arrays, counts=np.array([1, 0, 0], dtype=np.int64),
                 value_range=np.array([np.inf, -np.inf]), rng=np.array([seed], dtype=np.uint64))
@@ -110,14 +128,51 @@ def select(tree, s, exploration):
 
 
 @numba.njit(cache=True)
-def backup(tree, path_state, path_action, depth, ret):
-    """Running-mean backup of the return ``ret`` along the path (Algorithm 1 lines 31-33):
-    ``N(N^s) += 1``, ``N(N^a) += 1``, ``V(N^a) += (ret - V(N^a)) / N(N^a)``."""
-    for d in range(depth):
+def _outcome_mean(tree, x):
+    """``p V_find + (1 - p) V_miss`` of action node ``x`` (the visited outcome's value while
+    only one has been visited)."""
+    n_find, n_miss = tree.a_out_visits[x, 0], tree.a_out_visits[x, 1]
+    if n_miss == 0:
+        return tree.a_out_value[x, 0]
+    if n_find == 0:
+        return tree.a_out_value[x, 1]
+    p = tree.a_p[x]
+    return p * tree.a_out_value[x, 0] + (1.0 - p) * tree.a_out_value[x, 1]
+
+
+@numba.njit(cache=True)
+def _best_value(tree, s):
+    """The largest ``V(N^a)`` over the visited actions of state node ``s``."""
+    best = -np.inf
+    for x in range(tree.s_first[s], tree.s_first[s] + tree.s_count[s]):
+        if tree.a_visits[x] > 0 and tree.a_value[x] > best:
+            best = tree.a_value[x]
+    return best
+
+
+@numba.njit(cache=True)
+def backup(tree, path_state, path_action, path_found, depth, ret, mode):
+    """Back the return ``ret`` of a simulation up its path (Algorithm 1 lines 31-33), with the
+    backup ``BACKUPS[mode]`` (module docstring). Every mode counts ``N(N^s) += 1`` and
+    ``N(N^a) += 1``; ``"sampled"`` sets ``V(N^a) += (ret - V(N^a)) / N(N^a)``."""
+    value = ret
+    for d in range(depth - 1, -1, -1):
         x = path_action[d]
         tree.s_visits[path_state[d]] += 1
         tree.a_visits[x] += 1
-        tree.a_value[x] += (ret - tree.a_value[x]) / tree.a_visits[x]
+        if mode == 0:
+            tree.a_value[x] += (ret - tree.a_value[x]) / tree.a_visits[x]
+            continue
+        o = 0 if path_found[d] else 1
+        tree.a_out_visits[x, o] += 1
+        if mode == 1:
+            tree.a_out_value[x, o] += (ret - tree.a_out_value[x, o]) / tree.a_out_visits[x, o]
+        else:
+            tree.a_out_value[x, o] = value
+        tree.a_value[x] = _outcome_mean(tree, x)
+        if mode == 2:
+            value = _best_value(tree, path_state[d])
+            tree.s_value[path_state[d]] = value
     tree.value_range[0] = min(tree.value_range[0], ret)
     tree.value_range[1] = max(tree.value_range[1], ret)
     tree.counts[2] += 1

@@ -1,0 +1,68 @@
+"""An informed rollout policy for the sub-task MDP (an alternative to the paper's random one).
+
+:class:`MostUncertain` pursues, with probability ``1 - epsilon``, the available target whose
+position uncertainty ``log det Sigma^xy`` is largest when the agent would reach its belief mean
+(the rule of the ``greedy`` baseline, :mod:`hptrack.baselines.greedy`, applied inside the MDP), and
+otherwise an available action drawn uniformly. It follows the target just found only when no
+other action is available, so a rollout does not end its history early by chance. Informed
+rollouts can also mislead the search (their errors are systematic); the benchmark in
+``docs/planner-improvements.md`` measures it against the random policy.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from hptrack.models.beliefs import logdet_xy
+from hptrack.models.motion import position_covariance_after
+from hptrack.planning.rollout import register_policy
+from hptrack.planning.stream import uniform
+from hptrack.planning.subtask_mdp import I_LAST, I_STEP, intercept_of, is_available
+
+
+class MostUncertain(NamedTuple):
+    """Most-uncertain-on-arrival rollouts (module docstring).
+
+    Attributes:
+        epsilon: probability of a uniformly random available action instead, in ``[0, 1]``.
+    """
+
+    epsilon: float = 0.1
+
+
+@numba.njit(cache=True)
+def most_uncertain(policy, env, state, rng, candidates):
+    """:class:`MostUncertain`'s decision (``-1`` when no action is available)."""
+    count = 0
+    for a in range(candidates.shape[0]):
+        if is_available(env, state, a):
+            candidates[count] = a
+            count += 1
+    if count == 0:
+        return -1
+    if uniform(rng) < policy.epsilon:
+        return candidates[int(uniform(rng) * count)]
+    model = env.model
+    si, sf, base_cov, base_step = state
+    t = si[I_STEP]
+    best = -1
+    best_score = -np.inf
+    for k in range(count):
+        a = candidates[k]
+        if a == si[I_LAST]:
+            continue
+        arrival = t + intercept_of(model, sf, a, t)
+        sxx, sxy, syy = position_covariance_after(base_cov[a], model.process_noise[a],
+                                                  float(arrival - base_step[a]),
+                                                  model.time_step, model.c_per_step)
+        score = logdet_xy(sxx, sxy, syy)
+        if score > best_score:
+            best_score = score
+            best = a
+    return candidates[0] if best < 0 else best
+
+
+register_policy(MostUncertain, most_uncertain)
