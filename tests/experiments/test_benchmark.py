@@ -84,6 +84,22 @@ def test_scenarios_follow_seeds_and_setting():
     assert scenario_for(key) == random_scenario(key.n_targets, key.seed, homogeneous=True)
 
 
+def test_the_printed_q_form_is_part_of_the_setting_and_of_the_scenario(tmp_path):
+    printed = config(process_noise_form="paper_text")
+    key, base = printed.keys()[0], CONFIG.keys()[0]
+    assert (key.setting, base.setting) == ("homogeneous+paper_text", "homogeneous")
+    assert scenario_for(key) == random_scenario(key.n_targets, key.seed, homogeneous=True,
+                                                process_noise_form="paper_text")
+    store = ResultStore(tmp_path / "r.db")
+    run_benchmark(config(target_counts=(2,), scenarios=1), store)
+    run_benchmark(config(target_counts=(2,), scenarios=1, process_noise_form="paper_text"),
+                  store)
+    rows = {r.key.setting: r.uncertainty for r in store.rows() if r.key.planner == "greedy"}
+    store.close()
+    assert set(rows) == {"homogeneous", "homogeneous+paper_text"}
+    assert rows["homogeneous"] != rows["homogeneous+paper_text"]
+
+
 def test_a_different_option_never_reuses_another_settings_rows(tmp_path):
     store = ResultStore(tmp_path / "b.db")
     small = config(("astar",), {"astar": {"horizon": 2}}, target_counts=(2,), scenarios=1)

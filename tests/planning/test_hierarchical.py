@@ -105,3 +105,43 @@ def test_simulate_command_with_mcts(tmp_path):
                                       str(tmp_path / "m.json")])
     assert result.exit_code == 0, result.output
     assert "mcts mission" in result.output
+
+
+def test_presets_resolve_to_their_options_and_the_paper_keeps_its_identity():
+    paper = MctsSettings.from_options("mcts", {"preset": "paper"})
+    assert (paper.backup, paper.rollout) == ("sampled", "uniform")
+    assert paper.canonical() == '{"exploration":0.5,"iterations":100000,"time_limit":null}'
+    improved = MctsSettings.from_options("mcts", {"preset": "improved"})
+    assert {"backup": improved.backup, "rollout": improved.rollout} == \
+        hierarchical.PRESETS["improved"]
+    # an option given explicitly wins over the preset; the identity names the resolved options
+    mixed = MctsSettings.from_options("mcts", {"preset": "improved", "backup": "expected"})
+    assert mixed.backup == "expected"
+    assert '"backup":"expected"' in mixed.canonical()
+    same = MctsSettings.from_options("mcts", {"preset": "improved", "backup": "sampled",
+                                              "rollout": "uniform"})
+    assert same.canonical() == paper.canonical()  # the same search, the same results
+    assert "rollout_epsilon" not in MctsSettings(backup="max").canonical()
+    assert MctsSettings(rollout="most_uncertain", rollout_epsilon=0.2).canonical() != \
+        MctsSettings(rollout="most_uncertain").canonical()
+    with pytest.raises(InputError, match="option preset must be 'paper' or 'improved'"):
+        MctsSettings.from_options("mcts", {"preset": "fast"})
+
+
+def test_paper_search_follows_the_first_find_at_low_effort_and_the_max_backup_does_not():
+    """The premature follow (issue 11): with the paper's mean backup and 2,000 simulations, the
+    planner often follows the first target it finds for the rest of the mission; the mean of
+    random rollouts makes every other continuation look worse than the exactly known follow.
+    The max backup values each continuation by its best plan and keeps switching."""
+    def early_follows(options):
+        count = 0
+        for seed in range(10):
+            scenario = random_scenario(6, seed=seed, homogeneous=True)
+            record = run_episode(scenario, mcts(iterations=2000, **options),
+                                 belief_stride=scenario.n_steps)
+            follows = [e for e in record.info["subtasks"] if "follow" in e]
+            count += bool(follows and follows[0]["start_step"] < 0.6 * scenario.n_steps)
+        return count
+
+    assert early_follows({"preset": "paper"}) >= 3
+    assert early_follows({"preset": "paper", "backup": "max"}) == 0

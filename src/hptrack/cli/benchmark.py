@@ -21,6 +21,7 @@ from hptrack.cli.common import (
     write_json,
 )
 from hptrack.interface import InputError
+from hptrack.models.motion import ProcessNoiseForm
 
 
 def _int_list(text: str, option: str) -> tuple[int, ...]:
@@ -43,6 +44,9 @@ def benchmark(
     homogeneous: Annotated[bool, typer.Option("--homogeneous/--heterogeneous",
                                               help=SETTING_HELP)] = False,
     first_seed: Annotated[int, typer.Option(help="First scenario seed.")] = 0,
+    process_noise_form: Annotated[ProcessNoiseForm, typer.Option(
+        help="Per-step Q: 'continuous' (velocity block q tau I, the default) or 'paper_text' "
+             "(q I, as printed in the paper).")] = "continuous",
     iterations: Annotated[int | None, typer.Option(help="Tree-search iterations per decision.")
                           ] = None,
     time_limit: Annotated[float | None, typer.Option(help="Planning seconds per decision.")
@@ -103,7 +107,8 @@ def benchmark(
     check_output_dir(out, "--out")
     check_output_path(json_path, "--json")
     config = BenchmarkConfig(planners=names, settings=settings, target_counts=counts,
-                             scenarios=scenarios, homogeneous=homogeneous, first_seed=first_seed)
+                             scenarios=scenarios, homogeneous=homogeneous, first_seed=first_seed,
+                             process_noise_form=process_noise_form)
     with ExitStack() as stack:
         store = ResultStore(db)
         stack.callback(store.close)

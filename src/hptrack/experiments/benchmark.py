@@ -38,6 +38,7 @@ class BenchmarkConfig:
         scenarios: scenarios per ``n`` (seeds ``first_seed .. first_seed + scenarios - 1``).
         homogeneous: the paper's setting for ARVI and A* (shared ``q`` and prior).
         first_seed: first scenario seed.
+        process_noise_form: the scenarios' per-step ``Q`` (:mod:`hptrack.models.motion`).
     """
 
     planners: tuple[str, ...]
@@ -46,6 +47,7 @@ class BenchmarkConfig:
     scenarios: int = 100
     homogeneous: bool = True
     first_seed: int = 0
+    process_noise_form: str = "continuous"
 
     def __post_init__(self) -> None:
         missing = [p for p in self.planners if p not in self.settings]
@@ -54,7 +56,7 @@ class BenchmarkConfig:
 
     @property
     def setting(self) -> str:
-        return "homogeneous" if self.homogeneous else "heterogeneous"
+        return setting_name(self.homogeneous, self.process_noise_form)
 
     def keys(self) -> list[EpisodeKey]:
         """Every episode of the benchmark, in run order."""
@@ -63,10 +65,18 @@ class BenchmarkConfig:
                 for n in self.target_counts for s in seeds for p in self.planners]
 
 
+def setting_name(homogeneous: bool, process_noise_form: str = "continuous") -> str:
+    """The setting part of an episode's identity: ``"homogeneous"`` or ``"heterogeneous"``,
+    with ``"+paper_text"`` when ``Q`` is the paper's printed form."""
+    base = "homogeneous" if homogeneous else "heterogeneous"
+    return base if process_noise_form == "continuous" else f"{base}+{process_noise_form}"
+
+
 def scenario_for(key: EpisodeKey) -> Scenario:
     """The random scenario of a benchmark episode."""
-    return random_scenario(key.n_targets, seed=key.seed,
-                           homogeneous=key.setting == "homogeneous")
+    base, _, form = key.setting.partition("+")
+    return random_scenario(key.n_targets, seed=key.seed, homogeneous=base == "homogeneous",
+                           process_noise_form=form or "continuous")
 
 
 def planner_for(key: EpisodeKey):
@@ -102,9 +112,16 @@ def run_benchmark(config: BenchmarkConfig, store: ResultStore, workers: int = 1,
     Returns:
         The number of episodes run now.
     """
+    return run_keys(config.keys(), store, workers, on_done, executor)
+
+
+def run_keys(keys: Iterable[EpisodeKey], store: ResultStore, workers: int = 1,
+             on_done: Callable[[EpisodeRow, int, int], None] | None = None,
+             executor: Executor | None = None) -> int:
+    """:func:`run_benchmark` on any list of episodes (in this order)."""
     store.release_stale_claims()
     done = store.done()
-    todo = [k for k in config.keys() if k not in done]
+    todo = [k for k in keys if k not in done]
     total = len(todo)
     finished = 0
 

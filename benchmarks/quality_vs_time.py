@@ -1,0 +1,219 @@
+"""Quality against planning time: the tree search's variants side by side on the same scenarios.
+
+Every variant of ``mcts`` (the paper's search and the improvements, :data:`VARIANTS`) flies the
+same homogeneous random scenarios with a wall-clock limit per decision (``--levels``, s), and
+``greedy`` flies them once as the reference without look-ahead. Episodes are interleaved (for each
+scenario every variant and level in turn), so a change of machine load hits all of them alike;
+they are stored as they finish in a resumable database (``--db``), and a re-run with other
+``--targets`` or ``--scenarios`` adds to it. ``--report`` writes, from everything in the database,
+the mean ``U`` per variant, level and ``n`` with its standard error, paired differences
+(same scenarios) with their standard errors, and a figure of ``U`` against time per ``n``.
+
+    python3 benchmarks/quality_vs_time.py --targets 2,3,4,5,6 --scenarios 100 --workers 2
+    python3 benchmarks/quality_vs_time.py --targets 8,10,12 --scenarios 30 --workers 2
+    python3 benchmarks/quality_vs_time.py --report --out docs/results/quality-vs-time
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+VARIANTS = {
+    "paper": {"preset": "paper"},
+    "improved": {"preset": "improved"},
+    "max": {"backup": "max"},
+    "expected": {"backup": "expected"},
+    "most_uncertain": {"rollout": "most_uncertain"},
+}
+"""``mcts`` options of each variant (the single-option rows are the ablation)."""
+
+SETTING = "homogeneous"
+
+
+def settings(variant: str, level: float) -> str:
+    from hptrack.planning.hierarchical import MctsSettings
+
+    return MctsSettings.from_options("mcts", {**VARIANTS[variant], "time_limit": level}
+                                     ).canonical()
+
+
+def keys(targets, scenarios, first_seed, levels, variants, greedy):
+    from hptrack.experiments.store import EpisodeKey
+    from hptrack.settings import NoSettings
+
+    out = []
+    for n in targets:
+        for seed in range(first_seed, first_seed + scenarios):
+            for level in levels:
+                out += [EpisodeKey("mcts", n, seed, SETTING, settings(v, level))
+                        for v in variants]
+            if greedy:
+                out.append(EpisodeKey("greedy", n, seed, SETTING, NoSettings().canonical()))
+    return out
+
+
+def label(key, levels, variants) -> tuple[str, float] | None:
+    """``(variant, level)`` of a stored episode (``("greedy", 0)``), ``None`` if not ours."""
+    if key.planner == "greedy":
+        return ("greedy", 0.0)
+    for level in levels:
+        for v in variants:
+            if key.settings == settings(v, level):
+                return (v, level)
+    return None
+
+
+def mean_se(values) -> tuple[float, float]:
+    a = np.asarray(values, dtype=float)
+    return float(a.mean()), float(a.std(ddof=1) / math.sqrt(a.size)) if a.size > 1 else math.nan
+
+
+def report(db: Path, out: Path, levels, variants) -> None:
+    from matplotlib.figure import Figure
+
+    from hptrack.experiments.report import write_csv
+    from hptrack.experiments.store import ResultStore
+
+    store = ResultStore(db)
+    rows = store.rows()
+    store.close()
+    by = defaultdict(dict)  # (variant, level, n) -> {seed: U}
+    mine = []
+    for r in rows:
+        tag = label(r.key, levels, variants) if r.key.setting == SETTING else None
+        if tag is not None:
+            by[(*tag, r.key.n_targets)][r.key.seed] = r.uncertainty
+            mine.append(r)
+    ns = sorted({n for (_, _, n) in by})
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(mine, out / "episodes.csv")
+    lines = ["Mean U +- standard error (episodes), homogeneous scenarios; time limit per "
+             "decision in s.", "", "| variant | time, s | " + " | ".join(f"n={n}" for n in ns)
+             + " |", "|---|---|" + "---|" * len(ns)]
+    cells = sorted({(v, lv) for (v, lv, _) in by},
+                   key=lambda c: (c[0] != "greedy", list(VARIANTS).index(c[0])
+                                  if c[0] in VARIANTS else -1, c[1]))
+    for v, lv in cells:
+        row = []
+        for n in ns:
+            seeds = by.get((v, lv, n), {})
+            if seeds:
+                m, se = mean_se(list(seeds.values()))
+                row.append(f"{m:.2f} +- {se:.2f} ({len(seeds)})")
+            else:
+                row.append("")
+        lines.append(f"| {v} | {lv:g} | " + " | ".join(row) + " |" if v != "greedy" else
+                     "| greedy | - | " + " | ".join(row) + " |")
+
+    def paired(a, b, relative=False):
+        """Mean of ``U_a - U_b`` over the shared scenarios (percent of mean ``U_b``)."""
+        out_cells = []
+        for n in ns:
+            sa, sb = by.get((*a, n), {}), by.get((*b, n), {})
+            shared = sorted(set(sa) & set(sb))
+            if len(shared) < 2:
+                out_cells.append("")
+                continue
+            d = np.array([sa[s] - sb[s] for s in shared])
+            scale = 100.0 / np.mean([sb[s] for s in shared]) if relative else 1.0
+            m, se = mean_se(d * scale)
+            out_cells.append(f"{m:+.2f} +- {se:.2f} ({len(shared)})")
+        return out_cells
+
+    comparisons = []
+    top = max(levels)
+    for v in variants:
+        if v == "paper":
+            continue
+        comparisons.append((f"{v} @ {min(levels):g} s - paper @ {top:g} s", (v, min(levels)),
+                            ("paper", top), False))
+        for lv in levels:
+            comparisons.append((f"{v} @ {lv:g} s - paper @ {lv:g} s, % of paper", (v, lv),
+                                ("paper", lv), True))
+    for v in variants:
+        comparisons.append((f"{v} @ {top:g} s - greedy, % of greedy", (v, top),
+                            ("greedy", 0.0), True))
+    lines += ["", "Paired differences of U on the same scenarios, mean +- standard error "
+              "(scenarios); negative: the first is better.", "",
+              "| comparison | " + " | ".join(f"n={n}" for n in ns) + " |",
+              "|---|" + "---|" * len(ns)]
+    for name, a, b, rel in comparisons:
+        cells_ = paired(a, b, rel)
+        if any(cells_):
+            lines.append(f"| {name} | " + " | ".join(cells_) + " |")
+    text = "\n".join(lines) + "\n"
+    (out / "table.md").write_text(text)
+    print(text)
+    cols = min(4, len(ns))
+    fig = Figure(figsize=(3.6 * cols, 3.2 * math.ceil(len(ns) / cols)))
+    for i, n in enumerate(ns):
+        ax = fig.add_subplot(math.ceil(len(ns) / cols), cols, i + 1)
+        for v in variants:
+            pts = [(lv, *mean_se(list(by[(v, lv, n)].values()))) for lv in levels
+                   if by.get((v, lv, n))]
+            if pts:
+                x, m, se = map(np.array, zip(*pts, strict=True))
+                ax.errorbar(x, m, yerr=se, marker="o", capsize=3, label=v)
+        if by.get(("greedy", 0.0, n)):
+            ax.axhline(mean_se(list(by[("greedy", 0.0, n)].values()))[0], color="grey",
+                       ls="--", label="greedy")
+        ax.set_xscale("log")
+        ax.set_title(f"n = {n}")
+        ax.set_xlabel("planning time per decision, s")
+        ax.set_ylabel("mean U")
+        if i == 0:
+            ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "quality_vs_time.png", dpi=120)
+    print(f"written to {out}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--targets", default="2,3,4,5,6")
+    parser.add_argument("--scenarios", type=int, default=100)
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--levels", default="0.05,0.2,1", help="seconds per decision")
+    parser.add_argument("--variants", default="paper,improved")
+    parser.add_argument("--no-greedy", action="store_true")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--db", type=Path, default=Path("results/quality_vs_time.db"))
+    parser.add_argument("--report", action="store_true", help="only write the report")
+    parser.add_argument("--out", type=Path, default=Path("results/quality-vs-time"))
+    args = parser.parse_args()
+    levels = [float(x) for x in args.levels.split(",")]
+    variants = args.variants.split(",")
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        parser.error(f"--variants: unknown {unknown} (known: {', '.join(VARIANTS)})")
+    if args.report:
+        report(args.db, args.out, levels, variants)
+        return
+    from hptrack.experiments.benchmark import run_keys
+    from hptrack.experiments.store import ResultStore
+
+    args.db.parent.mkdir(parents=True, exist_ok=True)
+    store = ResultStore(args.db)
+    todo = keys([int(n) for n in args.targets.split(",")], args.scenarios, args.first_seed,
+                levels, variants, not args.no_greedy)
+
+    def on_done(row, finished, total):
+        s = json.loads(row.key.settings)
+        print(f"[{finished}/{total}] {row.key.planner} n={row.key.n_targets} "
+              f"seed={row.key.seed} {s.get('time_limit', '')} {s.get('backup', '')} "
+              f"U={row.uncertainty:.2f} wall={row.wall_time_s:.1f}s", flush=True)
+
+    try:
+        run_keys(todo, store, workers=args.workers, on_done=on_done)
+    finally:
+        store.close()
+
+
+if __name__ == "__main__":
+    main()

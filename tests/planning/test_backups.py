@@ -1,0 +1,97 @@
+"""The search's improvements on problems with exact answers: the expected and max backups
+(:mod:`hptrack.planning.tree`) and the most-uncertain rollout policy
+(:mod:`hptrack.planning.subtask_rollout`)."""
+
+import numpy as np
+import pytest
+from test_mcts import expectimax, six_targets, two_targets
+from test_search_toys import GAMBLE, Bandit, gamble_q_exact
+
+from hptrack.models.beliefs import logdet_xy
+from hptrack.models.motion import position_covariance_after
+from hptrack.planning import search, search_mdp
+from hptrack.planning.subtask_mdp import SubtaskEnv, intercept_of, is_available, new_memo
+from hptrack.planning.subtask_rollout import MostUncertain, most_uncertain
+
+
+@pytest.mark.parametrize("p", [0.3, 0.5, 0.9])
+def test_expected_backup_weights_the_outcomes_by_their_known_probability(p):
+    """One action, win 1 or lose 0: the sampled backup gives the fraction of wins drawn, the
+    expected backup gives exactly ``p`` as soon as both outcomes were visited (the second visit
+    takes the outcome not yet seen)."""
+    env = Bandit(np.array([p]), np.array([1.0]), np.array([0.0]))
+    root = (np.array([-1, 0], dtype=np.int64),)
+    for sims in (3, 4, 50):
+        result = search_mdp(env, root, 1, 2, np.zeros(1), iterations=sims, seed=2,
+                            backup="expected")
+        assert result.root.values[0] == pytest.approx(p, abs=1e-15)
+    sampled = search_mdp(env, root, 1, 2, np.zeros(1), iterations=50, seed=2)
+    assert sampled.root.values[0] != pytest.approx(p, abs=1e-3)
+
+
+def test_max_backup_gives_the_exact_expectimax_values_of_the_gamble():
+    """Deterministic rewards per outcome: once the tree is open to the end, the max backup's
+    root values are the expectimax Q-values exactly, while the mean backups stay below them
+    (they average in the worse actions tried below)."""
+    exact = [gamble_q_exact(0, 0, a) for a in range(3)]
+    root = (np.zeros(2, dtype=np.int64),)
+    found = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5, backup="max")
+    np.testing.assert_allclose(found.root.values, exact, rtol=1e-12)
+    for backup in ("sampled", "expected"):
+        mean = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5,
+                          backup=backup)
+        assert np.all(mean.root.values < np.array(exact) - 0.05)
+
+
+def test_max_backup_matches_expectimax_on_the_subtask_mdp():
+    exact = expectimax(two_targets())
+    result = search(two_targets(), iterations=30000, seed=0, backup="max")
+    np.testing.assert_allclose(result.root.values, [exact[0], exact[1]], rtol=1e-9)
+    after = search(two_targets(current_action=0), iterations=30000, seed=1, backup="max")
+    exact_after = expectimax(two_targets(), first=(0, True))
+    np.testing.assert_allclose(after.after_find.values,
+                               [exact_after[a] for a in after.after_find.actions], rtol=1e-9)
+
+
+def test_unknown_backup_is_refused():
+    with pytest.raises(ValueError, match="backup must be one of"):
+        search(two_targets(), iterations=10, backup="median")
+
+
+def test_most_uncertain_rollout_picks_the_largest_uncertainty_on_arrival():
+    """epsilon = 0: the available target whose position log det is largest when the agent
+    reaches its mean (computed here in numpy), never the target just found while another is
+    available; epsilon = 1: uniform over the available actions."""
+    problem = six_targets(3)
+    env = SubtaskEnv(problem.model(), new_memo(6, problem.n_steps))
+    model = env.model
+    candidates = np.empty(6, dtype=np.int64)
+    rng = np.array([7], dtype=np.uint64)
+    for step, last in ((0, -1), (300, 2), (900, 4)):
+        state = problem.root_state()
+        state[0][0], state[0][2] = step, last
+        available = [a for a in range(6) if is_available(env, state, a)]
+        scores = {}
+        for a in available:
+            if a == last:
+                continue
+            arrival = step + intercept_of(model, state[1], a, step)
+            scores[a] = logdet_xy(*position_covariance_after(
+                problem.covariances[a], problem.process_noise[a], float(arrival), 0.5, 0.5))
+        assert len(scores) >= 3
+        assert most_uncertain(MostUncertain(0.0), env, state, rng, candidates) == \
+            max(scores, key=scores.get)
+        draws = {most_uncertain(MostUncertain(1.0), env, state, rng, candidates)
+                 for _ in range(300)}
+        assert draws == set(available)
+
+
+def test_most_uncertain_rollout_follows_only_when_nothing_else_is_left():
+    problem = two_targets()
+    env = SubtaskEnv(problem.model(), new_memo(2, problem.n_steps))
+    state = problem.root_state()
+    state[0][1] = 0b01  # target 1 missed: only target 0, just found, is left
+    state[0][2] = 0
+    out = most_uncertain(MostUncertain(0.0), env, state, np.array([1], dtype=np.uint64),
+                         np.empty(2, dtype=np.int64))
+    assert out == 0
