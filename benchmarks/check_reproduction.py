@@ -26,7 +26,9 @@ def run(planner: str, n: int, seed: int) -> tuple[float, int]:
     from hptrack.experiments.store import EpisodeKey
     from hptrack.registry import planner_settings
 
-    key = EpisodeKey(planner, n, seed, "homogeneous", planner_settings(planner).canonical())
+    options = {"preset": "paper"} if planner == "mcts" else None  # the published search
+    key = EpisodeKey(planner, n, seed, "homogeneous",
+                     planner_settings(planner, options).canonical())
     row = run_one(key)
     return row.uncertainty, row.detections
 

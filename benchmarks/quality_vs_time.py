@@ -47,9 +47,9 @@ def keys(targets, scenarios, first_seed, levels, variants, greedy):
     from hptrack.experiments.store import EpisodeKey
     from hptrack.settings import NoSettings
 
-    out = []
-    for n in targets:
-        for seed in range(first_seed, first_seed + scenarios):
+    out = []  # seeds outermost: a run stopped early leaves every n and level alike
+    for seed in range(first_seed, first_seed + scenarios):
+        for n in targets:
             for level in levels:
                 out += [EpisodeKey("mcts", n, seed, SETTING, settings(v, level))
                         for v in variants]
@@ -181,6 +181,9 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--levels", default="0.05,0.2,1", help="seconds per decision")
     parser.add_argument("--variants", default="paper,improved")
+    parser.add_argument("--define", action="append", default=[], metavar="NAME=JSON",
+                        help='another variant, e.g. max_c1=\'{"backup": "max", '
+                             '"exploration": 1.0}\'')
     parser.add_argument("--no-greedy", action="store_true")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--db", type=Path, default=Path("results/quality_vs_time.db"))
@@ -188,6 +191,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/quality-vs-time"))
     args = parser.parse_args()
     levels = [float(x) for x in args.levels.split(",")]
+    for text in args.define:
+        name, _, options = text.partition("=")
+        VARIANTS[name] = json.loads(options)
     variants = args.variants.split(",")
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:

@@ -116,6 +116,11 @@ class PlannerSettings(BaseModel):
         """Every field, in strict JSON types."""
         return {k: _json_value(v) for k, v in self.model_dump().items()}
 
+    @classmethod
+    def from_canonical(cls, text: str) -> Self:
+        """The settings a :meth:`canonical` text stands for (a stored result's identity)."""
+        return cls.model_validate(json.loads(text))
+
     def canonical(self) -> str:
         """Canonical JSON of every field (sorted keys, no spaces): part of a result's identity."""
         return json.dumps(self.as_json(), sort_keys=True, separators=(",", ":"))

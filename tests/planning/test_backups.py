@@ -95,3 +95,30 @@ def test_most_uncertain_rollout_follows_only_when_nothing_else_is_left():
     out = most_uncertain(MostUncertain(0.0), env, state, np.array([1], dtype=np.uint64),
                          np.empty(2, dtype=np.int64))
     assert out == 0
+
+
+def test_root_parallel_trees_merge_their_statistics():
+    """Two trees of 1,500 simulations: visits add up action by action, values are the
+    visit-weighted means of the trees' values, and the run is reproducible from its seed."""
+    from hptrack.planning.search import seed_value
+    from hptrack.planning.tree import merge_stats
+
+    merged = search(six_targets(), iterations=1500, seed=4, threads=2)
+    again = search(six_targets(), iterations=1500, seed=4, threads=2)
+    np.testing.assert_array_equal(merged.root.visits, again.root.visits)
+    assert merged.simulations == 3000
+    seeds = np.random.SeedSequence(seed_value(4)).generate_state(2, np.uint64)
+    trees = [search(six_targets(), iterations=1500, seed=int(s)) for s in seeds]
+    visits = {a: 0 for a in merged.root.actions}
+    weighted = {a: 0.0 for a in merged.root.actions}
+    for t in trees:
+        for a, n, v in zip(t.root.actions, t.root.visits, t.root.values, strict=True):
+            visits[a] += n
+            weighted[a] += n * v
+    assert merged.root.visits.tolist() == [visits[a] for a in merged.root.actions]
+    np.testing.assert_allclose(merged.root.values,
+                               [weighted[a] / visits[a] for a in merged.root.actions])
+    assert merged.best_action == merged.root.best
+    assert merge_stats([None, None]) is None
+    plan = search(six_targets(current_action=2), iterations=1000, seed=1, threads=2)
+    assert plan.best_action == 2 and plan.after_find.visits.sum() > 0

@@ -145,3 +145,16 @@ def test_paper_search_follows_the_first_find_at_low_effort_and_the_max_backup_do
 
     assert early_follows({"preset": "paper"}) >= 3
     assert early_follows({"preset": "paper", "backup": "max"}) == 0
+
+
+def test_a_stored_identity_means_the_same_search_whatever_the_default_preset(monkeypatch):
+    """Options left out of a canonical text have the paper's value, so a result stored for the
+    paper's search is rebuilt as the paper's search even if the default preset changes."""
+    paper = MctsSettings.from_options("mcts", {"preset": "paper", "iterations": 300})
+    improved = MctsSettings.from_options("mcts", {"preset": "improved", "iterations": 300})
+    for default in ("paper", "improved"):
+        monkeypatch.setattr(hierarchical, "DEFAULT_PRESET", default)
+        for settings in (paper, improved):
+            again = MctsSettings.from_canonical(settings.canonical())
+            assert (again.backup, again.rollout, again.canonical()) == \
+                (settings.backup, settings.rollout, settings.canonical())

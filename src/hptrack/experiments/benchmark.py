@@ -11,7 +11,6 @@ and the budget.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Iterable
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
@@ -20,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
-from hptrack.registry import make_planner
+from hptrack.registry import planner_entry
 from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
 from hptrack.settings import PlannerSettings
@@ -81,7 +80,8 @@ def scenario_for(key: EpisodeKey) -> Scenario:
 
 def planner_for(key: EpisodeKey):
     """A fresh planner of a benchmark episode, from the settings stored in its key."""
-    return make_planner(key.planner, json.loads(key.settings))
+    entry = planner_entry(key.planner)
+    return entry.factory(entry.settings_type.from_canonical(key.settings))
 
 
 def run_one(key: EpisodeKey) -> EpisodeRow:

@@ -4,17 +4,16 @@ reduction of each planner against each other, a box plot per ``n`` and a traject
 from __future__ import annotations
 
 import csv
-import json
 from pathlib import Path
 
 from hptrack.experiments.benchmark import reductions, summarise
 from hptrack.experiments.store import EpisodeKey, EpisodeRow
-from hptrack.registry import planner_settings
+from hptrack.registry import planner_entry
 
 
 def effort_label(key: EpisodeKey) -> str:
     """The planning effort an episode's settings set (``"none"`` for a planner without one)."""
-    return planner_settings(key.planner, json.loads(key.settings)).effort_label()
+    return planner_entry(key.planner).settings_type.from_canonical(key.settings).effort_label()
 
 # Paper, Tables II and III (mean +- std of U over its random cases), for side-by-side reports.
 PAPER_TABLE = {

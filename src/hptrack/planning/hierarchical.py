@@ -41,7 +41,7 @@ DEFAULT_ITERATIONS = 100_000
 
 PRESETS: dict[str, dict[str, Any]] = {
     "paper": {"backup": "sampled", "rollout": "uniform"},
-    "improved": {"backup": "max", "rollout": "most_uncertain"},
+    "improved": {"backup": "max", "rollout": "uniform"},
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
 improvements measured in ``docs/planner-improvements.md``."""
@@ -65,6 +65,9 @@ class MctsSettings(PlannerSettings):
         rollout: ``"uniform"`` (the paper's random policy) or ``"most_uncertain"``
             (:mod:`hptrack.planning.subtask_rollout`).
         rollout_epsilon: probability of a random action in a ``most_uncertain`` rollout.
+        threads: independent trees searched in parallel and merged (root parallelism), each
+            with the effort above; 1 (the paper's single tree) unless the machine has spare
+            cores.
     """
 
     iterations: Annotated[int | None, Field(ge=1)] = None
@@ -74,6 +77,7 @@ class MctsSettings(PlannerSettings):
     backup: Literal["sampled", "expected", "max"] | None = None
     rollout: Literal["uniform", "most_uncertain"] | None = None
     rollout_epsilon: Annotated[float, Field(ge=0.0, le=1.0)] = 0.1
+    threads: Annotated[int, Field(ge=1, le=64)] = 1
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
 
@@ -87,6 +91,12 @@ class MctsSettings(PlannerSettings):
         preset = PRESETS.get(data.get("preset", DEFAULT_PRESET), {})
         return {**data, **{k: v for k, v in preset.items() if data.get(k) is None}}
 
+    @classmethod
+    def from_canonical(cls, text: str) -> MctsSettings:
+        """The settings of a stored identity: an option it leaves out has the paper's value
+        (:meth:`canonical`), whatever the default preset."""
+        return cls.model_validate({"preset": "paper", **json.loads(text)})
+
     def canonical(self) -> str:
         """The identity of the results: the resolved options, without ``preset`` (which only
         stands for them), and without the options that have the paper's value, so that the
@@ -98,6 +108,8 @@ class MctsSettings(PlannerSettings):
                 values.pop(key)
         if values.get("rollout", "uniform") == "uniform":
             values.pop("rollout_epsilon")
+        if values["threads"] == 1:
+            values.pop("threads")
         return json.dumps(values, sort_keys=True, separators=(",", ":"))
 
     def rollout_policy(self) -> tuple:
@@ -146,7 +158,7 @@ class HierarchicalPlanner:
             current_action=current_action)
         result = search(problem, iterations=self.iterations, time_limit=self.time_limit,
                         seed=self._rng, exploration=self.exploration, policy=self.policy,
-                        backup=self.settings.backup)
+                        backup=self.settings.backup, threads=self.settings.threads)
         self._searches.append({"step": observation.step, "simulations": result.simulations,
                                "elapsed_s": result.elapsed, "stopped_by": result.stopped_by})
         return result

@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Literal
 
@@ -72,6 +73,7 @@ from hptrack.planning.tree import (
     Tree,
     backup,
     grow_tree,
+    merge_stats,
     new_tree,
     node_stats,
     select,
@@ -212,14 +214,14 @@ def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, 
     return n_simulations
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def run_subtask_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
                             exploration, backup_mode, n_simulations):
     """:func:`run_simulations` on the paper's sub-task MDP, compiled once and cached on disk.
 
     The generic loop is not cached itself: its cache index would hold the signature of every
     MDP it ever ran on (test toys included), and another process that cannot import one of
-    them could not read it.
+    them could not read it. It releases the GIL, so root-parallel trees run on several cores.
     """
     return run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
                            exploration, backup_mode, n_simulations)
@@ -348,7 +350,8 @@ def search_mdp(env: tuple, root: tuple, n_actions: int, max_depth: int, work: np
 def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
            time_limit: float | None = None, seed: int | np.random.Generator = 0,
            exploration: float = DEFAULT_EXPLORATION,
-           policy: tuple = UniformRandom(), backup: str = "sampled") -> SearchResult:
+           policy: tuple = UniformRandom(), backup: str = "sampled",
+           threads: int = 1) -> SearchResult:
     """Plan from ``problem``'s root state with Algorithm 1 (``TreeSearch``) on the sub-task MDP.
 
     Args:
@@ -364,21 +367,53 @@ def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
         policy: the rollout policy (default the paper's uniformly random one).
         backup: one of :data:`~hptrack.planning.tree.BACKUPS` (default the paper's running
             mean of sampled returns).
+        threads: root parallelism: this many independent trees (each with its own stream,
+            seeded from ``seed``, and the limits above), searched on as many threads and
+            merged (:func:`~hptrack.planning.tree.merge_stats`). 1 is the paper's single tree.
 
     Raises:
         ValueError: no limit given, a limit not positive, or a current action that cannot be
             carried out in the remaining budget.
     """
     _check_limits(iterations, time_limit)
+    if threads < 1:
+        raise ValueError(f"threads must be positive, got {threads}")
     start = time.perf_counter()
-    env = subtask_mdp.SubtaskEnv(problem.model(),
-                                 subtask_mdp.new_memo(problem.n_targets, problem.n_steps))
+    model = problem.model()
     root = problem.root_state()
     fixed = -1 if problem.current_action is None else problem.current_action
-    if fixed >= 0 and not subtask_mdp.is_available(env, root, fixed):
-        raise ValueError(f"current action {fixed} cannot be carried out in the remaining budget")
-    return search_mdp(env, root, problem.n_targets, problem.n_steps + 2, subtask_mdp.new_work(),
-                      iterations, time_limit, seed, exploration, policy, fixed, start, backup)
+
+    def one(tree_seed: int | np.random.Generator) -> SearchResult:
+        env = subtask_mdp.SubtaskEnv(model, subtask_mdp.new_memo(problem.n_targets,
+                                                                 problem.n_steps))
+        if fixed >= 0 and not subtask_mdp.is_available(env, root, fixed):
+            raise ValueError(f"current action {fixed} cannot be carried out in the remaining "
+                             "budget")
+        return search_mdp(env, root, problem.n_targets, problem.n_steps + 2,
+                          subtask_mdp.new_work(), iterations, time_limit, tree_seed,
+                          exploration, policy, fixed, start, backup)
+
+    if threads == 1:
+        return one(seed)
+    seeds = np.random.SeedSequence(seed_value(seed)).generate_state(threads, np.uint64)
+    with ThreadPoolExecutor(threads) as pool:
+        results = list(pool.map(one, (int(s) for s in seeds)))
+    return _merged(results, fixed)
+
+
+def _merged(results: list[SearchResult], fixed: int) -> SearchResult:
+    """One result from root-parallel trees: statistics merged action by action."""
+    root = merge_stats([r.root for r in results])
+    after_find = merge_stats([r.after_find for r in results]) if fixed >= 0 else None
+    after_miss = merge_stats([r.after_miss for r in results]) if fixed >= 0 else None
+    return SearchResult(
+        best_action=root.best if fixed < 0 else results[0].best_action, root=root,
+        after_find=after_find, after_miss=after_miss,
+        simulations=sum(r.simulations for r in results), stopped_by=results[0].stopped_by,
+        elapsed=max(r.elapsed for r in results),
+        state_nodes=sum(r.state_nodes for r in results),
+        action_nodes=sum(r.action_nodes for r in results),
+        tree_bytes=sum(r.tree_bytes for r in results))
 
 
 def _backup_mode(backup: str) -> int:

@@ -207,6 +207,28 @@ class ActionStats:
         return int(self.actions[visited[np.argmax(self.values[visited])]])
 
 
+def merge_stats(stats: list[ActionStats | None]) -> ActionStats | None:
+    """The statistics of one node searched in several independent trees (root parallelism):
+    visits add up, values are the visit-weighted means; expansion results, which are
+    deterministic, are taken from the first tree that expanded the action."""
+    present = [s for s in stats if s is not None]
+    if not present:
+        return None
+    actions = np.unique(np.concatenate([s.actions for s in present]))
+    visits = np.zeros(actions.size, dtype=np.int64)
+    weighted = np.zeros(actions.size)
+    p, find, miss = np.full(actions.size, np.nan), np.zeros_like(visits), np.zeros_like(visits)
+    for s in present:
+        at = np.searchsorted(actions, s.actions)
+        visits[at] += s.visits
+        weighted[at] += s.visits * s.values
+        new = np.isnan(p[at]) & ~np.isnan(s.p_find)
+        p[at[new]], find[at[new]], miss[at[new]] = (s.p_find[new], s.find_steps[new],
+                                                    s.miss_steps[new])
+    values = np.divide(weighted, visits, out=np.zeros(actions.size), where=visits > 0)
+    return ActionStats(actions, visits, values, p, find, miss)
+
+
 def node_stats(tree: Tree, s: int) -> ActionStats | None:
     """The statistics of state node ``s``'s actions (``None`` if it has no action slots)."""
     first = int(tree.s_first[s])
