@@ -36,7 +36,8 @@ wall-clock checks. :func:`search` runs it on the sub-task MDP of
   are the same as with an eager expansion, at a fraction of the cost;
 * otherwise UCB1 picks an action (:func:`hptrack.planning.tree.select`), the outcome is drawn
   from ``p`` (line 25), the child state is created on first draw (lines 26-29) and values are
-  backed up as running means (:func:`hptrack.planning.tree.backup`, lines 31-33).
+  backed up as running means (:func:`hptrack.planning.tree.backup`, lines 31-33), or with
+  one of the other backups of :mod:`hptrack.planning.tree` (``backup``).
 
 States are not stored: the descent rebuilds the state from the root by applying the stored
 transitions, only when it is needed (a first visit, opening the action slots, or a first
