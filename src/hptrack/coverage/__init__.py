@@ -1,8 +1,10 @@
 """Coverage sub-task (paper Sec. IV-A, IV-B): interception, shifting spiral, outcome estimator.
 
 Compiled kernels for the tree search: :func:`intercept_time`, :func:`intercept_steps`,
-:func:`coverage_outcome` (and :func:`spiral_phases` for the path). Python objects for planners:
-:class:`CoverageSubtask`, :func:`estimate_coverage`.
+:func:`coverage_outcome` (the paper's estimator), :func:`sharp_coverage_outcome` with
+:func:`approach_step` (the sharp estimator: flight detections and the spiral's footprint), and
+:func:`spiral_phases` for the path. Python objects for planners: :class:`CoverageSubtask`,
+:func:`estimate_coverage`.
 """
 
 from hptrack.coverage.estimator import (
@@ -13,12 +15,14 @@ from hptrack.coverage.estimator import (
 )
 from hptrack.coverage.intercept import (
     Intercept,
+    approach_step,
     intercept_path,
     intercept_steps,
     intercept_time,
     intercept_waypoint,
     plan_intercept,
 )
+from hptrack.coverage.sharp_estimator import sharp_coverage_outcome
 from hptrack.coverage.spiral import ShiftingSpiral, ellipse_axes, spiral_phases
 from hptrack.coverage.subtask import CoverageSubtask
 
@@ -27,6 +31,7 @@ __all__ = [
     "CoverageSubtask",
     "Intercept",
     "ShiftingSpiral",
+    "approach_step",
     "coverage_cdf",
     "coverage_outcome",
     "ellipse_axes",
@@ -36,5 +41,6 @@ __all__ = [
     "intercept_time",
     "intercept_waypoint",
     "plan_intercept",
+    "sharp_coverage_outcome",
     "spiral_phases",
 ]

@@ -33,6 +33,25 @@ MAX_COVERAGE_STEPS = 10_000_000
 """Cap on ``t_cutoff`` when no budget is given; reaching it means the belief does not grow."""
 
 
+@numba.njit(cache=True, inline="always")
+def position_det(poly, n):
+    """``det Sigma^xy`` (m^4) after ``n`` steps from :func:`position_polynomials`' ``poly``
+    (its first ten entries), by Horner's rule."""
+    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = (poly[0], poly[1], poly[2], poly[3], poly[4],
+                                              poly[5], poly[6], poly[7], poly[8], poly[9])
+    sxx = x0 + n * (x1 + n * (x2 + n * x3))
+    syy = y0 + n * (y1 + n * (y2 + n * x3))
+    sxy = c0 + n * (c1 + n * c2)
+    return sxx * syy - sxy * sxy
+
+
+@numba.njit(cache=True, inline="always")
+def ratio_grows(area, det, next_area, next_det):
+    """Whether ``S_cover / sqrt(det)`` still grows from one step to the next (the ``t_cutoff``
+    test of Eq. (8)), without roots or divisions."""
+    return next_area * next_area * det > area * area * next_det
+
+
 @numba.njit(cache=True)
 def _covered_ratio(cov, q, k, tau, c_per_step, speed, diameter):
     """``S_cover(k) / sqrt(det Sigma^xy(k))`` (dimensionless)."""
@@ -71,15 +90,11 @@ def coverage_outcome(cov: np.ndarray, q: float, tau: float, c_per_step: float, s
     area = area0
     det = x0 * y0 - c0 * c0
     cdf_sum = 0.0  # sum_{j<k} P_cdf(j)
+    poly = (x0, x1, x2, y0, y1, y2, c0, c1, c2, x3)
     while k < max_steps:
-        n = k + 1.0
-        sxx = x0 + n * (x1 + n * (x2 + n * x3))
-        syy = y0 + n * (y1 + n * (y2 + n * x3))
-        sxy = c0 + n * (c1 + n * c2)
-        next_det = sxx * syy - sxy * sxy
+        next_det = position_det(poly, k + 1.0)
         next_area = area + area1
-        # ratio(k + 1) <= ratio(k), ratio = S_cover / sqrt(det), without roots or divisions
-        if next_area * next_area * det <= area * area * next_det:
+        if not ratio_grows(area, det, next_area, next_det):
             break
         cdf_sum -= math.expm1(-area * inv_two_pi / math.sqrt(det))
         k += 1

@@ -71,6 +71,20 @@ def intercept_steps(agent_x: float, agent_y: float, mean_x: float, mean_y: float
     return int(math.ceil(t / tau - CEIL_SLACK))
 
 
+@numba.njit(cache=True)
+def approach_step(agent_x: float, agent_y: float, mean_x: float, mean_y: float, vel_x: float,
+                  vel_y: float, speed: float, tau: float, steps: int) -> tuple:
+    """The agent's displacement per step relative to the belief mean during an intercept flight
+    of ``steps`` whole steps (module docstring), m: ``v_a tau u - v_hat tau`` with ``u`` the unit
+    vector towards the mean at step ``steps``. ``(0, 0)`` when ``steps <= 0``."""
+    if steps <= 0:
+        return 0.0, 0.0
+    dx = mean_x + vel_x * steps * tau - agent_x
+    dy = mean_y + vel_y * steps * tau - agent_y
+    length = math.hypot(dx, dy)
+    return speed * tau * dx / length - vel_x * tau, speed * tau * dy / length - vel_y * tau
+
+
 @dataclass(frozen=True, eq=False)
 class Intercept:
     """A planned intercept flight.

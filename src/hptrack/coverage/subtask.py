@@ -3,8 +3,10 @@
 When the agent pursues target ``a`` it flies straight at full speed to intercept the belief mean
 (:mod:`hptrack.coverage.intercept`), then flies the shifting spiral of Sec. IV-A
 (:mod:`hptrack.coverage.spiral`) until the target is detected or ``t_cutoff`` of Sec. IV-B is
-reached, or the budget ends. :class:`CoverageSubtask` is the plan the hierarchical planner
-executes inside its ``Planner.act`` loop (and the ``coverage`` planner of
+reached, or the budget ends. Its outcome is estimated by the paper's estimator
+(:attr:`CoverageSubtask.estimate`) and by the sharp one (:attr:`CoverageSubtask.sharp_estimate`,
+:mod:`hptrack.coverage.sharp_estimator`). :class:`CoverageSubtask` is the plan the hierarchical
+planner executes inside its ``Planner.act`` loop (and the ``coverage`` planner of
 :mod:`hptrack.baselines.coverage` flies on its own).
 
 Step bookkeeping: a sub-task built at step ``s`` (the observation it was planned from) has its
@@ -16,11 +18,19 @@ intercept flight takes ``j = 0 .. n`` and spiral step ``m`` is ``path[n + m]``. 
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 
 from hptrack.coverage.estimator import CoverageEstimate, estimate_coverage
-from hptrack.coverage.intercept import Intercept, intercept_path, intercept_waypoint, plan_intercept
+from hptrack.coverage.intercept import (
+    Intercept,
+    approach_step,
+    intercept_path,
+    intercept_waypoint,
+    plan_intercept,
+)
+from hptrack.coverage.sharp_estimator import SharpEstimate, estimate_sharp
 from hptrack.coverage.spiral import ShiftingSpiral
 from hptrack.interface import MissionSpec, Observation
 
@@ -59,6 +69,8 @@ class CoverageSubtask:
         if remaining_budget is not None and math.isnan(remaining_budget):
             raise ValueError("remaining_budget is NaN")
         m = mission
+        self.mean = mean.copy()
+        self.remaining_budget = remaining_budget
         self.agent_position = np.asarray(agent_position, dtype=float).copy()
         self.intercept: Intercept = plan_intercept(self.agent_position, mean[:2], mean[2:],
                                                    m.agent_speed, m.time_step, m.sensor_diameter)
@@ -86,6 +98,17 @@ class CoverageSubtask:
                    i, observation.step)
 
     # --- the planned estimate ---------------------------------------------------------------
+    @cached_property
+    def sharp_estimate(self) -> SharpEstimate:
+        """The sharp estimator's outcome of this sub-task (flight detections included, expected
+        duration from its start; :mod:`hptrack.coverage.sharp_estimator`)."""
+        m, n, mean = self.mission, self.intercept.steps, self.mean
+        approach = approach_step(self.agent_position[0], self.agent_position[1], mean[0],
+                                 mean[1], mean[2], mean[3], m.agent_speed, m.time_step, n)
+        remaining = (None if self.remaining_budget is None
+                     else self.remaining_budget - n * m.time_step)
+        return estimate_sharp(self.start_covariance, self.q, m, n, approach, remaining)
+
     @property
     def intercept_time(self) -> float:
         """Intercept flight in whole steps, s."""

@@ -1,0 +1,358 @@
+"""A sharper coverage outcome estimator: the paper's sub-task (Sec. IV-A, IV-B) with detections
+during the intercept flight and the spiral's real footprint (``docs/coverage-validation.md``,
+"The sharp estimator").
+
+The paper's estimator (:func:`hptrack.coverage.estimator.coverage_outcome`, Eqs. (6)-(8)) counts a
+target found when it lies, at step ``k`` of the spiral, inside an ellipse of the belief's shape and
+of area ``S_cover(k)``. Two things it leaves out make it conservative after a departure delay:
+
+* **The spiral's footprint reaches beyond its mean boundary.** With a belief dominated by its
+  velocity uncertainty each target keeps its place in the belief's normalised coordinates
+  ``z = Sigma(t)^-1/2 (x - mean)``, so a target is found when the footprint, at *its* pass,
+  reaches the target's normalised radius. Where the spiral passed at scale ``s'`` (phase
+  ``theta' = s' / b``, loop ellipse ``s'A, s'B``) the footprint's outer edge encloses the
+  parallel body of that ellipse at distance ``w/2`` (Steiner's formula)
+
+      S_out(s') = pi A B s'^2 + (w/2) P(A, B) s' + pi (w/2)^2,   P = ellipse perimeter,
+
+  normalised at the time of that pass: ``h_out(s') = S_out(s') / (pi sqrt(det Sigma^xy(t')))``.
+  The last pass at each angle happened at a phase uniform in the last turn, ``s' = s - b alpha``
+  with ``alpha`` uniform in ``[0, 2 pi)`` (angles the first turn has not reached yet have only
+  the start footprint), and a target once reached stays found, so the normalised area found by
+  step ``k`` is
+
+      h_F(k) = mean over alpha of  max_{t <= t'(s - b alpha)} h_out(t),
+
+  and ``P_spiral(k) = 1 - exp(-h_F(k) / 2)`` (the chi-squared CDF of Eq. (7) for that area). The
+  path length fixes the scale: ``v_a tau k = P s^2 / (4 pi b)``.
+* **Detections during the intercept flight.** Relative to the belief mean the agent flies a
+  straight line ending on it, ``delta`` metres per step; its footprint sweeps a half-strip of
+  width ``w``. In the normalised coordinates at the start of the coverage that is a half-strip
+  of half-width ``w_n = (w/2) / sigma_c`` (``sigma_c``: the belief's spread across the line), so
+  the flight adds, outside the spiral's disk of radius ``sqrt(h_F)``, the mass
+
+      H(k) = int_{-w_n}^{w_n} phi(y) P(X >= sqrt(h_F - y^2)) dy        (h_F >= w_n^2),
+
+  (a narrower disk adds the annulus ``(e^{-h_F/2} - e^{-w_n^2/2}) / 2``). A target ``xi`` along
+  the line (towards the incoming agent) and ``c`` across it is reached ``X = (xi + sqrt((w/2)^2 -
+  c^2)) / |delta|`` steps before the coverage starts, so the flight's steps after the find sum to
+  ``sum_{m=1}^{n} P(X >= m)`` (Euler-Maclaurin on the closed-form integral, Gauss-Legendre over
+  ``c``).
+
+``F(k) = P_spiral(k) + H(k)`` is the probability of a find by step ``k`` of the coverage.
+``t_cutoff = K`` is the paper's (Eq. (8)), so the plan and a miss's duration are unchanged; the
+find probability is ``F(K)`` and the expected finding time
+
+    E = ((n + K) F(K) - sum_{j<n} F_flight(j) - sum_{k<K} F(k)) / F(K)
+
+is counted in steps from the start of the sub-task (departure), the flight included: the
+sub-task's duration given a find. :func:`sharp_coverage_outcome` is the compiled kernel (cost
+``O(t_cutoff)`` cheap steps plus a fixed number of quadrature evaluations, no allocation);
+:func:`estimate_sharp` its validated Python wrapper.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from hptrack.coverage.estimator import estimate_coverage, position_det, ratio_grows
+from hptrack.interface import MissionSpec
+from hptrack.models.motion import position_polynomials
+
+PHASE_NODES = 3
+"""Gauss-Legendre nodes in the phase of the last pass ``alpha``."""
+_ALPHA_X, _ALPHA_W = np.polynomial.legendre.leggauss(PHASE_NODES)
+ALPHA_FRACTIONS = 0.5 * (_ALPHA_X + 1.0)
+"""Nodes ``alpha / (2 pi)`` in ``[0, 1]``."""
+ALPHA_WEIGHTS = 0.5 * _ALPHA_W
+"""Their weights (sum 1)."""
+_STRIP_X, _STRIP_W = np.polynomial.legendre.leggauss(3)
+STRIP_NODES = np.sin(0.25 * math.pi * (_STRIP_X + 1.0))
+"""Nodes ``y / w_n = sin(gamma)`` of the strip integral ``H``, Gauss-Legendre in ``gamma`` on
+``[0, pi/2]`` (smooth where the disk's edge meets the strip's)."""
+STRIP_WEIGHTS = 0.25 * math.pi * _STRIP_W * np.cos(0.25 * math.pi * (_STRIP_X + 1.0))
+"""Their weights times ``dy / dgamma / w_n = cos(gamma)``."""
+_CROSS_X, _CROSS_W = np.polynomial.legendre.leggauss(8)
+CROSS_ANGLES = 0.5 * math.pi * _CROSS_X
+"""Gauss-Legendre nodes ``beta`` of the flight integral over ``c = (w/2) sin(beta)``."""
+CROSS_WEIGHTS = 0.5 * math.pi * _CROSS_W
+EXACT_STEPS = 16
+"""Coverage steps at the start where ``F`` is evaluated at every step."""
+GRID_INTERVALS = 32
+"""Intervals (of equal whole steps) on which ``F`` is evaluated after them, linear in between."""
+
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+
+
+@numba.njit(cache=True, inline="always")
+def _upper_tail(x):
+    """Standard normal ``P(X >= x)``."""
+    return 0.5 * math.erfc(x * (1.0 / math.sqrt(2.0)))
+
+
+@numba.njit(cache=True, inline="always")
+def _density(x):
+    """Standard normal density."""
+    return _INV_SQRT_2PI * math.exp(-0.5 * x * x)
+
+
+@numba.njit(cache=True)
+def ellipse_perimeter(semi_a, semi_b):
+    """Perimeter of an ellipse with semi-axes ``semi_a, semi_b`` (m), Ramanujan's second
+    approximation (relative error below 4e-5 at every eccentricity)."""
+    h = ((semi_a - semi_b) / (semi_a + semi_b)) ** 2
+    return math.pi * (semi_a + semi_b) * (1.0 + 3.0 * h / (10.0 + math.sqrt(4.0 - 3.0 * h)))
+
+
+@numba.njit(cache=True)
+def strip_mass(h_found, strip_halfwidth, strip_at_edge):
+    """``H``: standard normal mass of the half-strip ``{x >= 0, |y| <= w_n}`` outside the disk
+    of radius ``sqrt(h_found)``. ``strip_at_edge`` is ``H`` at ``h_found = w_n^2``."""
+    w2 = strip_halfwidth * strip_halfwidth
+    if h_found < w2:  # polar: half of each circle of radius below w_n lies in the strip
+        return 0.5 * (math.exp(-0.5 * h_found) - math.exp(-0.5 * w2)) + strip_at_edge
+    total = 0.0  # int_{-w_n}^{w_n} phi(y) P(X >= sqrt(h - y^2)) dy
+    for i in range(STRIP_NODES.shape[0]):
+        y = strip_halfwidth * STRIP_NODES[i]
+        total += STRIP_WEIGHTS[i] * _density(y) * _upper_tail(math.sqrt(h_found - y * y))
+    return 2.0 * strip_halfwidth * total
+
+
+@numba.njit(cache=True)
+def _tail_sum(mu, sd, n):
+    """``sum_{m=1}^{n} P(X >= m)`` for ``X ~ N(mu, sd^2)``: the Euler-Maclaurin formula on the
+    closed-form integral when ``sd >= 1``, else the terms within ``8 sd`` of ``mu`` one by one
+    (those below count 1 each)."""
+    if sd >= 1.0:
+        a0, an = -mu / sd, (n - mu) / sd
+        g0, gn = _upper_tail(a0), _upper_tail(an)
+        f0, fn = _density(a0), _density(an)
+        integral = sd * ((f0 - a0 * g0) - (fn - an * gn))
+        return integral - 0.5 * (g0 - gn) + (f0 - fn) / (12.0 * sd)
+    low = max(1, min(n + 1, int(math.floor(mu - 8.0 * sd))))
+    high = min(n, int(math.ceil(mu + 8.0 * sd)))
+    total = float(low - 1)
+    for m in range(low, high + 1):
+        total += _upper_tail((m - mu) / sd)
+    return total
+
+
+@numba.njit(cache=True)
+def flight_detection_sum(cov, flight_steps, approach_x, approach_y, radius):
+    """``(sum_{j < n} F_flight(j), sigma_c)``: the expected number of the ``n`` flight steps at
+    which the target is already found, and the belief's spread across the flight line (m).
+    ``delta = (approach_x, approach_y)`` is the agent's displacement per step relative to the
+    belief mean (m), ``cov`` the covariance where the flight ends, ``radius`` ``w/2`` (m)."""
+    step = math.hypot(approach_x, approach_y)
+    dx, dy = approach_x / step, approach_y / step
+    sxx, sxy, syy = cov[0, 0], cov[0, 1], cov[1, 1]
+    # xi = -d.e (towards the incoming agent), c = d_perp.e with d_perp = (-dy, dx)
+    var_a = dx * dx * sxx + 2.0 * dx * dy * sxy + dy * dy * syy
+    var_c = dy * dy * sxx - 2.0 * dx * dy * sxy + dx * dx * syy
+    cov_ac = -(-dx * dy * sxx + (dx * dx - dy * dy) * sxy + dx * dy * syy)
+    sigma_c = math.sqrt(var_c)
+    slope = cov_ac / var_c
+    sd = math.sqrt(max(var_a - cov_ac * slope, 0.0)) / step
+    total = 0.0
+    for i in range(CROSS_ANGLES.shape[0]):
+        c = radius * math.sin(CROSS_ANGLES[i])
+        half_chord = radius * math.cos(CROSS_ANGLES[i])
+        weight = CROSS_WEIGHTS[i] * half_chord * _density(c / sigma_c) / sigma_c
+        mu = (slope * c + half_chord) / step  # X = (xi + half_chord) / |delta| ~ N(mu, sd^2)
+        total += weight * _tail_sum(mu, sd, flight_steps)
+    return total, sigma_c
+
+
+@numba.njit(cache=True, inline="always")
+def _outer_area_ratio(poly, scale, area_ab, perimeter, radius):
+    """``h_out``: the parallel body of the loop at ``scale`` over ``pi sqrt(det Sigma^xy)`` at
+    the time of that loop, ``scale^2 / scale_rate`` steps into the coverage (``poly[10]``)."""
+    steps = scale * scale / poly[10]
+    area = area_ab * scale * scale + radius * perimeter * scale + math.pi * radius * radius
+    return area / (math.pi * math.sqrt(position_det(poly, steps)))
+
+
+@numba.njit(cache=True)
+def _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio):
+    """``h_F(k)``: the normalised area found by step ``k`` (module docstring)."""
+    scale = math.sqrt(poly[10] * k)
+    start = radius * radius / math.sqrt(position_det(poly, 0.0))
+    total = 0.0
+    for i in range(ALPHA_FRACTIONS.shape[0]):
+        passed = scale - pitch * 2.0 * math.pi * ALPHA_FRACTIONS[i]
+        if passed <= 0.0:
+            value = start
+        elif passed * passed / poly[10] >= peak_steps:
+            value = peak_ratio
+        else:
+            value = _outer_area_ratio(poly, passed, area_ab, perimeter, radius)
+        total += ALPHA_WEIGHTS[i] * value
+    return total
+
+
+@numba.njit(cache=True, inline="always")
+def _found(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, flight_steps,
+           strip_halfwidth, strip_at_edge):
+    """``F(k)``: spiral plus flight strip."""
+    h = _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio)
+    p = -math.expm1(-0.5 * h)
+    if flight_steps > 0:
+        p += strip_mass(h, strip_halfwidth, strip_at_edge)
+    return p
+
+
+@numba.njit(cache=True)
+def sharp_coverage_outcome(cov: np.ndarray, q: float, tau: float, c_per_step: float,
+                           speed: float, diameter: float, max_steps: int, flight_steps: int,
+                           approach_x: float, approach_y: float) -> tuple:
+    """Outcome of a sub-task (intercept flight, then spiral) with the sharp model.
+
+    Args:
+        cov: 4x4 belief covariance at the start of the coverage (the end of the flight).
+        q: process noise intensity (m^2/s^3).
+        tau: time step, s.
+        c_per_step: lower-right per-step ``Q`` block over ``q`` (``tau`` or ``1``).
+        speed: agent speed ``v_a``, m/s.
+        diameter: sensor footprint diameter ``w``, m.
+        max_steps: coverage steps left in the budget (truncates ``t_cutoff``); negative when the
+            budget ends before the coverage starts.
+        flight_steps: whole steps of the intercept flight ``n`` (0: none).
+        approach_x, approach_y: the agent's displacement per flight step relative to the belief
+            mean, m (:func:`hptrack.coverage.intercept.approach_step`); unused when ``n = 0``.
+
+    Returns:
+        ``(cutoff_steps, p_find, expected_steps)``: the paper's ``t_cutoff`` in steps from the
+        start of the coverage, the probability of a find by then (flight included), and the
+        expected duration of the sub-task given a find, in steps from its start (departure);
+        ``(0, 0, 0)`` when ``max_steps < 0``.
+    """
+    if max_steps < 0:
+        return 0.0, 0.0, 0.0
+    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials(cov, q, tau, c_per_step)
+    radius = 0.5 * diameter
+    tr = 0.5 * (x0 + y0)
+    gap = math.sqrt(max(tr * tr - (x0 * y0 - c0 * c0), 0.0))
+    semi_a, semi_b = math.sqrt(tr + gap), math.sqrt(max(tr - gap, 0.0))
+    pitch = diameter / (2.0 * math.pi * semi_a)  # b of Eq. (4)
+    perimeter = ellipse_perimeter(semi_a, semi_b)
+    area_ab = math.pi * semi_a * semi_b
+    # path length v_a tau k = P s^2 / (4 pi b): s^2 = scale_rate k
+    poly = (x0, x1, x2, y0, y1, y2, c0, c1, c2, x3, 4.0 * math.pi * pitch * speed * tau / perimeter)
+    # Pass 1, per step: the paper's t_cutoff and the first peak of h_out.
+    peak_steps, peak_ratio = math.inf, 0.0
+    previous = _outer_area_ratio(poly, 0.0, area_ab, perimeter, radius)
+    area1 = speed * diameter * tau  # S_cover(k) = area + k area1, as coverage_outcome
+    area = math.pi * radius * radius
+    det = x0 * y0 - c0 * c0
+    k = 0
+    while k < max_steps:
+        next_det = position_det(poly, k + 1.0)
+        next_area = area + area1
+        if not ratio_grows(area, det, next_area, next_det):
+            break
+        k += 1
+        area = next_area
+        det = next_det
+        if peak_steps == math.inf:
+            ratio = _outer_area_ratio(poly, math.sqrt(poly[10] * k), area_ab, perimeter, radius)
+            if ratio < previous:
+                peak_steps, peak_ratio = k - 1.0, previous
+            previous = ratio
+    cutoff = k
+    # The flight: its detections' time sum and the strip's width.
+    flight_sum = 0.0
+    strip_halfwidth = 0.0
+    strip_at_edge = 0.0
+    if flight_steps > 0:
+        flight_sum, sigma_c = flight_detection_sum(cov, flight_steps, approach_x, approach_y,
+                                                   radius)
+        strip_halfwidth = radius / sigma_c
+        strip_at_edge = strip_mass(strip_halfwidth * strip_halfwidth, strip_halfwidth, 0.0)
+    # Pass 2: F on a grid, sum_{k < K} F(k) by linear interpolation between its points.
+    spacing = max(1, -(-(cutoff - EXACT_STEPS) // GRID_INTERVALS))
+    at = 0
+    found = _found(poly, 0.0, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio,
+                   flight_steps, strip_halfwidth, strip_at_edge)
+    coverage_sum = 0.0
+    while at < cutoff:
+        length = min(1 if at < EXACT_STEPS else spacing, cutoff - at)
+        nxt = _found(poly, float(at + length), pitch, area_ab, perimeter, radius, peak_steps,
+                     peak_ratio, flight_steps, strip_halfwidth, strip_at_edge)
+        coverage_sum += length * found + 0.5 * (nxt - found) * (length - 1)
+        found = nxt
+        at += length
+    total = float(flight_steps + cutoff)
+    expected = (total * found - flight_sum - coverage_sum) / found
+    return float(cutoff), found, expected
+
+
+@dataclass(frozen=True)
+class SharpEstimate:
+    """Outcome of one sub-task (intercept flight, then spiral) by the sharp estimator.
+
+    Attributes:
+        flight_steps: whole steps of the intercept flight ``n``.
+        cutoff_steps: the paper's ``t_cutoff`` in steps from the start of the coverage (truncated
+            by the budget when ``budget_limited``).
+        p_find: probability of a find by ``t_cutoff``, the flight included; 0 when the budget
+            ends before the coverage starts.
+        expected_time: expected duration of the sub-task given a find, s from its start
+            (departure), the flight included.
+        time_step: ``tau``, s.
+        budget_limited: whether the budget ended before the unconstrained ``t_cutoff``.
+    """
+
+    flight_steps: int
+    cutoff_steps: int
+    p_find: float
+    expected_time: float
+    time_step: float
+    budget_limited: bool
+
+    @property
+    def expected_steps(self) -> float:
+        """Expected duration given a find, steps from departure."""
+        return self.expected_time / self.time_step
+
+    @property
+    def miss_steps(self) -> int:
+        """Duration of the sub-task without a find: flight plus ``t_cutoff``, steps."""
+        return self.flight_steps + self.cutoff_steps
+
+
+def estimate_sharp(covariance: np.ndarray, q: float, mission: MissionSpec, flight_steps: int,
+                   approach: tuple[float, float] | np.ndarray,
+                   remaining_time: float | None = None) -> SharpEstimate:
+    """The sharp estimate of a sub-task whose coverage starts from ``covariance`` after an
+    intercept flight of ``flight_steps`` steps, ``approach`` (m) per step relative to the belief
+    mean (:func:`hptrack.coverage.intercept.approach_step`).
+
+    ``remaining_time`` is the budget left when the coverage starts (s; ``None``: no budget), as
+    for :func:`hptrack.coverage.estimator.estimate_coverage`, whose checks and ``t_cutoff`` this
+    shares.
+
+    Raises:
+        ValueError: what :func:`estimate_coverage` refuses, a negative flight, or an approach
+            that is not two finite numbers (non-zero when there is a flight).
+    """
+    paper = estimate_coverage(covariance, q, mission, remaining_time)
+    steps = int(flight_steps)
+    step = np.asarray(approach, dtype=float)
+    if steps < 0 or steps != flight_steps:
+        raise ValueError(f"flight_steps must be a non-negative integer, got {flight_steps!r}")
+    if step.shape != (2,) or not np.all(np.isfinite(step)) or (steps > 0 and not np.any(step)):
+        raise ValueError(f"approach must be two finite numbers (m per step, non-zero with a "
+                         f"flight), got {approach!r}")
+    tau = mission.time_step
+    if remaining_time is not None and remaining_time < 0.0:
+        return SharpEstimate(steps, 0, 0.0, 0.0, tau, True)
+    cutoff, p_find, expected = sharp_coverage_outcome(
+        np.asarray(covariance, dtype=float), float(q), tau, mission.c_per_step,
+        mission.agent_speed, mission.sensor_diameter, paper.cutoff_steps, steps,
+        float(step[0]), float(step[1]))
+    return SharpEstimate(steps, int(cutoff), float(p_find), float(expected) * tau, tau,
+                         paper.budget_limited)
