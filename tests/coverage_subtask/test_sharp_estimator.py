@@ -13,6 +13,7 @@ from hptrack.coverage.sharp_estimator import (
     estimate_sharp,
     flight_detection_sum,
     sharp_coverage_outcome,
+    strip_constants,
     strip_mass,
 )
 from hptrack.experiments.coverage_validation import draw_case, first_detections, plan_coverage
@@ -125,8 +126,7 @@ def test_strip_mass_is_the_half_strip_outside_the_disk(h, width):
     wy = np.full(y.size, y[1] - y[0])
     wy[[0, -1]] /= 2
     expected = np.sum(wy * norm.pdf(y) * norm.sf(np.sqrt(np.maximum(h - y * y, 0.0))))
-    at_edge = strip_mass(width * width, width, 0.0)
-    assert strip_mass(h, width, at_edge) == pytest.approx(expected, rel=5e-3)
+    assert strip_mass(h, strip_constants(width)) == pytest.approx(expected, rel=5e-3)
 
 
 def test_flight_sum_counts_the_flight_steps_after_the_find_as_a_simulation_does():

@@ -63,7 +63,7 @@ from hptrack.coverage.estimator import estimate_coverage, position_det, ratio_gr
 from hptrack.interface import MissionSpec
 from hptrack.models.motion import position_polynomials
 
-PHASE_NODES = 3
+PHASE_NODES = 2
 """Gauss-Legendre nodes in the phase of the last pass ``alpha``."""
 _ALPHA_X, _ALPHA_W = np.polynomial.legendre.leggauss(PHASE_NODES)
 ALPHA_FRACTIONS = 0.5 * (_ALPHA_X + 1.0)
@@ -76,14 +76,16 @@ STRIP_NODES = np.sin(0.25 * math.pi * (_STRIP_X + 1.0))
 ``[0, pi/2]`` (smooth where the disk's edge meets the strip's)."""
 STRIP_WEIGHTS = 0.25 * math.pi * _STRIP_W * np.cos(0.25 * math.pi * (_STRIP_X + 1.0))
 """Their weights times ``dy / dgamma / w_n = cos(gamma)``."""
-_CROSS_X, _CROSS_W = np.polynomial.legendre.leggauss(8)
-CROSS_ANGLES = 0.5 * math.pi * _CROSS_X
-"""Gauss-Legendre nodes ``beta`` of the flight integral over ``c = (w/2) sin(beta)``."""
+_CROSS_X, _CROSS_W = np.polynomial.legendre.leggauss(6)
+CROSS_SINES = np.sin(0.5 * math.pi * _CROSS_X)
+"""``c / (w/2) = sin(beta)`` at the Gauss-Legendre nodes ``beta`` of the flight integral."""
+CROSS_COSINES = np.cos(0.5 * math.pi * _CROSS_X)
+"""``cos(beta)``, the half chord over ``w/2``."""
 CROSS_WEIGHTS = 0.5 * math.pi * _CROSS_W
-EXACT_STEPS = 16
+EXACT_STEPS = 8
 """Coverage steps at the start where ``F`` is evaluated at every step."""
-GRID_INTERVALS = 32
-"""Intervals (of equal whole steps) on which ``F`` is evaluated after them, linear in between."""
+GRID_INTERVALS = 16
+"""Intervals (of equal whole steps) on which ``F`` is evaluated after them."""
 
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 
@@ -109,17 +111,31 @@ def ellipse_perimeter(semi_a, semi_b):
 
 
 @numba.njit(cache=True)
-def strip_mass(h_found, strip_halfwidth, strip_at_edge):
+def strip_constants(strip_halfwidth):
+    """What :func:`strip_mass` needs of a strip of half-width ``w_n``, computed once per
+    estimate: ``(w_n, H(w_n^2), e^{-w_n^2/2})`` and the three node weights times ``2 w_n
+    phi(y_i)``."""
+    w = strip_halfwidth
+    factors = (2.0 * w * STRIP_WEIGHTS[0] * _density(w * STRIP_NODES[0]),
+               2.0 * w * STRIP_WEIGHTS[1] * _density(w * STRIP_NODES[1]),
+               2.0 * w * STRIP_WEIGHTS[2] * _density(w * STRIP_NODES[2]))
+    edge = math.exp(-0.5 * w * w)
+    at_edge = strip_mass(w * w, (w, 0.0, edge, factors[0], factors[1], factors[2]))
+    return w, at_edge, edge, factors[0], factors[1], factors[2]
+
+
+@numba.njit(cache=True)
+def strip_mass(h_found, strip):
     """``H``: standard normal mass of the half-strip ``{x >= 0, |y| <= w_n}`` outside the disk
-    of radius ``sqrt(h_found)``. ``strip_at_edge`` is ``H`` at ``h_found = w_n^2``."""
-    w2 = strip_halfwidth * strip_halfwidth
-    if h_found < w2:  # polar: half of each circle of radius below w_n lies in the strip
-        return 0.5 * (math.exp(-0.5 * h_found) - math.exp(-0.5 * w2)) + strip_at_edge
-    total = 0.0  # int_{-w_n}^{w_n} phi(y) P(X >= sqrt(h - y^2)) dy
-    for i in range(STRIP_NODES.shape[0]):
-        y = strip_halfwidth * STRIP_NODES[i]
-        total += STRIP_WEIGHTS[i] * _density(y) * _upper_tail(math.sqrt(h_found - y * y))
-    return 2.0 * strip_halfwidth * total
+    of radius ``sqrt(h_found)``; ``strip`` from :func:`strip_constants`."""
+    w = strip[0]
+    if h_found < w * w:  # polar: half of each circle of radius below w_n lies in the strip
+        return 0.5 * (math.exp(-0.5 * h_found) - strip[2]) + strip[1]
+    # int_{-w_n}^{w_n} phi(y) P(X >= sqrt(h - y^2)) dy
+    y0, y1, y2 = w * STRIP_NODES[0], w * STRIP_NODES[1], w * STRIP_NODES[2]
+    return (strip[3] * _upper_tail(math.sqrt(h_found - y0 * y0))
+            + strip[4] * _upper_tail(math.sqrt(h_found - y1 * y1))
+            + strip[5] * _upper_tail(math.sqrt(h_found - y2 * y2)))
 
 
 @numba.njit(cache=True)
@@ -158,9 +174,9 @@ def flight_detection_sum(cov, flight_steps, approach_x, approach_y, radius):
     slope = cov_ac / var_c
     sd = math.sqrt(max(var_a - cov_ac * slope, 0.0)) / step
     total = 0.0
-    for i in range(CROSS_ANGLES.shape[0]):
-        c = radius * math.sin(CROSS_ANGLES[i])
-        half_chord = radius * math.cos(CROSS_ANGLES[i])
+    for i in range(CROSS_SINES.shape[0]):
+        c = radius * CROSS_SINES[i]
+        half_chord = radius * CROSS_COSINES[i]
         weight = CROSS_WEIGHTS[i] * half_chord * _density(c / sigma_c) / sigma_c
         mu = (slope * c + half_chord) / step  # X = (xi + half_chord) / |delta| ~ N(mu, sd^2)
         total += weight * _tail_sum(mu, sd, flight_steps)
@@ -176,11 +192,43 @@ def _outer_area_ratio(poly, scale, area_ab, perimeter, radius):
     return area / (math.pi * math.sqrt(position_det(poly, steps)))
 
 
+@numba.njit(cache=True, inline="always")
+def _outer_growing(poly, k, area_ab, perimeter, radius):
+    """Whether ``h_out`` grows at ``k > 0`` steps: ``2 S_out' det > S_out det'``."""
+    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3, rate = poly
+    scale = math.sqrt(rate * k)
+    area = area_ab * scale * scale + radius * perimeter * scale + math.pi * radius * radius
+    area_rate = rate * (area_ab + 0.5 * radius * perimeter / scale)
+    sxx = x0 + k * (x1 + k * (x2 + k * x3))
+    syy = y0 + k * (y1 + k * (y2 + k * x3))
+    sxy = c0 + k * (c1 + k * c2)
+    det_rate = ((x1 + k * (2.0 * x2 + 3.0 * k * x3)) * syy
+                + sxx * (y1 + k * (2.0 * y2 + 3.0 * k * x3)) - 2.0 * sxy * (c1 + 2.0 * k * c2))
+    return 2.0 * area_rate * (sxx * syy - sxy * sxy) > area * det_rate
+
+
 @numba.njit(cache=True)
-def _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio):
-    """``h_F(k)``: the normalised area found by step ``k`` (module docstring)."""
+def _outer_peak(poly, cutoff, area_ab, perimeter, radius):
+    """``(t*, h_out(t*))``: where ``h_out`` stops growing within ``t_cutoff`` steps, by bisection
+    on the sign of its derivative to 0.05 steps (it rises while the swept area outgrows the
+    belief, then falls); ``(inf, 0)`` when it still grows at ``t_cutoff``."""
+    if cutoff <= 0.0 or _outer_growing(poly, cutoff, area_ab, perimeter, radius):
+        return math.inf, 0.0
+    lo, hi = 0.0, cutoff
+    while hi - lo > 0.05:
+        mid = 0.5 * (lo + hi)
+        if _outer_growing(poly, mid, area_ab, perimeter, radius):
+            lo = mid
+        else:
+            hi = mid
+    return lo, _outer_area_ratio(poly, math.sqrt(poly[10] * lo), area_ab, perimeter, radius)
+
+
+@numba.njit(cache=True)
+def _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start):
+    """``h_F(k)``: the normalised area found by step ``k`` (module docstring); ``start`` is the
+    start footprint's, ``h_out(0)``."""
     scale = math.sqrt(poly[10] * k)
-    start = radius * radius / math.sqrt(position_det(poly, 0.0))
     total = 0.0
     for i in range(ALPHA_FRACTIONS.shape[0]):
         passed = scale - pitch * 2.0 * math.pi * ALPHA_FRACTIONS[i]
@@ -195,13 +243,13 @@ def _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ra
 
 
 @numba.njit(cache=True, inline="always")
-def _found(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, flight_steps,
-           strip_halfwidth, strip_at_edge):
+def _found(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start,
+           flight_steps, strip):
     """``F(k)``: spiral plus flight strip."""
-    h = _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio)
+    h = _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start)
     p = -math.expm1(-0.5 * h)
     if flight_steps > 0:
-        p += strip_mass(h, strip_halfwidth, strip_at_edge)
+        p += strip_mass(h, strip)
     return p
 
 
@@ -242,10 +290,8 @@ def sharp_coverage_outcome(cov: np.ndarray, q: float, tau: float, c_per_step: fl
     area_ab = math.pi * semi_a * semi_b
     # path length v_a tau k = P s^2 / (4 pi b): s^2 = scale_rate k
     poly = (x0, x1, x2, y0, y1, y2, c0, c1, c2, x3, 4.0 * math.pi * pitch * speed * tau / perimeter)
-    # Pass 1, per step: the paper's t_cutoff and the first peak of h_out.
-    peak_steps, peak_ratio = math.inf, 0.0
-    previous = _outer_area_ratio(poly, 0.0, area_ab, perimeter, radius)
-    area1 = speed * diameter * tau  # S_cover(k) = area + k area1, as coverage_outcome
+    # The paper's t_cutoff (Eq. (8)), step by step with coverage_outcome's arithmetic.
+    area1 = speed * diameter * tau  # S_cover(k) = area + k area1
     area = math.pi * radius * radius
     det = x0 * y0 - c0 * c0
     k = 0
@@ -257,33 +303,34 @@ def sharp_coverage_outcome(cov: np.ndarray, q: float, tau: float, c_per_step: fl
         k += 1
         area = next_area
         det = next_det
-        if peak_steps == math.inf:
-            ratio = _outer_area_ratio(poly, math.sqrt(poly[10] * k), area_ab, perimeter, radius)
-            if ratio < previous:
-                peak_steps, peak_ratio = k - 1.0, previous
-            previous = ratio
     cutoff = k
+    peak_steps, peak_ratio = _outer_peak(poly, float(cutoff), area_ab, perimeter, radius)
     # The flight: its detections' time sum and the strip's width.
     flight_sum = 0.0
-    strip_halfwidth = 0.0
-    strip_at_edge = 0.0
+    strip = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     if flight_steps > 0:
         flight_sum, sigma_c = flight_detection_sum(cov, flight_steps, approach_x, approach_y,
                                                    radius)
-        strip_halfwidth = radius / sigma_c
-        strip_at_edge = strip_mass(strip_halfwidth * strip_halfwidth, strip_halfwidth, 0.0)
-    # Pass 2: F on a grid, sum_{k < K} F(k) by linear interpolation between its points.
+        strip = strip_constants(radius / sigma_c)
+    # F on a grid; sum_{k < K} F(k) by linear interpolation between its points, less the
+    # curvature term F'' L (L^2 - 1) / 12 of each interval of L steps (F'' from its neighbours).
     spacing = max(1, -(-(cutoff - EXACT_STEPS) // GRID_INTERVALS))
-    at = 0
-    found = _found(poly, 0.0, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio,
-                   flight_steps, strip_halfwidth, strip_at_edge)
+    at, before = 0, 0
+    start = _outer_area_ratio(poly, 0.0, area_ab, perimeter, radius)
+    found = _found(poly, 0.0, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start,
+                   flight_steps, strip)
+    previous = found
     coverage_sum = 0.0
     while at < cutoff:
         length = min(1 if at < EXACT_STEPS else spacing, cutoff - at)
         nxt = _found(poly, float(at + length), pitch, area_ab, perimeter, radius, peak_steps,
-                     peak_ratio, flight_steps, strip_halfwidth, strip_at_edge)
+                     peak_ratio, start, flight_steps, strip)
         coverage_sum += length * found + 0.5 * (nxt - found) * (length - 1)
-        found = nxt
+        if length > 1 and before > 0:
+            second = 2.0 * ((nxt - found) / length - (found - previous) / before) / (
+                length + before)
+            coverage_sum -= second * length * (length * length - 1) / 12.0
+        previous, found, before = found, nxt, length
         at += length
     total = float(flight_steps + cutoff)
     expected = (total * found - flight_sum - coverage_sum) / found
