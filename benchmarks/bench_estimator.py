@@ -1,7 +1,8 @@
 """Speed of the coverage outcome estimator (paper Sec. IV-B), the hot call of the tree search.
 
-Run: ``python benchmarks/bench_estimator.py [--n 20000]``. Prints estimates per second for
-beliefs drawn from the paper's distributions after 0 to 600 s without observation:
+Run: ``python benchmarks/bench_estimator.py [--n 20000] [--age SECONDS]``. Prints estimates per
+second for beliefs drawn from the paper's distributions after 0 to 600 s without observation (or
+exactly ``--age`` seconds):
 
 * ``kernel``: :func:`coverage_outcome` in a compiled loop, as the tree search calls it at each
   node expansion (the covariance at the start of the coverage given);
@@ -54,19 +55,20 @@ def estimate_all_sharp(covs, qs, tau, c_per_step, speed, diameter, max_steps, fl
     return total
 
 
-def start_covariances(n: int, settings: MissionSpec, seed: int = 0
+def start_covariances(n: int, settings: MissionSpec, seed: int = 0, age: float | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Beliefs of the paper's distributions left unobserved 0 to 600 s, then intercepted from the
-    origin: ``(means, covariances at the start of coverage, q, flight steps, approach per step)``.
-    """
+    """Beliefs of the paper's distributions left unobserved 0 to 600 s (or ``age`` s), then
+    intercepted from the origin: ``(means, covariances at the start of coverage, q, flight
+    steps, approach per step)``."""
     rng = np.random.default_rng(seed)
     motion = settings.motion
     means, covs, qs = np.empty((n, 4)), np.empty((n, 4, 4)), np.empty(n)
     flights, approach = np.empty(n, dtype=np.int64), np.empty((n, 2))
     for i in range(n):
         cov, q = random_prior(rng)
-        m, c = motion.predict(random_mean(rng)[None], cov[None], q,
-                              rng.integers(0, 1201) * settings.time_step)
+        mean = random_mean(rng)
+        unobserved = rng.integers(0, 1201) * settings.time_step if age is None else age
+        m, c = motion.predict(mean[None], cov[None], q, unobserved)
         steps = intercept_steps(0.0, 0.0, *m[0], settings.agent_speed, settings.time_step,
                                 settings.sensor_radius)
         start = motion.predict(m, c, q, steps * settings.time_step)[1][0]
@@ -89,9 +91,11 @@ def best_time(function, *args, repeats: int = 5) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=20000, help="beliefs per measurement")
+    parser.add_argument("--age", type=float, default=None,
+                        help="seconds every belief goes unobserved (default: 0 to 600 s)")
     args = parser.parse_args()
     settings = MissionSpec()
-    means, covs, qs, flights, approach = start_covariances(args.n, settings)
+    means, covs, qs, flights, approach = start_covariances(args.n, settings, age=args.age)
     call = (settings.time_step, settings.c_per_step, settings.agent_speed,
             settings.sensor_diameter, 1800)
     estimate_all(covs[:10], qs[:10], *call)  # compile
