@@ -122,3 +122,18 @@ def test_root_parallel_trees_merge_their_statistics():
     assert merge_stats([None, None]) is None
     plan = search(six_targets(current_action=2), iterations=1000, seed=1, threads=2)
     assert plan.best_action == 2 and plan.after_find.visits.sum() > 0
+
+
+def test_robust_backup_finds_the_gamble_optimum_with_values_between_mean_and_max():
+    """A state worth its most visited action: on the gamble it picks the expectimax optimum,
+    and its root values lie between the mean backup's (pessimistic) and the exact ones."""
+    exact = np.array([gamble_q_exact(0, 0, a) for a in range(3)])
+    root = (np.zeros(2, dtype=np.int64),)
+    robust = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5,
+                        backup="robust")
+    mean = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5,
+                      backup="expected")
+    assert robust.best_action == int(np.argmax(exact))
+    assert np.all(robust.root.values <= exact + 1e-9)
+    assert np.all(robust.root.values >= mean.root.values - 1e-9)
+    assert abs(robust.root.values[robust.best_action] - exact.max()) < 0.02

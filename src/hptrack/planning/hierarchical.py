@@ -60,8 +60,8 @@ class MctsSettings(PlannerSettings):
         exploration: UCB1 constant ``c`` on values normalised to the observed return range.
         preset: ``"paper"`` (the paper's search, Algorithm 1) or ``"improved"``; it sets the
             options below that are not given (:data:`PRESETS`).
-        backup: ``"sampled"`` (the paper's running mean), ``"expected"`` or ``"max"``
-            (:mod:`hptrack.planning.tree`).
+        backup: ``"sampled"`` (the paper's running mean), ``"expected"``, ``"max"`` or
+            ``"robust"`` (:mod:`hptrack.planning.tree`).
         rollout: ``"uniform"`` (the paper's random policy) or ``"most_uncertain"``
             (:mod:`hptrack.planning.subtask_rollout`).
         rollout_epsilon: probability of a random action in a ``most_uncertain`` rollout.
@@ -74,7 +74,7 @@ class MctsSettings(PlannerSettings):
     time_limit: Annotated[float | None, Field(gt=0.0)] = None
     exploration: Annotated[float, Field(gt=0.0)] = DEFAULT_EXPLORATION
     preset: Literal["paper", "improved"] = DEFAULT_PRESET
-    backup: Literal["sampled", "expected", "max"] | None = None
+    backup: Literal["sampled", "expected", "max", "robust"] | None = None
     rollout: Literal["uniform", "most_uncertain"] | None = None
     rollout_epsilon: Annotated[float, Field(ge=0.0, le=1.0)] = 0.1
     threads: Annotated[int, Field(ge=1, le=64)] = 1

@@ -18,7 +18,11 @@ tree's, whatever the MDP. Three backups (``BACKUPS``):
   of its best action (a Bellman backup; a state visited once is worth its rollout's return).
   Mean backups average the returns of every action tried below, which the random rollouts drag
   down; an action whose value is exact from the start (following a target to the end of the
-  budget) then looks better than it is at small effort. The max backup removes that bias.
+  budget) then looks better than it is at small effort. The max backup removes that bias;
+* ``"robust"``: like ``"max"``, but a state is worth its most visited action (ties: the better
+  value). At the frontier of the tree, actions are valued by one or a few rollouts, and the
+  largest of several noisy values is biased upwards; UCB1 concentrates its visits on the best
+  action, so the most visited one is the best without picking a lucky rollout.
 """
 
 from __future__ import annotations
@@ -73,7 +77,7 @@ _FILL = {
 """Initial value and dtype of each node array of :class:`Tree` (``a_child``, ``a_out_*``: one
 column per outcome)."""
 
-BACKUPS = ("sampled", "expected", "max")
+BACKUPS = ("sampled", "expected", "max", "robust")
 """The backups of :func:`backup`, by code (index)."""
 PAIRED = ("a_child", "a_out_visits", "a_out_value")
 
@@ -151,6 +155,19 @@ def _best_value(tree, s):
 
 
 @numba.njit(cache=True)
+def _most_visited_value(tree, s):
+    """``V(N^a)`` of the most visited action of state node ``s`` (ties: the larger value)."""
+    best = -np.inf
+    most = 0
+    for x in range(tree.s_first[s], tree.s_first[s] + tree.s_count[s]):
+        n = tree.a_visits[x]
+        if n > most or (n == most and n > 0 and tree.a_value[x] > best):
+            most = n
+            best = tree.a_value[x]
+    return best
+
+
+@numba.njit(cache=True)
 def backup(tree, path_state, path_action, path_found, depth, ret, mode):
     """Back the return ``ret`` of a simulation up its path (Algorithm 1 lines 31-33), with the
     backup ``BACKUPS[mode]`` (module docstring). Every mode counts ``N(N^s) += 1`` and
@@ -172,7 +189,8 @@ def backup(tree, path_state, path_action, path_found, depth, ret, mode):
         tree.a_value[x] = _outcome_mean(tree, x)
         if mode == 2:
             value = _best_value(tree, path_state[d])
-            tree.s_value[path_state[d]] = value
+        elif mode == 3:
+            value = _most_visited_value(tree, path_state[d])
     tree.value_range[0] = min(tree.value_range[0], ret)
     tree.value_range[1] = max(tree.value_range[1], ret)
     tree.counts[2] += 1
