@@ -40,8 +40,8 @@ DEFAULT_ITERATIONS = 100_000
 
 
 PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {"backup": "sampled", "rollout": "uniform"},
-    "improved": {"backup": "max", "rollout": "uniform"},
+    "paper": {"backup": "sampled", "rollout": "uniform", "estimator": "paper"},
+    "improved": {"backup": "max", "rollout": "uniform", "estimator": "paper"},
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
 improvements measured in ``docs/planner-improvements.md``."""
@@ -65,6 +65,8 @@ class MctsSettings(PlannerSettings):
         rollout: ``"uniform"`` (the paper's random policy) or ``"most_uncertain"``
             (:mod:`hptrack.planning.subtask_rollout`).
         rollout_epsilon: probability of a random action in a ``most_uncertain`` rollout.
+        estimator: the sub-task outcome estimator of the search's expansions, ``"paper"``
+            (Sec. IV-B) or ``"sharp"`` (:mod:`hptrack.coverage.sharp_estimator`).
         threads: independent trees searched in parallel and merged (root parallelism), each
             with the effort above; 1 (the paper's single tree) unless the machine has spare
             cores.
@@ -77,6 +79,7 @@ class MctsSettings(PlannerSettings):
     backup: Literal["sampled", "expected", "max", "robust"] | None = None
     rollout: Literal["uniform", "most_uncertain"] | None = None
     rollout_epsilon: Annotated[float, Field(ge=0.0, le=1.0)] = 0.1
+    estimator: Literal["paper", "sharp"] | None = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
@@ -155,7 +158,7 @@ class HierarchicalPlanner:
                 last_found: int | None = None) -> SearchResult:
         problem = PlanningProblem.from_mission(
             self._mission, observation, available=self._available, last_found=last_found,
-            current_action=current_action)
+            current_action=current_action, estimator=self.settings.estimator)
         result = search(problem, iterations=self.iterations, time_limit=self.time_limit,
                         seed=self._rng, exploration=self.exploration, policy=self.policy,
                         backup=self.settings.backup, threads=self.settings.threads)

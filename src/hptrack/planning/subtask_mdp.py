@@ -56,7 +56,8 @@ import numba
 import numpy as np
 
 from hptrack.coverage.estimator import coverage_outcome
-from hptrack.coverage.intercept import intercept_steps
+from hptrack.coverage.intercept import approach_step, intercept_steps
+from hptrack.coverage.sharp_estimator import sharp_coverage_outcome
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.measurement import update_covariance
 from hptrack.models.motion import mean_position_at, position_covariance_after, predict_covariance
@@ -91,6 +92,8 @@ class Model(NamedTuple):
         follow_a, follow_g, follow_h: ``(n, L, 4, 4)`` measured-every-step maps
             (:func:`hptrack.models.riccati.riccati_table`).
         follow_len: ``(n,)`` number of valid entries of each target's maps.
+        sharp: expand with the sharp estimator instead of the paper's (see
+            :class:`PlanningProblem`).
     """
 
     means: np.ndarray
@@ -105,6 +108,7 @@ class Model(NamedTuple):
     follow_g: np.ndarray
     follow_h: np.ndarray
     follow_len: np.ndarray
+    sharp: bool
 
 
 class Memo(NamedTuple):
@@ -141,6 +145,10 @@ class PlanningProblem:
             follows it to the end of the budget).
         current_action: re-planning mode (Sec. IV-C-4): the target being pursued, fixed as the
             root's only action; ``None`` for a first plan.
+        estimator: ``"paper"`` (Sec. IV-B) or ``"sharp"``
+            (:mod:`hptrack.coverage.sharp_estimator`: detections on the intercept flight and the
+            footprint's reach; the find outcome then lasts the estimated duration from
+            departure, and the estimate depends on the approach, so it is not memoised).
     """
 
     agent_position: np.ndarray
@@ -156,6 +164,7 @@ class PlanningProblem:
     available: np.ndarray | None = None
     last_found: int | None = None
     current_action: int | None = None
+    estimator: str = "paper"
 
     def __post_init__(self) -> None:
         means = _frozen(self.means, "means")
@@ -185,6 +194,8 @@ class PlanningProblem:
         noise = arrays["measurement_noise"]
         if not (np.allclose(noise, noise.T) and np.all(np.linalg.eigvalsh(noise) > 0.0)):
             raise ValueError("measurement_noise must be symmetric positive definite")
+        if self.estimator not in ("paper", "sharp"):
+            raise ValueError(f"estimator must be 'paper' or 'sharp', got {self.estimator!r}")
         for name in ("last_found", "current_action"):
             value = getattr(self, name)
             if value is not None and not (0 <= value < n and available[value]):
@@ -198,7 +209,8 @@ class PlanningProblem:
     def from_mission(cls, mission: MissionSpec, observation: Observation,
                      available: np.ndarray | None = None,
                      last_found: int | None = None,
-                     current_action: int | None = None) -> PlanningProblem:
+                     current_action: int | None = None,
+                     estimator: str = "paper") -> PlanningProblem:
         """The problem seen from an :class:`~hptrack.interface.Observation` of a mission
         described by a :class:`~hptrack.interface.MissionSpec`."""
         return cls(
@@ -208,7 +220,7 @@ class PlanningProblem:
             c_per_step=mission.c_per_step, agent_speed=mission.agent_speed,
             sensor_diameter=mission.sensor_diameter,
             measurement_noise=mission.measurement_noise, available=available,
-            last_found=last_found, current_action=current_action)
+            last_found=last_found, current_action=current_action, estimator=estimator)
 
     @property
     def n_targets(self) -> int:
@@ -235,7 +247,7 @@ class PlanningProblem:
         return Model(np.ascontiguousarray(self.means), np.ascontiguousarray(self.process_noise),
                      np.ascontiguousarray(self.measurement_noise), self.time_step,
                      self.c_per_step, self.agent_speed, self.sensor_diameter, n_steps,
-                     stacked[0], stacked[1], stacked[2], lengths)
+                     stacked[0], stacked[1], stacked[2], lengths, self.estimator == "sharp")
 
     def root_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Fresh state arrays ``(si, sf, base_cov, base_step)`` of the root (``base_step`` 0)."""
@@ -330,6 +342,8 @@ def expand_action(env, state, a, work):
         return 1.0, left, left
     ic = intercept_of(model, sf, a, t)
     start = t + ic
+    if model.sharp:
+        return _expand_sharp(model, state, a, ic, work[0])
     if base_step[a] == 0 and memo.cutoff[a, start] >= 0:
         cutoff, p, expected = memo.cutoff[a, start], memo.p_find[a, start], memo.expected[a, start]
     else:
@@ -347,6 +361,25 @@ def expand_action(env, state, a, work):
     find_steps = max(1, ic + int(math.floor(expected + 0.5)))
     miss_steps = max(1, ic + cutoff)
     return p, find_steps, miss_steps
+
+
+@numba.njit(cache=True)
+def _expand_sharp(model, state, a, ic, cov):
+    """:func:`expand_action` with the sharp estimator: ``p_find`` includes detections on the
+    intercept flight, and a find lasts the estimated duration from departure."""
+    si, sf, base_cov, base_step = state
+    t = si[I_STEP]
+    m = model.means[a]
+    x, y = mean_position_at(m, t * model.time_step)
+    dx, dy = approach_step(sf[0], sf[1], x, y, m[2], m[3], model.agent_speed, model.time_step,
+                           ic)
+    predict_covariance(base_cov[a], model.process_noise[a], t + ic - base_step[a],
+                       model.time_step, model.c_per_step, cov)
+    cutoff, p, expected = sharp_coverage_outcome(cov, model.process_noise[a], model.time_step,
+                                                 model.c_per_step, model.agent_speed,
+                                                 model.sensor_diameter, model.n_steps - t - ic,
+                                                 ic, dx, dy)
+    return p, max(1, int(math.floor(expected + 0.5))), max(1, ic + int(cutoff))
 
 
 @numba.njit(cache=True)
