@@ -112,7 +112,7 @@ def test_presets_resolve_to_their_options_and_the_paper_keeps_its_identity():
     assert (paper.backup, paper.rollout) == ("sampled", "uniform")
     assert paper.canonical() == '{"exploration":0.5,"iterations":100000,"time_limit":null}'
     improved = MctsSettings.from_options("mcts", {"preset": "improved"})
-    assert {"backup": improved.backup, "rollout": improved.rollout} == \
+    assert {k: getattr(improved, k) for k in hierarchical.PRESETS["improved"]} == \
         hierarchical.PRESETS["improved"]
     # an option given explicitly wins over the preset; the identity names the resolved options
     mixed = MctsSettings.from_options("mcts", {"preset": "improved", "backup": "expected"})
