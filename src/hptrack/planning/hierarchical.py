@@ -125,19 +125,20 @@ class MctsSettings(PlannerSettings):
 _warmed: set[type] = set()
 
 
-def warm_up(policy: tuple = UniformRandom()) -> None:
-    """Load (or compile) the search's kernels for ``policy``'s class once per process with a
-    tiny search, so that the first timed search of a process gets as many simulations as the
-    later ones."""
-    if type(policy) in _warmed:
+def warm_up(policy: tuple = UniformRandom(), estimator: str = "paper") -> None:
+    """Load (or compile) the search's kernels for ``policy``'s class and ``estimator`` once per
+    process with a tiny search, so that the first timed search of a process gets as many
+    simulations as the later ones."""
+    if (type(policy), estimator) in _warmed:
         return
     cov = np.diag([1000.0, 1000.0, 0.4, 0.4])
     for fixed in (None, 0):
         problem = PlanningProblem(np.zeros(2), np.array([[300.0, 0, 1, 0], [-300.0, 0, 0, 1]]),
                                   np.stack([cov, cov]), np.full(2, 3e-4), 60.0, 0.5, 0.5, 30.0,
-                                  100.0, 10.0 * np.eye(2), current_action=fixed)
+                                  100.0, 10.0 * np.eye(2), current_action=fixed,
+                                  estimator=estimator)
         search(problem, iterations=64, seed=0, policy=policy)
-    _warmed.add(type(policy))
+    _warmed.add((type(policy), estimator))
 
 
 class HierarchicalPlanner:
@@ -204,7 +205,7 @@ class HierarchicalPlanner:
     def reset(self, mission: MissionSpec, observation: Observation,
               rng: np.random.Generator) -> None:
         if self.time_limit is not None:
-            warm_up(self.policy)
+            warm_up(self.policy, self.settings.estimator)
         self._mission = mission
         self._rng = rng
         self._available = np.ones(mission.n_targets, dtype=bool)
