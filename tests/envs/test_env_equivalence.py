@@ -155,9 +155,11 @@ def lost_target_scenario():
 @pytest.mark.parametrize("scenario", [random_scenario(3, seed=1, budget=200.0),
                                       lost_target_scenario()], ids=["random", "lost-target"])
 def test_subtask_env_replaying_the_tree_search_gives_its_mission(scenario):
-    """The hierarchical planner's sub-tasks, chosen one by one in SubtaskTracking-v0, fly the
-    same mission: same sub-task boundaries and outcomes, same U."""
-    record = run_episode(scenario, HierarchicalPlanner(MctsSettings(iterations=300)))
+    """The hierarchical planner's sub-tasks (the paper's search, which pursues the lost target
+    and misses it), chosen one by one in SubtaskTracking-v0, fly the same mission: same sub-task
+    boundaries and outcomes, same U."""
+    settings = MctsSettings(iterations=300, preset="paper")
+    record = run_episode(scenario, HierarchicalPlanner(settings))
     n = len(scenario.targets)
     env = gym.make("hptrack/SubtaskTracking-v0", n_targets=n, max_targets=n + 1).unwrapped
     env.reset(options={"scenario": scenario})

@@ -77,7 +77,9 @@ def test_settings_default_effort_and_identity():
     assert MctsSettings.from_options("mcts", {"iterations": "100000"}) == default
     timed = MctsSettings(time_limit=1.0)
     assert (timed.iterations, timed.time_limit) == (None, 1.0)
-    assert default.canonical() == '{"exploration":0.5,"iterations":100000,"time_limit":null}'
+    assert default.preset == "improved"  # the default since the quality-against-time benchmark
+    assert default.canonical() == \
+        '{"backup":"max","exploration":0.5,"iterations":100000,"time_limit":null}'
     assert default.digest() != timed.digest()
     assert MctsSettings.from_options("mcts", default.as_json()) == default
 

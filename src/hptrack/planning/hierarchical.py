@@ -46,7 +46,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
 improvements measured in ``docs/planner-improvements.md``."""
 
-DEFAULT_PRESET = "paper"
+DEFAULT_PRESET = "improved"
 
 
 class MctsSettings(PlannerSettings):
