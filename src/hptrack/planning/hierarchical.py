@@ -122,7 +122,8 @@ class MctsSettings(PlannerSettings):
         return UniformRandom()
 
 
-_warmed: set[type] = set()
+_warmed: set[tuple[type, str]] = set()
+"""(rollout policy class, estimator) pairs whose kernels this process has loaded."""
 
 
 def warm_up(policy: tuple = UniformRandom(), estimator: str = "paper") -> None:

@@ -46,13 +46,20 @@ class UniformRandom(NamedTuple):
 
 
 @numba.njit(cache=True)
-def uniform_random(policy, env, state, rng, candidates):
-    """:class:`UniformRandom`'s decision."""
+def available_actions(env, state, candidates):
+    """Write the available actions of ``state`` (in order) to ``candidates``; their number."""
     count = 0
     for a in range(candidates.shape[0]):
         if mdp_is_available(env, state, a):
             candidates[count] = a
             count += 1
+    return count
+
+
+@numba.njit(cache=True)
+def uniform_random(policy, env, state, rng, candidates):
+    """:class:`UniformRandom`'s decision."""
+    count = available_actions(env, state, candidates)
     if count == 0:
         return -1
     return candidates[int(uniform(rng) * count)]

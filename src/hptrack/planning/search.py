@@ -384,21 +384,22 @@ def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
     root = problem.root_state()
     fixed = -1 if problem.current_action is None else problem.current_action
 
-    def one(tree_seed: int | np.random.Generator) -> SearchResult:
-        env = subtask_mdp.SubtaskEnv(model, subtask_mdp.new_memo(problem.n_targets,
-                                                                 problem.n_steps))
-        if fixed >= 0 and not subtask_mdp.is_available(env, root, fixed):
-            raise ValueError(f"current action {fixed} cannot be carried out in the remaining "
-                             "budget")
+    envs = [subtask_mdp.SubtaskEnv(model, subtask_mdp.new_memo(problem.n_targets,
+                                                               problem.n_steps))
+            for _ in range(threads)]  # one memo per tree: the kernels write to it
+    if fixed >= 0 and not subtask_mdp.is_available(envs[0], root, fixed):
+        raise ValueError(f"current action {fixed} cannot be carried out in the remaining budget")
+
+    def one(env: subtask_mdp.SubtaskEnv, tree_seed: int | np.random.Generator) -> SearchResult:
         return search_mdp(env, root, problem.n_targets, problem.n_steps + 2,
                           subtask_mdp.new_work(), iterations, time_limit, tree_seed,
                           exploration, policy, fixed, start, backup)
 
     if threads == 1:
-        return one(seed)
+        return one(envs[0], seed)
     seeds = np.random.SeedSequence(seed_value(seed)).generate_state(threads, np.uint64)
     with ThreadPoolExecutor(threads) as pool:
-        results = list(pool.map(one, (int(s) for s in seeds)))
+        results = list(pool.map(one, envs, (int(s) for s in seeds)))
     return _merged(results, fixed)
 
 

@@ -18,9 +18,9 @@ import numpy as np
 
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.motion import position_covariance_after
-from hptrack.planning.rollout import register_policy
+from hptrack.planning.rollout import available_actions, register_policy
 from hptrack.planning.stream import uniform
-from hptrack.planning.subtask_mdp import I_LAST, I_STEP, intercept_of, is_available
+from hptrack.planning.subtask_mdp import I_LAST, I_STEP, intercept_of
 
 
 class MostUncertain(NamedTuple):
@@ -36,11 +36,7 @@ class MostUncertain(NamedTuple):
 @numba.njit(cache=True)
 def most_uncertain(policy, env, state, rng, candidates):
     """:class:`MostUncertain`'s decision (``-1`` when no action is available)."""
-    count = 0
-    for a in range(candidates.shape[0]):
-        if is_available(env, state, a):
-            candidates[count] = a
-            count += 1
+    count = available_actions(env, state, candidates)
     if count == 0:
         return -1
     if uniform(rng) < policy.epsilon:
