@@ -1,0 +1,146 @@
+"""Diagnostics of the tree search quoted in the README and ``docs/planner-improvements.md``.
+
+    # early follows (the first "follow" before 60 % of the budget) per setting, n and settings
+    python3 benchmarks/search_diagnostics.py follows --db results/effort.db
+    # paired U differences of one database's mcts episodes against another's, same scenarios
+    python3 benchmarks/search_diagnostics.py paired --db results/default-effort.db \\
+        --against docs/results/benchmark/episodes.csv \\
+        --against docs/results/learning-benchmark/episodes.csv
+    # simulations per second of each backup on a first plan
+    python3 benchmarks/search_diagnostics.py rates --targets 6,12
+    # the sub-tasks each preset flies on a scenario file
+    python3 benchmarks/search_diagnostics.py subtasks examples/paper-flight.yaml
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+EARLY = 0.6
+"""A follow that starts before this fraction of the budget is an early follow."""
+
+
+def _rows(path: Path) -> list:
+    from hptrack.experiments.store import ResultStore
+
+    store = ResultStore(path)
+    try:
+        return [r for r in store.rows() if r.key.planner == "mcts"]
+    finally:
+        store.close()
+
+
+def follows(db: Path) -> None:
+    counts, totals = defaultdict(int), defaultdict(int)
+    for r in _rows(db):
+        from hptrack.experiments.benchmark import scenario_for
+
+        group = (r.key.setting, r.key.n_targets, r.key.settings)
+        totals[group] += 1
+        entries = [e for e in (r.info or {}).get("subtasks", []) if "follow" in e]
+        limit = EARLY * scenario_for(r.key).n_steps
+        counts[group] += bool(entries and entries[0]["start_step"] < limit)
+    for group in sorted(totals):
+        print(f"{group[0]} n={group[1]} {group[2]}: {counts[group]} of {totals[group]} "
+              "episodes follow early")
+
+
+def _published(paths: list[Path]) -> dict:
+    out = {}
+    for path in paths:
+        if path.suffix == ".csv":
+            with path.open(newline="") as fh:
+                for r in csv.DictReader(fh):
+                    if r["planner"] == "mcts":
+                        out[(r["setting"], int(r["n_targets"]), int(r["seed"]))] = float(r["U"])
+        else:
+            for r in _rows(path):
+                out[(r.key.setting, r.key.n_targets, r.key.seed)] = r.uncertainty
+    return out
+
+
+def paired(db: Path, against: list[Path]) -> None:
+    reference = _published(against)
+    diffs = defaultdict(list)
+    for r in _rows(db):
+        ref = reference.get((r.key.setting, r.key.n_targets, r.key.seed))
+        if ref is not None:
+            diffs[(r.key.setting, r.key.n_targets)].append(r.uncertainty - ref)
+    print("| setting | n | U minus the reference, mean +- standard error (scenarios) |")
+    print("|---|---|---|")
+    for (setting, n), d in sorted(diffs.items()):
+        a = np.array(d)
+        se = a.std(ddof=1) / math.sqrt(a.size) if a.size > 1 else math.nan
+        print(f"| {setting} | {n} | {a.mean():+.2f} +- {se:.2f} ({a.size}) |")
+
+
+def rates(targets: list[int], seconds: float) -> None:
+    from hptrack.planning import search
+    from hptrack.planning.subtask_mdp import PlanningProblem
+    from hptrack.planning.tree import BACKUPS
+    from hptrack.scenario.random import random_scenario
+
+    for n in targets:
+        sc = random_scenario(n, seed=0, homogeneous=True)
+        spec = sc.mission_spec()
+        problem = PlanningProblem(sc.agent.position, sc.means(), sc.covariances(),
+                                  sc.process_noise(), sc.budget, spec.time_step,
+                                  spec.c_per_step, spec.agent_speed, spec.sensor_diameter,
+                                  spec.measurement_noise)
+        search(problem, iterations=64)  # load the kernels
+        for backup in BACKUPS:
+            result = search(problem, time_limit=seconds, seed=0, backup=backup)
+            print(f"n={n} {backup}: {result.simulations / result.elapsed:,.0f} simulations/s, "
+                  f"{result.state_nodes:,} state nodes")
+
+
+def subtasks(path: Path, iterations: int) -> None:
+    from hptrack.registry import make_planner
+    from hptrack.scenario.io import load_scenario
+    from hptrack.sim.episode import run_episode
+
+    scenario = load_scenario(path)
+    ids = scenario.target_ids
+    for preset in ("paper", "improved"):
+        record = run_episode(scenario, make_planner("mcts", {"preset": preset,
+                                                            "iterations": iterations}))
+        steps = [f"follow {ids[e['follow']]}" if "follow" in e and e["follow"] is not None
+                 else f"{ids[e['target_index']]} {e.get('outcome', '')}".strip()
+                 for e in record.info["subtasks"] if "follow" in e or "target_index" in e]
+        print(f"{preset}: U = {record.uncertainty:.2f}; " + ", ".join(steps))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("follows")
+    p.add_argument("--db", type=Path, required=True)
+    p = sub.add_parser("paired")
+    p.add_argument("--db", type=Path, required=True)
+    p.add_argument("--against", type=Path, action="append", required=True,
+                   help="a published episodes.csv or another results database")
+    p = sub.add_parser("rates")
+    p.add_argument("--targets", default="6,12")
+    p.add_argument("--seconds", type=float, default=1.0)
+    p = sub.add_parser("subtasks")
+    p.add_argument("scenario", type=Path)
+    p.add_argument("--iterations", type=int, default=100_000)
+    args = parser.parse_args()
+    if args.command == "follows":
+        follows(args.db)
+    elif args.command == "paired":
+        paired(args.db, args.against)
+    elif args.command == "rates":
+        rates([int(n) for n in args.targets.split(",")], args.seconds)
+    else:
+        subtasks(args.scenario, args.iterations)
+
+
+if __name__ == "__main__":
+    main()
