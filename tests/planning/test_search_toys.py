@@ -4,7 +4,11 @@ counts from the textbook UCB1 rule and the published splitmix64 stream) and a th
 solved by expectimax."""
 
 import math
+import os
+import subprocess
+import sys
 from functools import cache
+from pathlib import Path
 from typing import NamedTuple
 
 import numba
@@ -203,3 +207,19 @@ def test_search_finds_the_expectimax_optimum_and_its_values():
         errors.append(abs(result.root.values[most] - exact[optimum]))
     assert errors[0] > errors[1] > errors[2]
     assert errors[2] < 0.15  # -5.65 against the exact -5.56 after 100,000 simulations
+
+
+def test_a_toy_search_leaves_the_disk_cache_usable_by_another_process():
+    """A process that searched a toy MDP (as this module does) must not leave in the kernels'
+    disk cache anything that a process without the toy cannot load."""
+    here = Path(__file__).parent
+    toy = ("import test_search_toys as t; "
+           "t.bandit_search(np.array([0.5, 0.5]), np.zeros(2), np.ones(2), 50, 0)")
+    subprocess.run([sys.executable, "-c", f"import numpy as np; {toy}"], check=True,
+                   env={**os.environ, "PYTHONPATH": str(here)}, cwd=here)
+    plan = ("from hptrack.registry import make_planner; "
+            "from hptrack.scenario.random import random_scenario; "
+            "from hptrack.sim.episode import run_episode; "
+            "run_episode(random_scenario(2, seed=0, homogeneous=True), "
+            "make_planner('mcts', {'iterations': 200}))")
+    subprocess.run([sys.executable, "-c", plan], check=True, cwd=here.parent.parent)

@@ -45,9 +45,13 @@ class UniformRandom(NamedTuple):
     """The paper's rollout policy: an available action drawn uniformly at random."""
 
 
-@numba.njit(cache=True)
+@numba.njit
 def available_actions(env, state, candidates):
-    """Write the available actions of ``state`` (in order) to ``candidates``; their number."""
+    """Write the available actions of ``state`` (in order) to ``candidates``; their number.
+
+    Not cached on disk, like every kernel generic in the MDP: its cache index would record the
+    MDP classes it ran on (test toys too), and a process that cannot import one of them could
+    not load the index. The cached search compiles it in."""
     count = 0
     for a in range(candidates.shape[0]):
         if mdp_is_available(env, state, a):
@@ -56,7 +60,7 @@ def available_actions(env, state, candidates):
     return count
 
 
-@numba.njit(cache=True)
+@numba.njit
 def uniform_random(policy, env, state, rng, candidates):
     """:class:`UniformRandom`'s decision."""
     count = available_actions(env, state, candidates)
