@@ -1,17 +1,25 @@
 """The search's improvements on problems with exact answers: the expected and max backups
-(:mod:`hptrack.planning.tree`) and the most-uncertain rollout policy
-(:mod:`hptrack.planning.subtask_rollout`)."""
+(:mod:`hptrack.planning.tree`), the rollout policies of :mod:`hptrack.planning.subtask_rollout`
+and the weighted root split of re-planning."""
 
 import numpy as np
 import pytest
 from test_mcts import expectimax, six_targets, two_targets
-from test_search_toys import GAMBLE, Bandit, gamble_q_exact
+from test_search_toys import GAMBLE, Bandit, Gamble, gamble_q_exact
 
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.motion import position_covariance_after
 from hptrack.planning import search, search_mdp
+from hptrack.planning.search import _root_outcome
 from hptrack.planning.subtask_mdp import SubtaskEnv, intercept_of, is_available, new_memo
-from hptrack.planning.subtask_rollout import MostUncertain, most_uncertain
+from hptrack.planning.subtask_rollout import (
+    MostUncertain,
+    UniformNoFollow,
+    most_uncertain,
+    uniform_no_follow,
+)
+from hptrack.planning.tree import backup as back_up
+from hptrack.planning.tree import new_tree
 
 
 @pytest.mark.parametrize("p", [0.3, 0.5, 0.9])
@@ -137,3 +145,84 @@ def test_robust_backup_finds_the_gamble_optimum_with_values_between_mean_and_max
     assert np.all(robust.root.values <= exact + 1e-9)
     assert np.all(robust.root.values >= mean.root.values - 1e-9)
     assert abs(robust.root.values[robust.best_action] - exact.max()) < 0.02
+
+
+@pytest.mark.parametrize("weight", [0.0, 0.5, 1.0])
+def test_mixmax_backup_mixes_the_best_action_and_the_mean_return(weight):
+    """State 1 (below the root's only action) has two actions whose simulations returned -10
+    and -20: it is worth ``lambda * (-10) + (1 - lambda) * (-15)``."""
+    tree = new_tree(0, 8)
+    tree.s_first[0], tree.s_count[0] = 0, 1
+    tree.s_first[1], tree.s_count[1] = 1, 2
+    tree.a_p[:3] = 1.0
+    tree.a_child[0, 0] = 1
+    path_state, path_found = np.array([0, 1]), np.array([True, True])
+    for x, ret in ((1, -10.0), (2, -20.0)):
+        back_up(tree, path_state, np.array([0, x]), path_found, 2, ret, 2, weight)
+    assert tree.a_value[0] == weight * -10.0 + (1.0 - weight) * -15.0
+    assert list(tree.a_value[1:3]) == [-10.0, -20.0]
+
+
+def test_no_follow_rollout_draws_uniformly_among_the_targets_not_just_found():
+    problem = six_targets()
+    env = SubtaskEnv(problem.model(), new_memo(6, problem.n_steps))
+    state = problem.root_state()
+    state[0][2] = 3  # target 3 was just found
+    rng = np.array([7], dtype=np.uint64)
+    draws = [uniform_no_follow(UniformNoFollow(), env, state, rng, np.empty(6, dtype=np.int64))
+             for _ in range(3000)]
+    counts = np.bincount(draws, minlength=6)
+    assert counts[3] == 0
+    others = counts[[0, 1, 2, 4, 5]]
+    assert np.all(np.abs(others - 600) < 4 * np.sqrt(600 * 0.8))  # binomial(3000, 1/5)
+    state[0][1] = 0b001000  # only the followed target is left: it follows
+    assert uniform_no_follow(UniformNoFollow(), env, state, rng,
+                             np.empty(6, dtype=np.int64)) == 3
+
+
+def test_even_root_split_alternates_and_the_weighted_split_follows_the_probability():
+    """Even: simulation ``k`` takes the find exactly when ``k`` is odd (the paper's rule).
+    Weighted: after ``K`` simulations the find had ``floor(K f)`` of them, with
+    ``f = p^(2/3) / (p^(2/3) + (1 - p)^(2/3))``."""
+    assert [_root_outcome(k, 0.9, False) for k in range(10)] == [k % 2 == 1 for k in range(10)]
+    for p in (0.5, 0.9, 0.99):
+        f = p ** (2 / 3) / (p ** (2 / 3) + (1 - p) ** (2 / 3))
+        for total in (10, 101, 1000):
+            finds = sum(_root_outcome(k, p, True) for k in range(total))
+            assert finds == int(np.floor(total * f))
+
+
+def test_weighted_root_split_gives_the_likely_outcome_more_simulations():
+    problem = six_targets(current_action=0)
+    even = search(problem, iterations=4000, seed=1, backup="max")
+    weighted = search(problem, iterations=4000, seed=1, backup="max", weighted_root=True)
+    p = even.root.p_find[0]
+    assert 0.5 < p < 1.0
+    share = weighted.after_find.visits.sum() / (weighted.after_find.visits.sum()
+                                                + weighted.after_miss.visits.sum())
+    even_share = even.after_find.visits.sum() / (even.after_find.visits.sum()
+                                                 + even.after_miss.visits.sum())
+    f = p ** (2 / 3) / (p ** (2 / 3) + (1 - p) ** (2 / 3))
+    assert abs(even_share - 0.5) < 0.01 and abs(share - f) < 0.01
+
+
+def test_common_rollouts_value_siblings_with_the_same_random_decisions():
+    """A gamble whose every pull wins (rewards 1, 2, 4 over three pulls, value
+    ``-(score - 5)^2``): the only randomness left is the rollout's choice of actions. After
+    four simulations (the root's rollout, then one per action), each root action is valued by
+    one rollout of the last two pulls. With common random numbers those rollouts choose the
+    same pulls, so the three values are those of one common increment; with the single stream
+    they are not, for most seeds."""
+    sure = Gamble(np.ones(3), np.array([1, 2, 4]), 3, 5.0)
+    rewards = np.array([1, 2, 4])
+    increments = {int(a + b) for a in rewards for b in rewards}
+
+    def one_increment(values):
+        return any(np.allclose(values, -(rewards + inc - 5.0) ** 2) for inc in increments)
+
+    for common, expect in ((True, 20), (False, None)):
+        hits = sum(one_increment(search_mdp(sure, (np.zeros(2, dtype=np.int64),), 3, 4,
+                                            np.zeros(1), iterations=4, seed=seed,
+                                            common_rollouts=common).root.values)
+                   for seed in range(20))
+        assert hits == expect if expect else hits < 10

@@ -9,7 +9,7 @@ import pytest
 
 from hptrack.planning import PlanningProblem, search
 from hptrack.planning.rollout import UniformRandom
-from hptrack.planning.search import run_simulations
+from hptrack.planning.search import SearchOptions, run_simulations
 from hptrack.planning.subtask_mdp import (
     SubtaskEnv,
     apply_outcome,
@@ -141,7 +141,8 @@ def test_tree_is_independent_of_chunking_and_initial_capacity():
         for n in chunks:
             while n:
                 n -= run_simulations(tree, env, root, state, new_work(), UniformRandom(), 6,
-                                     problem.n_steps + 2, -1, 0.5, 0, n)
+                                     problem.n_steps + 2, -1,
+                                     SearchOptions(0.5, 0, 1.0, False, False), n)
                 if n:
                     tree = grow_tree(tree, 6)
         return tree

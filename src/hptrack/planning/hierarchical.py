@@ -32,7 +32,7 @@ from hptrack.models.motion import predicted_positions
 from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchResult, search
 from hptrack.planning.subtask_mdp import PlanningProblem
-from hptrack.planning.subtask_rollout import MostUncertain
+from hptrack.planning.subtask_rollout import MostUncertain, UniformNoFollow
 from hptrack.settings import PlannerSettings
 
 DEFAULT_ITERATIONS = 100_000
@@ -40,8 +40,10 @@ DEFAULT_ITERATIONS = 100_000
 
 
 PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {"backup": "sampled", "rollout": "uniform", "estimator": "paper"},
-    "improved": {"backup": "max", "rollout": "uniform", "estimator": "paper"},
+    "paper": {"backup": "sampled", "max_weight": 1.0, "root_split": "even",
+              "common_rollouts": False, "rollout": "uniform", "estimator": "paper"},
+    "improved": {"backup": "max", "max_weight": 1.0, "root_split": "even",
+                 "common_rollouts": False, "rollout": "uniform", "estimator": "paper"},
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
 improvements measured in ``docs/planner-improvements.md``."""
@@ -62,7 +64,15 @@ class MctsSettings(PlannerSettings):
             options below that are not given (:data:`PRESETS`).
         backup: ``"sampled"`` (the paper's running mean), ``"expected"``, ``"max"`` or
             ``"robust"`` (:mod:`hptrack.planning.tree`).
-        rollout: ``"uniform"`` (the paper's random policy) or ``"most_uncertain"``
+        max_weight: with the max backup, the weight of a state's best action in its value;
+            the rest is the mean return through the state (1: the pure max).
+        root_split: re-planning: the current action's outcomes share the root's simulations
+            ``"even"``ly (the paper's) or ``"weighted"`` by their probability
+            (:func:`hptrack.planning.search.search`).
+        common_rollouts: the rollouts that value one state's actions and outcomes share their
+            random draws (common random numbers) instead of all drawing from one stream.
+        rollout: ``"uniform"`` (the paper's random policy), ``"uniform_no_follow"`` (the same
+            without following the target just found) or ``"most_uncertain"``
             (:mod:`hptrack.planning.subtask_rollout`).
         rollout_epsilon: probability of a random action in a ``most_uncertain`` rollout.
         estimator: the sub-task outcome estimator of the search's expansions, ``"paper"``
@@ -77,7 +87,10 @@ class MctsSettings(PlannerSettings):
     exploration: Annotated[float, Field(gt=0.0)] = DEFAULT_EXPLORATION
     preset: Literal["paper", "improved"] = DEFAULT_PRESET
     backup: Literal["sampled", "expected", "max", "robust"] | None = None
-    rollout: Literal["uniform", "most_uncertain"] | None = None
+    max_weight: Annotated[float | None, Field(ge=0.0, le=1.0)] = None
+    root_split: Literal["even", "weighted"] | None = None
+    common_rollouts: bool | None = None
+    rollout: Literal["uniform", "uniform_no_follow", "most_uncertain"] | None = None
     rollout_epsilon: Annotated[float, Field(ge=0.0, le=1.0)] = 0.1
     estimator: Literal["paper", "sharp"] | None = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
@@ -109,7 +122,9 @@ class MctsSettings(PlannerSettings):
         for key, paper in PRESETS["paper"].items():
             if values[key] == paper:
                 values.pop(key)
-        if values.get("rollout", "uniform") == "uniform":
+        if values.get("backup", "sampled") != "max":
+            values.pop("max_weight", None)  # only the max backup reads it
+        if values.get("rollout", "uniform") != "most_uncertain":
             values.pop("rollout_epsilon")
         if values["threads"] == 1:
             values.pop("threads")
@@ -119,6 +134,8 @@ class MctsSettings(PlannerSettings):
         """The rollout policy instance the search takes."""
         if self.rollout == "most_uncertain":
             return MostUncertain(self.rollout_epsilon)
+        if self.rollout == "uniform_no_follow":
+            return UniformNoFollow()
         return UniformRandom()
 
 
@@ -163,7 +180,10 @@ class HierarchicalPlanner:
             current_action=current_action, estimator=self.settings.estimator)
         result = search(problem, iterations=self.iterations, time_limit=self.time_limit,
                         seed=self._rng, exploration=self.exploration, policy=self.policy,
-                        backup=self.settings.backup, threads=self.settings.threads)
+                        backup=self.settings.backup, threads=self.settings.threads,
+                        max_weight=self.settings.max_weight,
+                        weighted_root=self.settings.root_split == "weighted",
+                        common_rollouts=self.settings.common_rollouts)
         self._searches.append({"step": observation.step, "simulations": result.simulations,
                                "elapsed_s": result.elapsed, "stopped_by": result.stopped_by})
         return result

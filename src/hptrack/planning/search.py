@@ -52,11 +52,12 @@ the root everything is as above.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numba
 import numpy as np
@@ -64,7 +65,7 @@ import numpy as np
 from hptrack.planning import subtask_mdp
 from hptrack.planning.mdp import mdp_apply, mdp_copy_state, mdp_expand, mdp_is_available, mdp_value
 from hptrack.planning.rollout import UniformRandom, choose_action
-from hptrack.planning.stream import seed_value, uniform
+from hptrack.planning.stream import seed_value, substream, uniform
 from hptrack.planning.tree import (
     BACKUPS,
     LEAF,
@@ -102,6 +103,48 @@ def rollout(env, state, forced, policy, rng, candidates, work):
     return mdp_value(env, state)
 
 
+class SearchOptions(NamedTuple):
+    """The search's tunable constants, as the compiled loop takes them.
+
+    Attributes:
+        exploration: UCB1 constant ``c`` on values normalised to the observed return range.
+        backup_mode: index of the backup in :data:`~hptrack.planning.tree.BACKUPS`.
+        max_weight: the max backup's weight of a state's best action
+            (:func:`~hptrack.planning.tree.backup`).
+        weighted_root: re-planning: share the root's simulations between the current action's
+            outcomes by their probability (:func:`_root_outcome`) instead of evenly.
+        common_rollouts: a rollout from a new node draws from a stream derived from its parent
+            node (common random numbers): the rollouts that value the actions and outcomes of
+            one state take the same random decisions wherever they can, so their differences
+            are less noisy. Otherwise every draw comes from the tree's single stream (the
+            paper's).
+    """
+
+    exploration: float
+    backup_mode: int
+    max_weight: float
+    weighted_root: bool
+    common_rollouts: bool
+
+
+@numba.njit(cache=True)
+def _root_outcome(k, p, weighted):
+    """Re-planning: whether simulation ``k`` takes the current action's find outcome at the root.
+
+    Both outcomes need a plan whatever ``p`` is, so the outcome is not drawn: a share ``f`` of
+    the simulations goes to the find (``floor((k + 1) f) > floor(k f)``). Evenly (``f = 1/2``,
+    the paper's, Algorithm 1 lines 9-12), every other simulation; weighted, ``f = p^(2/3) /
+    (p^(2/3) + (1 - p)^(2/3))``, the split that minimises ``p / sqrt(n_find) + (1 - p) /
+    sqrt(n_miss)``: each plan's error, shrinking as one over the square root of its
+    simulations, weighted by how likely the plan is to be flown.
+    """
+    f = 0.5
+    if weighted:
+        a, b = p ** (2.0 / 3.0), (1.0 - p) ** (2.0 / 3.0)
+        f = a / (a + b)
+    return math.floor((k + 1) * f) > math.floor(k * f)
+
+
 @numba.njit
 def _open_slots(tree, env, s, state, fixed, n_actions):
     """Allocate the action slots of state node ``s`` (its available actions, in order; only
@@ -135,19 +178,21 @@ def _catch_up(tree, env, path_action, path_found, applied, depth, root, state, w
 
 
 @numba.njit
-def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
-                    exploration, backup_mode, n_simulations):
+def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed, options,
+                    n_simulations):
     """Run up to ``n_simulations`` simulations (Algorithm 1, ``Simulate`` from the root) and
     return how many ran: it stops early when the tree's arrays might not hold one more
     simulation's nodes (:func:`~hptrack.planning.tree.grow_tree` makes room).
 
     ``root`` is the root state (never modified), ``state`` scratch of the same shapes, ``work``
-    the MDP's scratch; ``max_depth`` bounds the number of sub-tasks of a history;
-    ``backup_mode`` indexes :data:`~hptrack.planning.tree.BACKUPS`. With the expected and max
-    backups, an action's second visit takes the outcome not yet visited (their values are
-    combined with the known ``p``, so both are needed, and the draw no longer weights them).
+    the MDP's scratch; ``max_depth`` bounds the number of sub-tasks of a history; ``options``
+    a :class:`SearchOptions`. With the expected and max backups, an action's second visit takes
+    the outcome not yet visited (their values are combined with the known ``p``, so both are
+    needed, and the draw no longer weights them).
     """
+    exploration, backup_mode = options.exploration, options.backup_mode
     candidates = np.empty(n_actions, dtype=np.int64)
+    common = np.empty(1, dtype=np.uint64)
     path_state = np.empty(max_depth, dtype=np.int64)
     path_action = np.empty(max_depth, dtype=np.int64)
     path_found = np.empty(max_depth, dtype=np.bool_)
@@ -179,8 +224,12 @@ def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, 
                     tree.s_value[s] = ret
                     break
                 tree.s_first[s] = LEAF
-                ret = rollout(env, state, fixed if s == 0 else -1, policy, tree.rng,
-                              candidates, work)
+                stream = tree.rng
+                if options.common_rollouts and depth > 0:
+                    substream(tree.rng[1], path_state[depth - 1], common)
+                    stream = common
+                ret = rollout(env, state, fixed if s == 0 else -1, policy, stream, candidates,
+                              work)
                 break
             if first == LEAF:
                 _open_slots(tree, env, s, state, fixed, n_actions)
@@ -194,7 +243,7 @@ def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, 
                 tree.a_find[x] = payload0
                 tree.a_miss[x] = payload1
             if s == 0 and fixed >= 0 and 0.0 < tree.a_p[x] < 1.0:
-                found = tree.counts[2] % 2 == 1  # re-planning: both outcomes need a plan
+                found = _root_outcome(tree.counts[2], tree.a_p[x], options.weighted_root)
             elif backup_mode > 0 and tree.a_visits[x] > 0 and 0.0 < tree.a_p[x] < 1.0 \
                     and tree.a_out_visits[x, 0] * tree.a_out_visits[x, 1] == 0:
                 found = tree.a_out_visits[x, 0] == 0
@@ -211,13 +260,14 @@ def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, 
                 tree.counts[0] += 1
                 tree.a_child[x, outcome] = child
             s = child
-        backup(tree, path_state, path_action, path_found, depth, ret, backup_mode)
+        backup(tree, path_state, path_action, path_found, depth, ret, backup_mode,
+               options.max_weight)
     return n_simulations
 
 
 @numba.njit(cache=True, nogil=True)
 def run_subtask_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
-                            exploration, backup_mode, n_simulations):
+                            options, n_simulations):
     """:func:`run_simulations` on the paper's sub-task MDP, compiled once and cached on disk.
 
     The generic loop is not cached itself: its cache index would hold the signature of every
@@ -225,7 +275,7 @@ def run_subtask_simulations(tree, env, root, state, work, policy, n_actions, max
     them could not read it. It releases the GIL, so root-parallel trees run on several cores.
     """
     return run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
-                           exploration, backup_mode, n_simulations)
+                           options, n_simulations)
 
 
 @dataclass(frozen=True, eq=False)
@@ -317,7 +367,9 @@ def search_mdp(env: tuple, root: tuple, n_actions: int, max_depth: int, work: np
                iterations: int | None = None, time_limit: float | None = None,
                seed: int | np.random.Generator = 0, exploration: float = DEFAULT_EXPLORATION,
                policy: tuple = UniformRandom(), fixed: int = -1,
-               start: float | None = None, backup: str = "sampled") -> SearchResult:
+               start: float | None = None, backup: str = "sampled",
+               max_weight: float = 1.0, weighted_root: bool = False,
+               common_rollouts: bool = False) -> SearchResult:
     """Search the registered MDP of ``env`` from ``root`` (a tuple of arrays, not modified).
 
     Args:
@@ -335,15 +387,25 @@ def search_mdp(env: tuple, root: tuple, n_actions: int, max_depth: int, work: np
         fixed: re-planning mode: the root's only action (``-1``: a first plan).
         start: a ``time.perf_counter()`` reading the time limit counts from (default now).
         backup: one of :data:`~hptrack.planning.tree.BACKUPS` (default the paper's).
+        max_weight: the max backup's weight ``lambda`` of a state's best action, in ``[0, 1]``
+            (:func:`~hptrack.planning.tree.backup`; 1 is the pure max).
+        weighted_root: re-planning: split the root's simulations between the outcomes by their
+            probability (:func:`_root_outcome`; default the paper's even split).
+        common_rollouts: draw each new node's rollout from a stream derived from its parent
+            (:class:`SearchOptions`; default the paper's single stream).
     """
     mode = _backup_mode(backup)
+    if not 0.0 <= max_weight <= 1.0:
+        raise ValueError(f"max_weight must be in [0, 1], got {max_weight}")
     state = tuple(np.array(a, copy=True) for a in root)
+    options = SearchOptions(float(exploration), mode, float(max_weight), bool(weighted_root),
+                            bool(common_rollouts))
     kernel = (run_subtask_simulations if isinstance(env, subtask_mdp.SubtaskEnv)
               else run_simulations)
 
     def simulate(tree: Tree, count: int) -> int:
-        return kernel(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
-                      float(exploration), mode, count)
+        return kernel(tree, env, root, state, work, policy, n_actions, max_depth, fixed, options,
+                      count)
 
     return run_search(simulate, n_actions, iterations, time_limit, seed, fixed, start)
 
@@ -352,7 +414,8 @@ def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
            time_limit: float | None = None, seed: int | np.random.Generator = 0,
            exploration: float = DEFAULT_EXPLORATION,
            policy: tuple = UniformRandom(), backup: str = "sampled",
-           threads: int = 1) -> SearchResult:
+           threads: int = 1, max_weight: float = 1.0,
+           weighted_root: bool = False, common_rollouts: bool = False) -> SearchResult:
     """Plan from ``problem``'s root state with Algorithm 1 (``TreeSearch``) on the sub-task MDP.
 
     Args:
@@ -368,6 +431,12 @@ def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
         policy: the rollout policy (default the paper's uniformly random one).
         backup: one of :data:`~hptrack.planning.tree.BACKUPS` (default the paper's running
             mean of sampled returns).
+        max_weight: the max backup's weight of a state's best action (1: the pure max; below,
+            mixed with the state's mean return, :func:`~hptrack.planning.tree.backup`).
+        weighted_root: re-planning: split the root's simulations between the current action's
+            outcomes by their probability instead of evenly (the paper's).
+        common_rollouts: common random numbers in the rollouts of one state's children
+            (:class:`SearchOptions`).
         threads: root parallelism: this many independent trees (each with its own stream,
             seeded from ``seed``, and the limits above), searched on as many threads and
             merged (:func:`~hptrack.planning.tree.merge_stats`). 1 is the paper's single tree.
@@ -393,7 +462,8 @@ def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
     def one(env: subtask_mdp.SubtaskEnv, tree_seed: int | np.random.Generator) -> SearchResult:
         return search_mdp(env, root, problem.n_targets, problem.n_steps + 2,
                           subtask_mdp.new_work(), iterations, time_limit, tree_seed,
-                          exploration, policy, fixed, start, backup)
+                          exploration, policy, fixed, start, backup, max_weight,
+                          weighted_root, common_rollouts)
 
     if threads == 1:
         return one(envs[0], seed)

@@ -22,6 +22,14 @@ def uniform(rng):
     return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
+@numba.njit(cache=True)
+def substream(seed, k, out):
+    """Start in ``out`` (one ``uint64``) the ``k``-th stream derived from ``seed``: the
+    splitmix64 output of ``seed + (k + 1) * golden``, so distinct ``k`` give unrelated streams."""
+    out[0] = seed + np.uint64(k + 1) * _GOLDEN
+    uniform(out)  # one step scrambles the state; the stream goes on from there
+
+
 def seed_value(seed: int | np.random.Generator) -> int:
     """The stream's initial state from an integer seed or a :class:`numpy.random.Generator`
     (one ``uint64`` drawn from it)."""

@@ -1,4 +1,11 @@
-"""An informed rollout policy for the sub-task MDP (an alternative to the paper's random one).
+"""Rollout policies for the sub-task MDP (alternatives to the paper's random one).
+
+:class:`UniformNoFollow` is the paper's uniform draw without one action: following the target
+just found, which ends the history (it keeps every other belief growing to the end of the
+budget). A uniform rollout takes it with probability ``1 / k`` after each find (``k`` available
+actions), so most random rollouts end in an early follow and value their state as if the
+mission stopped there; without it, the rollout estimates the state under random pursuit of the
+other targets. It follows only when no other action is available.
 
 :class:`MostUncertain` pursues, with probability ``1 - epsilon``, the available target whose
 position uncertainty ``log det Sigma^xy`` is largest when the agent would reach its belief mean
@@ -21,6 +28,29 @@ from hptrack.models.motion import position_covariance_after
 from hptrack.planning.rollout import available_actions, register_policy
 from hptrack.planning.stream import uniform
 from hptrack.planning.subtask_mdp import I_LAST, I_STEP, intercept_of
+
+
+class UniformNoFollow(NamedTuple):
+    """Uniformly random rollouts that do not follow the target just found (module docstring)."""
+
+
+@numba.njit(cache=True)
+def uniform_no_follow(policy, env, state, rng, candidates):
+    """:class:`UniformNoFollow`'s decision (``-1`` when no action is available)."""
+    count = available_actions(env, state, candidates)
+    if count == 0:
+        return -1
+    last = state[0][I_LAST]  # available whenever any action is: it is in the action list
+    if last < 0 or count == 1:
+        return candidates[int(uniform(rng) * count)]
+    k = int(uniform(rng) * (count - 1))  # the k-th available action other than ``last``
+    for j in range(count):
+        if candidates[j] == last:
+            continue
+        if k == 0:
+            return candidates[j]
+        k -= 1
+    return candidates[0]
 
 
 class MostUncertain(NamedTuple):
@@ -61,4 +91,5 @@ def most_uncertain(policy, env, state, rng, candidates):
     return candidates[0] if best < 0 else best
 
 
+register_policy(UniformNoFollow, uniform_no_follow)
 register_policy(MostUncertain, most_uncertain)

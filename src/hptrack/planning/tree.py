@@ -18,7 +18,10 @@ tree's, whatever the MDP. Three backups (``BACKUPS``):
   of its best action (a Bellman backup; a state visited once is worth its rollout's return).
   Mean backups average the returns of every action tried below, which the random rollouts drag
   down; an action whose value is exact from the start (following a target to the end of the
-  budget) then looks better than it is at small effort. The max backup removes that bias;
+  budget) then looks better than it is at small effort. The max backup removes that bias, but
+  the largest of several noisy values is biased upwards, more so as the tree grows: with
+  ``max_weight`` ``lambda < 1`` a state is worth ``lambda max_a V(N^a) + (1 - lambda)`` times
+  the mean return of the simulations through it (the "mixmax" backup of Jacobsen et al., 2014);
 * ``"robust"``: like ``"max"``, but a state is worth its most visited action (ties: the better
   value). At the frontier of the tree, actions are valued by one or a few rollouts, and the
   largest of several noisy values is biased upwards; UCB1 concentrates its visits on the best
@@ -46,13 +49,15 @@ class Tree(NamedTuple):
     """The search tree as arrays (state nodes ``s_*``, action nodes ``a_*``).
 
     ``counts`` holds ``[state nodes, action nodes, simulations run]``; ``value_range`` the
-    smallest and largest return seen; ``rng`` the random stream's state.
+    smallest and largest return seen; ``rng`` the random stream's state and the seed it started
+    from (the seed of the search's derived streams, :func:`hptrack.planning.stream.substream`).
     """
 
     s_first: np.ndarray
     s_count: np.ndarray
     s_visits: np.ndarray
     s_value: np.ndarray
+    s_mean: np.ndarray
     a_target: np.ndarray
     a_p: np.ndarray
     a_find: np.ndarray
@@ -69,7 +74,8 @@ class Tree(NamedTuple):
 
 _FILL = {
     "s_first": (UNVISITED, np.int32), "s_count": (0, np.int8), "s_visits": (0, np.int32),
-    "s_value": (np.nan, np.float64), "a_target": (0, np.int8), "a_p": (-1.0, np.float64),
+    "s_value": (np.nan, np.float64), "s_mean": (0.0, np.float64), "a_target": (0, np.int8),
+    "a_p": (-1.0, np.float64),
     "a_find": (0, np.int32), "a_miss": (0, np.int32), "a_visits": (0, np.int32),
     "a_value": (0.0, np.float64), "a_child": (-1, np.int32), "a_out_visits": (0, np.int32),
     "a_out_value": (0.0, np.float64),
@@ -87,7 +93,8 @@ def new_tree(seed: int, capacity: int = 1024) -> Tree:
     arrays = {name: np.full((capacity, 2) if name in PAIRED else capacity, fill, dtype=dtype)
               for name, (fill, dtype) in _FILL.items()}
     return Tree(**arrays, counts=np.array([1, 0, 0], dtype=np.int64),
-                value_range=np.array([np.inf, -np.inf]), rng=np.array([seed], dtype=np.uint64))
+                value_range=np.array([np.inf, -np.inf]),
+                rng=np.array([seed, seed], dtype=np.uint64))
 
 
 def grow_tree(tree: Tree, n_actions: int) -> Tree:
@@ -168,14 +175,16 @@ def _most_visited_value(tree, s):
 
 
 @numba.njit(cache=True)
-def backup(tree, path_state, path_action, path_found, depth, ret, mode):
+def backup(tree, path_state, path_action, path_found, depth, ret, mode, max_weight):
     """Back the return ``ret`` of a simulation up its path (Algorithm 1 lines 31-33), with the
-    backup ``BACKUPS[mode]`` (module docstring). Every mode counts ``N(N^s) += 1`` and
-    ``N(N^a) += 1``; ``"sampled"`` sets ``V(N^a) += (ret - V(N^a)) / N(N^a)``."""
+    backup ``BACKUPS[mode]`` (module docstring; ``max_weight`` is the max backup's ``lambda``).
+    Every mode counts ``N(N^s) += 1`` and ``N(N^a) += 1``; ``"sampled"`` sets
+    ``V(N^a) += (ret - V(N^a)) / N(N^a)``."""
     value = ret
     for d in range(depth - 1, -1, -1):
         x = path_action[d]
-        tree.s_visits[path_state[d]] += 1
+        s = path_state[d]
+        tree.s_visits[s] += 1
         tree.a_visits[x] += 1
         if mode == 0:
             tree.a_value[x] += (ret - tree.a_value[x]) / tree.a_visits[x]
@@ -188,9 +197,12 @@ def backup(tree, path_state, path_action, path_found, depth, ret, mode):
             tree.a_out_value[x, o] = value
         tree.a_value[x] = _outcome_mean(tree, x)
         if mode == 2:
-            value = _best_value(tree, path_state[d])
+            value = _best_value(tree, s)
+            if max_weight < 1.0:
+                tree.s_mean[s] += (ret - tree.s_mean[s]) / tree.s_visits[s]
+                value = max_weight * value + (1.0 - max_weight) * tree.s_mean[s]
         elif mode == 3:
-            value = _most_visited_value(tree, path_state[d])
+            value = _most_visited_value(tree, s)
     tree.value_range[0] = min(tree.value_range[0], ret)
     tree.value_range[1] = max(tree.value_range[1], ret)
     tree.counts[2] += 1
