@@ -14,8 +14,10 @@ from hptrack.planning.search import _root_outcome
 from hptrack.planning.subtask_mdp import SubtaskEnv, intercept_of, is_available, new_memo
 from hptrack.planning.subtask_rollout import (
     MostUncertain,
+    Nearest,
     UniformNoFollow,
     most_uncertain,
+    nearest,
     uniform_no_follow,
 )
 from hptrack.planning.tree import backup as back_up
@@ -226,3 +228,21 @@ def test_common_rollouts_value_siblings_with_the_same_random_decisions():
                                             common_rollouts=common).root.values)
                    for seed in range(20))
         assert hits == expect if expect else hits < 10
+
+
+def test_nearest_rollout_picks_the_first_reached_target_other_than_the_one_just_found():
+    """epsilon = 0: the available target with the fewest intercept steps (the lower index on a
+    tie), never the target just found while another is available; epsilon = 1: uniform."""
+    problem = six_targets(3)
+    env = SubtaskEnv(problem.model(), new_memo(6, problem.n_steps))
+    candidates = np.empty(6, dtype=np.int64)
+    rng = np.array([7], dtype=np.uint64)
+    for step, last in ((0, -1), (300, 2), (900, 4)):
+        state = problem.root_state()
+        state[0][0], state[0][2] = step, last
+        available = [a for a in range(6) if is_available(env, state, a)]
+        steps = {a: intercept_of(env.model, state[1], a, step) for a in available if a != last}
+        assert len(steps) >= 3
+        assert nearest(Nearest(0.0), env, state, rng, candidates) == min(steps, key=steps.get)
+        draws = {nearest(Nearest(1.0), env, state, rng, candidates) for _ in range(300)}
+        assert draws == set(available)

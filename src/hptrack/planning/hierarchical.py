@@ -32,7 +32,7 @@ from hptrack.models.motion import predicted_positions
 from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchResult, search
 from hptrack.planning.subtask_mdp import PlanningProblem
-from hptrack.planning.subtask_rollout import MostUncertain, UniformNoFollow
+from hptrack.planning.subtask_rollout import MostUncertain, Nearest, UniformNoFollow
 from hptrack.settings import PlannerSettings
 
 DEFAULT_ITERATIONS = 100_000
@@ -72,9 +72,10 @@ class MctsSettings(PlannerSettings):
         common_rollouts: the rollouts that value one state's actions and outcomes share their
             random draws (common random numbers) instead of all drawing from one stream.
         rollout: ``"uniform"`` (the paper's random policy), ``"uniform_no_follow"`` (the same
-            without following the target just found) or ``"most_uncertain"``
+            without following the target just found), ``"nearest"`` or ``"most_uncertain"``
             (:mod:`hptrack.planning.subtask_rollout`).
-        rollout_epsilon: probability of a random action in a ``most_uncertain`` rollout.
+        rollout_epsilon: probability of a random action in a ``nearest`` or
+            ``most_uncertain`` rollout.
         estimator: the sub-task outcome estimator of the search's expansions, ``"paper"``
             (Sec. IV-B) or ``"sharp"`` (:mod:`hptrack.coverage.sharp_estimator`).
         threads: independent trees searched in parallel and merged (root parallelism), each
@@ -90,7 +91,7 @@ class MctsSettings(PlannerSettings):
     max_weight: Annotated[float | None, Field(ge=0.0, le=1.0)] = None
     root_split: Literal["even", "weighted"] | None = None
     common_rollouts: bool | None = None
-    rollout: Literal["uniform", "uniform_no_follow", "most_uncertain"] | None = None
+    rollout: Literal["uniform", "uniform_no_follow", "nearest", "most_uncertain"] | None = None
     rollout_epsilon: Annotated[float, Field(ge=0.0, le=1.0)] = 0.1
     estimator: Literal["paper", "sharp"] | None = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
@@ -124,7 +125,7 @@ class MctsSettings(PlannerSettings):
                 values.pop(key)
         if values.get("backup", "sampled") != "max":
             values.pop("max_weight", None)  # only the max backup reads it
-        if values.get("rollout", "uniform") != "most_uncertain":
+        if values.get("rollout", "uniform") not in ("most_uncertain", "nearest"):
             values.pop("rollout_epsilon")
         if values["threads"] == 1:
             values.pop("threads")
@@ -136,6 +137,8 @@ class MctsSettings(PlannerSettings):
             return MostUncertain(self.rollout_epsilon)
         if self.rollout == "uniform_no_follow":
             return UniformNoFollow()
+        if self.rollout == "nearest":
+            return Nearest(self.rollout_epsilon)
         return UniformRandom()
 
 
