@@ -43,7 +43,9 @@ def settings(variant: str, level: float) -> str:
                                      ).canonical()
 
 
-def keys(targets, scenarios, first_seed, levels, variants, greedy):
+def keys(targets, scenarios, first_seed, levels, variants, greedy, only=None):
+    """The episodes to run; ``only``: a set of ``(variant, level)`` pairs to keep (all if
+    ``None``)."""
     from hptrack.experiments.store import EpisodeKey
     from hptrack.settings import NoSettings
 
@@ -52,7 +54,7 @@ def keys(targets, scenarios, first_seed, levels, variants, greedy):
         for n in targets:
             for level in levels:
                 out += [EpisodeKey("mcts", n, seed, SETTING, settings(v, level))
-                        for v in variants]
+                        for v in variants if only is None or (v, level) in only]
             if greedy:
                 out.append(EpisodeKey("greedy", n, seed, SETTING, NoSettings().canonical()))
     return out
@@ -74,7 +76,7 @@ def mean_se(values) -> tuple[float, float]:
     return float(a.mean()), float(a.std(ddof=1) / math.sqrt(a.size)) if a.size > 1 else math.nan
 
 
-def report(db: Path, out: Path, levels, variants) -> None:
+def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> None:
     from matplotlib.figure import Figure
 
     from hptrack.experiments.report import write_csv
@@ -136,6 +138,13 @@ def report(db: Path, out: Path, levels, variants) -> None:
         for lv in levels:
             comparisons.append((f"{v} @ {lv:g} s - paper @ {lv:g} s, % of paper", (v, lv),
                                 ("paper", lv), True))
+    if reference != "paper":
+        for v in variants:
+            if v in ("paper", reference):
+                continue
+            for lv in levels:
+                comparisons.append((f"{v} @ {lv:g} s - {reference} @ {lv:g} s, % of "
+                                    f"{reference}", (v, lv), (reference, lv), True))
     for v in variants:
         comparisons.append((f"{v} @ {top:g} s - greedy, % of greedy", (v, top),
                             ("greedy", 0.0), True))
@@ -184,10 +193,14 @@ def main() -> None:
     parser.add_argument("--define", action="append", default=[], metavar="NAME=JSON",
                         help='another variant, e.g. max_c1=\'{"backup": "max", '
                              '"exploration": 1.0}\'')
+    parser.add_argument("--only", default=None, metavar="VARIANT@LEVEL,...",
+                        help="run only these pairs of variant and level (e.g. paper@1)")
     parser.add_argument("--no-greedy", action="store_true")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--db", type=Path, default=Path("results/quality_vs_time.db"))
     parser.add_argument("--report", action="store_true", help="only write the report")
+    parser.add_argument("--reference", default="paper",
+                        help="the report also compares every variant with this one")
     parser.add_argument("--out", type=Path, default=Path("results/quality-vs-time"))
     args = parser.parse_args()
     levels = [float(x) for x in args.levels.split(",")]
@@ -198,8 +211,17 @@ def main() -> None:
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         parser.error(f"--variants: unknown {unknown} (known: {', '.join(VARIANTS)})")
+    only = None
+    if args.only:
+        only = set()
+        for pair in args.only.split(","):
+            v, _, level = pair.partition("@")
+            if v not in variants or not level or float(level) not in levels:
+                parser.error(f"--only: {pair!r} is not a variant@level of --variants and "
+                             "--levels")
+            only.add((v, float(level)))
     if args.report:
-        report(args.db, args.out, levels, variants)
+        report(args.db, args.out, levels, variants, args.reference)
         return
     from hptrack.experiments.benchmark import run_keys
     from hptrack.experiments.store import ResultStore
@@ -207,7 +229,7 @@ def main() -> None:
     args.db.parent.mkdir(parents=True, exist_ok=True)
     store = ResultStore(args.db)
     todo = keys([int(n) for n in args.targets.split(",")], args.scenarios, args.first_seed,
-                levels, variants, not args.no_greedy)
+                levels, variants, not args.no_greedy, only)
 
     def on_done(row, finished, total):
         s = json.loads(row.key.settings)

@@ -8,6 +8,8 @@
         --against docs/results/learning-benchmark/episodes.csv
     # simulations per second of each backup on a first plan
     python3 benchmarks/search_diagnostics.py rates --targets 6,12
+    # what a rollout is: sub-tasks, how often it ends in a follow, its time, per policy
+    python3 benchmarks/search_diagnostics.py rollouts --targets 6,12
     # the sub-tasks each preset flies on a scenario file
     python3 benchmarks/search_diagnostics.py subtasks examples/paper-flight.yaml
 """
@@ -80,24 +82,76 @@ def paired(db: Path, against: list[Path]) -> None:
         print(f"| {setting} | {n} | {a.mean():+.2f} +- {se:.2f} ({a.size}) |")
 
 
-def rates(targets: list[int], seconds: float) -> None:
-    from hptrack.planning import search
+def _first_problem(n: int):
     from hptrack.planning.subtask_mdp import PlanningProblem
-    from hptrack.planning.tree import BACKUPS
     from hptrack.scenario.random import random_scenario
 
+    sc = random_scenario(n, seed=0, homogeneous=True)
+    spec = sc.mission_spec()
+    return PlanningProblem(sc.agent.position, sc.means(), sc.covariances(), sc.process_noise(),
+                           sc.budget, spec.time_step, spec.c_per_step, spec.agent_speed,
+                           spec.sensor_diameter, spec.measurement_noise)
+
+
+def rates(targets: list[int], seconds: float) -> None:
+    from hptrack.planning import search
+    from hptrack.planning.tree import BACKUPS
+
     for n in targets:
-        sc = random_scenario(n, seed=0, homogeneous=True)
-        spec = sc.mission_spec()
-        problem = PlanningProblem(sc.agent.position, sc.means(), sc.covariances(),
-                                  sc.process_noise(), sc.budget, spec.time_step,
-                                  spec.c_per_step, spec.agent_speed, spec.sensor_diameter,
-                                  spec.measurement_noise)
+        problem = _first_problem(n)
         search(problem, iterations=64)  # load the kernels
         for backup in BACKUPS:
             result = search(problem, time_limit=seconds, seed=0, backup=backup)
             print(f"n={n} {backup}: {result.simulations / result.elapsed:,.0f} simulations/s, "
                   f"{result.state_nodes:,} state nodes")
+
+
+def rollouts(targets: list[int], count: int) -> None:
+    import time
+
+    import numba
+
+    from hptrack.planning import subtask_mdp as mdp
+    from hptrack.planning.rollout import UniformRandom, choose_action
+    from hptrack.planning.stream import uniform
+    from hptrack.planning.subtask_rollout import Nearest, UniformNoFollow
+
+    @numba.njit
+    def run(env, root, state, policy, rng, candidates, work, count):
+        """``count`` rollouts from ``root`` as the search runs them (its ``rollout``), counted."""
+        subtasks, follows, total = 0, 0, 0.0
+        for _ in range(count):
+            mdp.copy_state(env, root, state)
+            while True:
+                a = choose_action(policy, env, state, rng, candidates)
+                if a < 0:
+                    break
+                follows += a == state[0][mdp.I_LAST]
+                p, payload0, payload1 = mdp.expand_action(env, state, a, work)
+                found = uniform(rng) < p
+                mdp.apply_outcome(env, state, a, found, payload0 if found else payload1, work)
+                subtasks += 1
+            total += mdp.terminal_value(env, state)
+        return subtasks, follows, total
+
+    print("| rollout policy | n | sub-tasks per rollout | rollouts that end in a follow | "
+          "time per rollout | mean U |")
+    print("|---|---|---|---|---|---|")
+    for n in targets:
+        problem = _first_problem(n)
+        for name, policy in (("uniform", UniformRandom()), ("uniform_no_follow",
+                                                             UniformNoFollow()),
+                             ("nearest, epsilon 0.6", Nearest(0.6))):
+            env = mdp.SubtaskEnv(problem.model(), mdp.new_memo(n, problem.n_steps))
+            root = problem.root_state()
+            state = tuple(a.copy() for a in root)
+            args = (np.array([3], dtype=np.uint64), np.empty(n, dtype=np.int64), mdp.new_work())
+            run(env, root, state, policy, *args, 10)  # compile
+            start = time.perf_counter()
+            steps, follows, total = run(env, root, state, policy, *args, count)
+            elapsed = time.perf_counter() - start
+            print(f"| `{name}` | {n} | {steps / count:.1f} | {100 * follows / count:.0f} % | "
+                  f"{elapsed / count * 1e6:.0f} us | {-total / count:.1f} |")
 
 
 def subtasks(path: Path, iterations: int) -> None:
@@ -128,6 +182,9 @@ def main() -> None:
     p = sub.add_parser("rates")
     p.add_argument("--targets", default="6,12")
     p.add_argument("--seconds", type=float, default=1.0)
+    p = sub.add_parser("rollouts")
+    p.add_argument("--targets", default="6,12")
+    p.add_argument("--count", type=int, default=5000)
     p = sub.add_parser("subtasks")
     p.add_argument("scenario", type=Path)
     p.add_argument("--iterations", type=int, default=100_000)
@@ -136,6 +193,8 @@ def main() -> None:
         follows(args.db)
     elif args.command == "paired":
         paired(args.db, args.against)
+    elif args.command == "rollouts":
+        rollouts([int(n) for n in args.targets.split(",")], args.count)
     elif args.command == "rates":
         rates([int(n) for n in args.targets.split(",")], args.seconds)
     else:

@@ -53,39 +53,58 @@ def uniform_no_follow(policy, env, state, rng, candidates):
     return candidates[0]
 
 
+@numba.njit(cache=True)
+def epsilon_greedy(epsilon, env, state, rng, candidates, uncertainty):
+    """With probability ``epsilon`` an available action drawn uniformly, otherwise the best
+    available target other than the one just found (the lower index on a tie): the one whose
+    position ``log det Sigma^xy`` is largest when the agent reaches its belief mean
+    (``uncertainty``), or the one reached in the fewest intercept steps. ``-1`` when no action
+    is available; the target just found when it is the only one."""
+    count = available_actions(env, state, candidates)
+    if count == 0:
+        return -1
+    if uniform(rng) < epsilon:
+        return candidates[int(uniform(rng) * count)]
+    model = env.model
+    si, sf, base_cov, base_step = state
+    t = si[I_STEP]
+    best = -1
+    best_score = -np.inf
+    for k in range(count):
+        a = candidates[k]
+        if a == si[I_LAST]:
+            continue
+        steps = intercept_of(model, sf, a, t)
+        if uncertainty:
+            sxx, sxy, syy = position_covariance_after(base_cov[a], model.process_noise[a],
+                                                      float(t + steps - base_step[a]),
+                                                      model.time_step, model.c_per_step)
+            score = logdet_xy(sxx, sxy, syy)
+        else:
+            score = -float(steps)
+        if score > best_score:
+            best_score = score
+            best = a
+    return candidates[0] if best < 0 else best
+
+
 class Nearest(NamedTuple):
     """Rollouts that pursue, with probability ``1 - epsilon``, the available target other than
-    the one just found that the agent reaches first (fewest intercept steps; ties: the lower
-    index), and otherwise an available action drawn uniformly: a local tour, the opposite
-    bias of :class:`MostUncertain`.
+    the one just found that the agent reaches first (fewest intercept steps), and otherwise an
+    available action drawn uniformly: a local tour, the opposite bias of
+    :class:`MostUncertain`.
 
     Attributes:
         epsilon: probability of a uniformly random available action instead, in ``[0, 1]``.
     """
 
-    epsilon: float = 0.3
+    epsilon: float = 0.1
 
 
 @numba.njit(cache=True)
 def nearest(policy, env, state, rng, candidates):
-    """:class:`Nearest`'s decision (``-1`` when no action is available)."""
-    count = available_actions(env, state, candidates)
-    if count == 0:
-        return -1
-    if uniform(rng) < policy.epsilon:
-        return candidates[int(uniform(rng) * count)]
-    si, sf = state[0], state[1]
-    best = -1
-    best_steps = np.iinfo(np.int64).max
-    for k in range(count):
-        a = candidates[k]
-        if a == si[I_LAST]:
-            continue
-        steps = intercept_of(env.model, sf, a, si[I_STEP])
-        if steps < best_steps:
-            best_steps = steps
-            best = a
-    return candidates[0] if best < 0 else best
+    """:class:`Nearest`'s decision (:func:`epsilon_greedy` on intercept steps)."""
+    return epsilon_greedy(policy.epsilon, env, state, rng, candidates, False)
 
 
 class MostUncertain(NamedTuple):
@@ -100,30 +119,9 @@ class MostUncertain(NamedTuple):
 
 @numba.njit(cache=True)
 def most_uncertain(policy, env, state, rng, candidates):
-    """:class:`MostUncertain`'s decision (``-1`` when no action is available)."""
-    count = available_actions(env, state, candidates)
-    if count == 0:
-        return -1
-    if uniform(rng) < policy.epsilon:
-        return candidates[int(uniform(rng) * count)]
-    model = env.model
-    si, sf, base_cov, base_step = state
-    t = si[I_STEP]
-    best = -1
-    best_score = -np.inf
-    for k in range(count):
-        a = candidates[k]
-        if a == si[I_LAST]:
-            continue
-        arrival = t + intercept_of(model, sf, a, t)
-        sxx, sxy, syy = position_covariance_after(base_cov[a], model.process_noise[a],
-                                                  float(arrival - base_step[a]),
-                                                  model.time_step, model.c_per_step)
-        score = logdet_xy(sxx, sxy, syy)
-        if score > best_score:
-            best_score = score
-            best = a
-    return candidates[0] if best < 0 else best
+    """:class:`MostUncertain`'s decision (:func:`epsilon_greedy` on the uncertainty on
+    arrival)."""
+    return epsilon_greedy(policy.epsilon, env, state, rng, candidates, True)
 
 
 register_policy(UniformNoFollow, uniform_no_follow)
