@@ -64,11 +64,20 @@ def test_mcts_beats_greedy_on_twenty_three_target_scenarios():
     ("exploration", -1, "planner 'mcts': option exploration must be > 0, got -1"),
     ("exploration", "nan", "planner 'mcts': option exploration must be a finite number, got 'nan'"),
     ("exploration", float("inf"), "option exploration must be a finite number"),
+    ("max_weight", 1.5, "planner 'mcts': option max_weight must be <= 1, got 1.5"),
+    ("root_split", "uneven", "option root_split must be 'even' or 'weighted', got 'uneven'"),
 ])
 def test_invalid_settings_are_refused_naming_planner_option_and_value(option, value, message):
     with pytest.raises(InputError) as err:
         MctsSettings.from_options("mcts", {option: value})
     assert message in str(err.value)
+
+
+def test_max_weight_without_the_max_backup_is_refused():
+    with pytest.raises(InputError, match="planner 'mcts': option max_weight=0.5 applies only "
+                                         "to backup=max, got backup=sampled"):
+        MctsSettings.from_options("mcts", {"preset": "paper", "max_weight": 0.5})
+    assert MctsSettings.from_options("mcts", {"max_weight": 0.5}).max_weight == 0.5
 
 
 def test_settings_default_effort_and_identity():

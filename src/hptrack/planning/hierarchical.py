@@ -108,6 +108,13 @@ class MctsSettings(PlannerSettings):
         preset = PRESETS.get(data.get("preset", DEFAULT_PRESET), {})
         return {**data, **{k: v for k, v in preset.items() if data.get(k) is None}}
 
+    @model_validator(mode="after")
+    def _max_weight_needs_the_max_backup(self) -> MctsSettings:
+        if self.max_weight != 1.0 and self.backup != "max":
+            raise ValueError(f"option max_weight={self.max_weight:g} applies only to "
+                             f"backup=max, got backup={self.backup}")
+        return self
+
     @classmethod
     def from_canonical(cls, text: str) -> MctsSettings:
         """The settings of a stored identity: an option it leaves out has the paper's value
