@@ -146,6 +146,9 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
                 comparisons.append((f"{v} @ {lv:g} s - {reference} @ {lv:g} s, % of "
                                     f"{reference}", (v, lv), (reference, lv), True))
     for v in variants:
+        for lv in sorted(levels)[:-1]:
+            comparisons.append((f"{v} @ {top:g} s - {v} @ {lv:g} s", (v, top), (v, lv), False))
+    for v in variants:
         comparisons.append((f"{v} @ {top:g} s - greedy, % of greedy", (v, top),
                             ("greedy", 0.0), True))
     lines += ["", "Paired differences of U on the same scenarios, mean +- standard error "
