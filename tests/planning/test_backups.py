@@ -68,31 +68,37 @@ def test_unknown_backup_is_refused():
         search(two_targets(), iterations=10, backup="median")
 
 
-def test_most_uncertain_rollout_picks_the_largest_uncertainty_on_arrival():
-    """epsilon = 0: the available target whose position log det is largest when the agent
-    reaches its mean (computed here in numpy), never the target just found while another is
-    available; epsilon = 1: uniform over the available actions."""
+def _greedy_cases():
+    """States of six targets at several steps, with and without a target just found, with
+    their available actions and the greedy rules' scores computed here: the position log det
+    on arrival at the belief mean (numpy) and the intercept steps."""
     problem = six_targets(3)
     env = SubtaskEnv(problem.model(), new_memo(6, problem.n_steps))
-    model = env.model
-    candidates = np.empty(6, dtype=np.int64)
-    rng = np.array([7], dtype=np.uint64)
     for step, last in ((0, -1), (300, 2), (900, 4)):
         state = problem.root_state()
         state[0][0], state[0][2] = step, last
         available = [a for a in range(6) if is_available(env, state, a)]
-        scores = {}
-        for a in available:
-            if a == last:
-                continue
-            arrival = step + intercept_of(model, state[1], a, step)
-            scores[a] = logdet_xy(*position_covariance_after(
-                problem.covariances[a], problem.process_noise[a], float(arrival), 0.5, 0.5))
-        assert len(scores) >= 3
-        assert most_uncertain(MostUncertain(0.0), env, state, rng, candidates) == \
-            max(scores, key=scores.get)
-        draws = {most_uncertain(MostUncertain(1.0), env, state, rng, candidates)
-                 for _ in range(300)}
+        steps = {a: intercept_of(env.model, state[1], a, step) for a in available if a != last}
+        uncertainty = {a: logdet_xy(*position_covariance_after(
+            problem.covariances[a], problem.process_noise[a], float(step + k), 0.5, 0.5))
+            for a, k in steps.items()}
+        assert len(steps) >= 3
+        yield env, state, available, steps, uncertainty
+
+
+@pytest.mark.parametrize("policy, kernel", [(MostUncertain, most_uncertain), (Nearest, nearest)])
+def test_greedy_rollouts_pick_their_best_target_other_than_the_one_just_found(policy, kernel):
+    """epsilon = 0: most uncertain, the available target whose position log det is largest
+    on arrival; nearest, the one with the fewest intercept steps (the lower index on a tie);
+    never the target just found while another is available. epsilon = 1: uniform over the
+    available actions."""
+    candidates = np.empty(6, dtype=np.int64)
+    rng = np.array([7], dtype=np.uint64)
+    for env, state, available, steps, uncertainty in _greedy_cases():
+        expected = (max(uncertainty, key=uncertainty.get) if policy is MostUncertain
+                    else min(steps, key=steps.get))
+        assert kernel(policy(0.0), env, state, rng, candidates) == expected
+        draws = {kernel(policy(1.0), env, state, rng, candidates) for _ in range(300)}
         assert draws == set(available)
 
 
@@ -228,21 +234,3 @@ def test_common_rollouts_value_siblings_with_the_same_random_decisions():
                                             common_rollouts=common).root.values)
                    for seed in range(20))
         assert hits == expect if expect else hits < 10
-
-
-def test_nearest_rollout_picks_the_first_reached_target_other_than_the_one_just_found():
-    """epsilon = 0: the available target with the fewest intercept steps (the lower index on a
-    tie), never the target just found while another is available; epsilon = 1: uniform."""
-    problem = six_targets(3)
-    env = SubtaskEnv(problem.model(), new_memo(6, problem.n_steps))
-    candidates = np.empty(6, dtype=np.int64)
-    rng = np.array([7], dtype=np.uint64)
-    for step, last in ((0, -1), (300, 2), (900, 4)):
-        state = problem.root_state()
-        state[0][0], state[0][2] = step, last
-        available = [a for a in range(6) if is_available(env, state, a)]
-        steps = {a: intercept_of(env.model, state[1], a, step) for a in available if a != last}
-        assert len(steps) >= 3
-        assert nearest(Nearest(0.0), env, state, rng, candidates) == min(steps, key=steps.get)
-        draws = {nearest(Nearest(1.0), env, state, rng, candidates) for _ in range(300)}
-        assert draws == set(available)
