@@ -130,8 +130,6 @@ class MctsSettings(PlannerSettings):
         for key, paper in PRESETS["paper"].items():
             if values[key] == paper:
                 values.pop(key)
-        if values.get("backup", "sampled") != "max":
-            values.pop("max_weight", None)  # only the max backup reads it
         if values.get("rollout", "uniform") not in ("most_uncertain", "nearest"):
             values.pop("rollout_epsilon")
         if values["threads"] == 1:

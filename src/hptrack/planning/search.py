@@ -45,9 +45,10 @@ expansion), so a descent to a cached terminal node costs no transition at all.
 
 **Re-planning** (lines 9-12): the root's only action is the current one (``fixed``), and the
 result gives ``argmax V`` over the actions of its find child and of its miss child. As both
-answers are needed whatever ``p`` is (it is often above 0.99), the root's outcome alternates
-between find and miss instead of being drawn, so each child gets half of the simulations; below
-the root everything is as above.
+answers are needed whatever ``p`` is (it is often above 0.99), the root's outcome is not drawn:
+it alternates between find and miss, so each child gets half of the simulations, or with
+``weighted_root`` the find gets a share that grows with ``p`` (:func:`_root_outcome`); below the
+root everything is as above.
 """
 
 from __future__ import annotations

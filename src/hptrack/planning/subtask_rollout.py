@@ -44,13 +44,7 @@ def uniform_no_follow(policy, env, state, rng, candidates):
     if last < 0 or count == 1:
         return candidates[int(uniform(rng) * count)]
     k = int(uniform(rng) * (count - 1))  # the k-th available action other than ``last``
-    for j in range(count):
-        if candidates[j] == last:
-            continue
-        if k == 0:
-            return candidates[j]
-        k -= 1
-    return candidates[0]
+    return candidates[k + 1] if candidates[k] >= last else candidates[k]
 
 
 @numba.njit(cache=True)

@@ -8,7 +8,7 @@ payload per outcome that the MDP needs to replay the transition, e.g. a duration
 search rebuilds them from the root by replaying the stored transitions.
 
 :func:`select` is UCB1 (paper Algorithm 1, line 23) and :func:`backup` the backup; both are the
-tree's, whatever the MDP. Three backups (``BACKUPS``):
+tree's, whatever the MDP. Four backups (``BACKUPS``):
 
 * ``"sampled"``, the paper's (lines 31-33): ``V(N^a)`` is the running mean of the returns of the
   simulations through the action, whose outcomes were drawn from ``p``;
