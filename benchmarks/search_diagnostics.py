@@ -12,6 +12,10 @@
     python3 benchmarks/search_diagnostics.py rollouts --targets 6,12
     # the sub-tasks each preset flies on a scenario file
     python3 benchmarks/search_diagnostics.py subtasks examples/paper-flight.yaml
+    # how well the MDP predicts the sub-tasks flown: durations and find rates, per n and outcome
+    python3 benchmarks/search_diagnostics.py model-accuracy --db results/targets.db
+    # what a dwell after a find buys: the belief's uncertainty later, with and without it
+    python3 benchmarks/search_diagnostics.py dwell
 """
 
 from __future__ import annotations
@@ -170,6 +174,67 @@ def subtasks(path: Path, iterations: int) -> None:
         print(f"{preset}: U = {record.uncertainty:.2f}; " + ", ".join(steps))
 
 
+def model_accuracy(db: Path) -> None:
+    """Each pursuit sub-task flown by the max-backup searches of ``db``: its duration against
+    the MDP's (intercept plus ``E[T_find]`` or ``t_cutoff``), and the find rate against the
+    mean ``p_find``."""
+    flown = defaultdict(list)
+    for r in _rows(db):
+        from hptrack.experiments.benchmark import scenario_for
+
+        if '"backup":"max"' not in r.key.settings:
+            continue
+        tau = scenario_for(r.key).time_step
+        for e in (r.info or {}).get("subtasks", []):
+            if "target_index" in e and "outcome" in e:
+                found = e["outcome"] == "found"
+                predicted = e["intercept_time"] + (e["expected_time"] if found else e["t_cutoff"])
+                flown[r.key.n_targets].append(
+                    (found, (e["end_step"] - e["start_step"]) * tau, predicted, e["p_find"]))
+    for n in sorted(flown):
+        rows = np.array(flown[n])
+        for found, name in ((1.0, "found"), (0.0, "missed")):
+            part = rows[rows[:, 0] == found]
+            if len(part):
+                print(f"n={n} {name}: {len(part)} sub-tasks, mean duration "
+                      f"{part[:, 1].mean():.1f} s flown against {part[:, 2].mean():.1f} s "
+                      "predicted")
+        print(f"n={n}: find rate {rows[:, 0].mean():.3f} against mean p_find "
+              f"{rows[:, 3].mean():.3f}")
+
+
+def dwell(unseen: float, q: float) -> None:
+    """A target unseen for ``unseen`` s from a typical prior, found, optionally followed for a
+    dwell, then left: its position ``log det Sigma^xy`` and variance later, per dwell length."""
+    from hptrack.models.beliefs import position_logdet
+    from hptrack.models.measurement import update_covariance
+    from hptrack.models.motion import predict_covariance
+
+    tau, noise = 0.5, 10.0 * np.eye(2)
+
+    def grow(cov, seconds):
+        out = np.empty((4, 4))
+        predict_covariance(cov, q, round(seconds / tau), tau, tau, out)
+        return out
+
+    def measure(cov):
+        out = np.empty((4, 4))
+        update_covariance(cov, noise, out)
+        return out
+
+    found = measure(grow(np.diag([1000.0, 1000.0, 0.4, 0.4]), unseen))
+    print(f"q = {q:g} m^2/s^3, unseen {unseen:g} s before the find, R = 10 I m^2, tau = {tau} s")
+    print("dwell s | velocity variance (m/s)^2 | log det after 60 / 150 / 300 s | x variance "
+          "after 300 s, m^2")
+    for length in (0, 5, 10, 20, 40):
+        cov = found
+        for _ in range(round(length / tau)):
+            cov = measure(grow(cov, tau))
+        later = [grow(cov, s) for s in (60.0, 150.0, 300.0)]
+        logdets = " / ".join(f"{v:.2f}" for v in position_logdet(np.array(later)))
+        print(f"{length:7d} | {cov[2, 2]:.4f} | {logdets} | {later[2][0, 0]:.0f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -188,6 +253,11 @@ def main() -> None:
     p = sub.add_parser("subtasks")
     p.add_argument("scenario", type=Path)
     p.add_argument("--iterations", type=int, default=100_000)
+    p = sub.add_parser("model-accuracy")
+    p.add_argument("--db", type=Path, required=True)
+    p = sub.add_parser("dwell")
+    p.add_argument("--unseen", type=float, default=200.0, help="s")
+    p.add_argument("--q", type=float, default=3e-4, help="m^2/s^3")
     args = parser.parse_args()
     if args.command == "follows":
         follows(args.db)
@@ -197,6 +267,10 @@ def main() -> None:
         rollouts([int(n) for n in args.targets.split(",")], args.count)
     elif args.command == "rates":
         rates([int(n) for n in args.targets.split(",")], args.seconds)
+    elif args.command == "model-accuracy":
+        model_accuracy(args.db)
+    elif args.command == "dwell":
+        dwell(args.unseen, args.q)
     else:
         subtasks(args.scenario, args.iterations)
 

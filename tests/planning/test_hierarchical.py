@@ -66,6 +66,7 @@ def test_mcts_beats_greedy_on_twenty_three_target_scenarios():
     ("exploration", float("inf"), "option exploration must be a finite number"),
     ("max_weight", 1.5, "planner 'mcts': option max_weight must be <= 1, got 1.5"),
     ("root_split", "uneven", "option root_split must be 'even' or 'weighted', got 'uneven'"),
+    ("dwell", -5, "planner 'mcts': option dwell must be >= 0, got -5"),
 ])
 def test_invalid_settings_are_refused_naming_planner_option_and_value(option, value, message):
     with pytest.raises(InputError) as err:
@@ -169,3 +170,32 @@ def test_a_stored_identity_means_the_same_search_whatever_the_default_preset(mon
             again = MctsSettings.from_canonical(settings.canonical())
             assert (again.backup, again.rollout, again.canonical()) == \
                 (settings.backup, settings.rollout, settings.canonical())
+
+
+def test_dwell_follows_the_target_just_found_for_its_length_then_flies_the_plan():
+    """With ``dwell`` (beyond the paper) the planner may follow a target it has just found for
+    the dwell's length only: each dwell starts where a find ended, lasts its length, and is
+    followed by the plan made for it, or a fresh plan if that one cannot be flown."""
+    scenario = random_scenario(4, seed=1, homogeneous=True)
+    record = run_episode(scenario, mcts(iterations=2000, preset="improved", dwell=10.0))
+    log = record.info["subtasks"]
+    dwells = [i for i, entry in enumerate(log) if "dwell" in entry]
+    assert dwells, "the search never chose the dwell"
+    for i in dwells:
+        entry, before = log[i], log[i - 1]
+        assert entry["dwell"] == before.get("target_index", before.get("dwell"))
+        assert before.get("outcome", "found") == "found"
+        assert entry["start_step"] == before["end_step"]
+        if "end_step" in entry:
+            assert entry["end_step"] - entry["start_step"] == 20
+            after = log[i + 1]
+            assert after["start_step"] == entry["end_step"]
+            planned = entry["plan_after_dwell"]
+            if planned is not None and planned < len(scenario.targets):
+                assert after.get("target_index", after.get("follow")) == planned
+    again = run_episode(scenario, mcts(iterations=2000, preset="improved", dwell=10.0))
+    assert again.uncertainty == record.uncertainty
+    settings = MctsSettings(preset="improved", dwell=10.0)
+    assert '"dwell":10.0' in settings.canonical()
+    assert "dwell" not in MctsSettings(preset="improved").canonical()
+    assert MctsSettings.from_canonical(settings.canonical()).dwell == 10.0

@@ -220,3 +220,57 @@ def test_problem_arrays_are_frozen_copies():
     assert not problem.means.flags.writeable
     assert (problem.n_steps, problem.mask) == (1800, 1)
     assert problem.root_state()[0].tolist() == [0, 1, 0]
+
+
+def test_dwell_measures_the_target_just_found_at_every_step_and_keeps_it_last():
+    """The dwell (an option beyond the paper): action ``n`` after a find lasts ``dwell_steps``,
+    has ``p_find = 1``, and leaves the found target measured at every step of it (by hand: one
+    prediction and update per step); the agent ends on its mean and it stays the last found,
+    so it can be followed or dwelt on again."""
+    q = 3e-4
+    means = [[900, 0, 1, 1], [0, 900, 0, 0]]
+    problem = make_problem(means, [prior(), prior()], dwell_time=10.0)
+    assert (problem.dwell_steps, problem.n_actions) == (20, 3)
+    env, state, si, sf, cov, step = setup(problem)
+    work = new_work()
+    assert not is_available(env, state, 2)  # nothing found yet
+    _, find_steps, _ = expand_action(env, state, 0, work)
+    apply_outcome(env, state, 0, True, find_steps, work)
+    assert is_available(env, state, 2)
+    assert expand_action(env, state, 2, work) == (1.0, 20, 20)
+    apply_outcome(env, state, 2, True, 20, work)
+    expected = kalman(predict(prior(), q, find_steps))
+    for _ in range(20):
+        expected = kalman(predict(expected, q, 1))
+    np.testing.assert_allclose(cov[0], expected, rtol=1e-9, atol=1e-12)
+    end = find_steps + 20
+    assert (si[I_STEP], si[I_LAST], step[0], si[I_MASK]) == (end, 0, end, 0b11)
+    np.testing.assert_allclose(sf, [900 + end * TAU, end * TAU])
+    # dwelling, then following to the end, is following from the find to the end
+    left = env.model.n_steps - end
+    apply_outcome(env, state, 0, True, expand_action(env, state, 0, work)[1], work)
+    followed = make_problem(means, [prior(), prior()])
+    env2, state2, si2, sf2, cov2, step2 = setup(followed)
+    apply_outcome(env2, state2, 0, True, find_steps, work)
+    apply_outcome(env2, state2, 0, True, 20 + left, work)
+    np.testing.assert_allclose(cov[0], cov2[0], rtol=1e-9, atol=1e-12)
+    assert terminal_value(env, state) == pytest.approx(terminal_value(env2, state2), rel=1e-12)
+
+
+def test_dwell_is_available_only_after_a_find_and_before_the_budget_ends():
+    problem = make_problem([[0, 0, 0, 0]], [prior()], budget=30.0, last_found=0,
+                           dwell_time=14.75)  # 29.5 steps: the nearest whole step, 30
+    assert problem.dwell_steps == 30
+    env, state, *_ = setup(problem)
+    assert is_available(env, state, 1)  # 30 < 60 steps left
+    short = make_problem([[0, 0, 0, 0]], [prior()], budget=15.0, last_found=0, dwell_time=14.75)
+    env, state, *_ = setup(short)
+    assert not is_available(env, state, 1)  # 30 steps is the whole budget: that is the follow
+    off = make_problem([[0, 0, 0, 0]], [prior()], last_found=0)
+    assert (off.dwell_steps, off.n_actions) == (0, 1)
+    assert make_problem([[0, 0, 0, 0]], [prior()], dwell_time=0.1).dwell_steps == 1
+    with pytest.raises(ValueError, match="current_action=1"):
+        make_problem([[0, 0, 0, 0]], [prior()], dwell_time=10.0, current_action=1)
+    with pytest.raises(ValueError, match="dwell_time"):
+        make_problem([[0, 0, 0, 0]], [prior()], dwell_time=-1.0)
+    make_problem([[0, 0, 0, 0]], [prior()], dwell_time=10.0, last_found=0, current_action=1)

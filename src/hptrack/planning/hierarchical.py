@@ -9,7 +9,9 @@
    start, with the planning effort given per decision.
 4. When the sub-task ends, the outcome that happened picks the next target from the plan. A
    missed target leaves the action list (Sec. IV-C-2); choosing the target just found again means
-   following it to the end of the budget.
+   following it to the end of the budget. With the ``dwell`` option (beyond the paper) the plan
+   may also follow it for the dwell's length only (action index ``n``, also in the log's plans),
+   re-planning with the dwell fixed as it starts.
 
 Choices the paper leaves open (recorded in the README): a missed target that the agent measures
 by chance later returns to the action list; a planned next action that the remaining budget can
@@ -31,7 +33,7 @@ from hptrack.interface import MissionSpec, Observation
 from hptrack.models.motion import predicted_positions
 from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchResult, search
-from hptrack.planning.subtask_mdp import PlanningProblem
+from hptrack.planning.subtask_mdp import PlanningProblem, dwell_steps
 from hptrack.planning.subtask_rollout import MostUncertain, Nearest, UniformNoFollow
 from hptrack.settings import PlannerSettings
 
@@ -41,9 +43,11 @@ DEFAULT_ITERATIONS = 100_000
 
 PRESETS: dict[str, dict[str, Any]] = {
     "paper": {"backup": "sampled", "max_weight": 1.0, "root_split": "even",
-              "common_rollouts": False, "rollout": "uniform", "estimator": "paper"},
+              "common_rollouts": False, "rollout": "uniform", "estimator": "paper",
+              "dwell": 0.0},
     "improved": {"backup": "max", "max_weight": 1.0, "root_split": "even",
-                 "common_rollouts": False, "rollout": "uniform", "estimator": "paper"},
+                 "common_rollouts": False, "rollout": "uniform", "estimator": "paper",
+                 "dwell": 0.0},
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
 improvements measured in ``docs/planner-improvements.md``."""
@@ -78,6 +82,9 @@ class MctsSettings(PlannerSettings):
             ``most_uncertain`` rollout.
         estimator: the sub-task outcome estimator of the search's expansions, ``"paper"``
             (Sec. IV-B) or ``"sharp"`` (:mod:`hptrack.coverage.sharp_estimator`).
+        dwell: length of an extra action beyond the paper, s: follow the target just found
+            for this long, then choose again (:mod:`hptrack.planning.subtask_mdp`); 0 (the
+            paper): no such action.
         threads: independent trees searched in parallel and merged (root parallelism), each
             with the effort above; 1 (the paper's single tree) unless the machine has spare
             cores.
@@ -94,6 +101,7 @@ class MctsSettings(PlannerSettings):
     rollout: Literal["uniform", "uniform_no_follow", "nearest", "most_uncertain"] | None = None
     rollout_epsilon: Annotated[float, Field(ge=0.0, le=1.0)] = 0.1
     estimator: Literal["paper", "sharp"] | None = None
+    dwell: Annotated[float | None, Field(ge=0.0, le=1e6)] = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
@@ -185,7 +193,8 @@ class HierarchicalPlanner:
                 last_found: int | None = None) -> SearchResult:
         problem = PlanningProblem.from_mission(
             self._mission, observation, available=self._available, last_found=last_found,
-            current_action=current_action, estimator=self.settings.estimator)
+            current_action=current_action, estimator=self.settings.estimator,
+            dwell_time=self.settings.dwell)
         result = search(problem, iterations=self.iterations, time_limit=self.time_limit,
                         seed=self._rng, exploration=self.exploration, policy=self.policy,
                         backup=self.settings.backup, threads=self.settings.threads,
@@ -206,6 +215,22 @@ class HierarchicalPlanner:
         left = int(np.floor(observation.remaining_budget / mission.time_step + 1e-9))
         return 0 <= steps < left
 
+    def _dwell_feasible(self, observation: Observation, last_found: int | None) -> bool:
+        """A target was just found and the dwell ends before the budget (as in the MDP)."""
+        left = int(np.floor(observation.remaining_budget / self._mission.time_step + 1e-9))
+        return last_found is not None and 0 < self._dwell_steps < left
+
+    def _start_dwell(self, observation: Observation, target: int) -> None:
+        """Follow ``target`` for the dwell and re-plan with the dwell fixed."""
+        self._follow = target
+        self._subtask = None
+        self._dwell_end = observation.step + self._dwell_steps
+        plan = self._search(observation, current_action=self._mission.n_targets,
+                            last_found=target)
+        self._plan = (plan.best_after_find, None)
+        self._log.append({"dwell": target, "start_step": observation.step,
+                          "plan_after_dwell": self._plan[0]})
+
     def _start(self, observation: Observation, target: int) -> None:
         """Begin a sub-task on ``target`` and re-plan with it fixed (conditional plan)."""
         self._subtask = CoverageSubtask.from_observation(observation, target, self._mission)
@@ -216,9 +241,16 @@ class HierarchicalPlanner:
 
     def _next(self, observation: Observation, planned: int | None,
               last_found: int | None) -> None:
-        """Carry on after a sub-task: follow, start the planned target, or plan afresh."""
-        if planned is None or (planned != last_found
-                               and not self._feasible(observation, planned)):
+        """Carry on after a sub-task: follow, dwell, start the planned target, or plan
+        afresh."""
+        dwell = self._mission.n_targets  # the dwell's action index
+        if planned is None:
+            feasible = False
+        elif planned == dwell:
+            feasible = self._dwell_feasible(observation, last_found)
+        else:
+            feasible = planned == last_found or self._feasible(observation, planned)
+        if not feasible:
             if self._available.any() and observation.remaining_budget > 0:
                 planned = self._search(observation, last_found=last_found).best_action
             else:
@@ -227,6 +259,9 @@ class HierarchicalPlanner:
             self._follow = last_found
             self._subtask = None
             self._log.append({"follow": last_found, "start_step": observation.step})
+            return
+        if planned == dwell:
+            self._start_dwell(observation, last_found)
             return
         self._start(observation, planned)
 
@@ -241,6 +276,8 @@ class HierarchicalPlanner:
         self._subtask: CoverageSubtask | None = None
         self._plan: tuple[int | None, int | None] = (None, None)
         self._follow: int | None = None
+        self._dwell_end: int | None = None
+        self._dwell_steps = dwell_steps(self.settings.dwell, mission.time_step)
         self._log: list[dict] = []
         self._searches: list[dict] = []
         self._next(observation, None, None)
@@ -257,6 +294,11 @@ class HierarchicalPlanner:
                 self._available[target] = False
             self._next(observation, self._plan[0] if found else self._plan[1],
                        target if found else None)
+        if self._dwell_end is not None and observation.step >= self._dwell_end:
+            target = self._follow
+            self._follow = self._dwell_end = None
+            self._log[-1].update(end_step=observation.step)
+            self._next(observation, self._plan[0], target)
         if self._subtask is not None:
             return self._subtask.next_waypoint(observation)
         if self._follow is not None:
@@ -264,6 +306,7 @@ class HierarchicalPlanner:
         return observation.agent_position
 
     def episode_info(self) -> dict:
-        """The sub-tasks flown (plan, estimate, outcome), every search's effort, the settings."""
+        """The sub-tasks flown (plan, estimate, outcome; a planned action ``n`` is the dwell),
+        every search's effort, the settings."""
         return {"settings": self.settings.as_json(), "subtasks": self._log,
                 "searches": self._searches}

@@ -461,7 +461,7 @@ def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
         raise ValueError(f"current action {fixed} cannot be carried out in the remaining budget")
 
     def one(env: subtask_mdp.SubtaskEnv, tree_seed: int | np.random.Generator) -> SearchResult:
-        return search_mdp(env, root, problem.n_targets, problem.n_steps + 2,
+        return search_mdp(env, root, problem.n_actions, problem.n_steps + 2,
                           subtask_mdp.new_work(), iterations, time_limit, tree_seed,
                           exploration, policy, fixed, start, backup, max_weight,
                           weighted_root, common_rollouts)

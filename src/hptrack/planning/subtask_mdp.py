@@ -41,7 +41,15 @@ Either way the agent ends at the target's estimated position and every other bel
 time spent. A sub-task lasts at least one step (so a history always advances in time). Choosing the
 target found by the previous sub-task again follows it to the end of the budget with its detection
 guaranteed: it is measured at every step, its covariance follows the Riccati recursion
-(:func:`hptrack.models.riccati.measured_covariance`). At the end of the budget, or when no action is
+(:func:`hptrack.models.riccati.measured_covariance`).
+
+**Dwell** (an option beyond the paper, off by default: ``dwell_steps = 0``). With
+``dwell_steps > 0`` the MDP has one more action, index ``n`` ("dwell"): follow the target just
+found for ``dwell_steps`` steps only, measured at every step, then choose again with that target
+still the last found. A single find fixes a target's position but leaves much of its velocity
+uncertain, so its belief grows fast afterwards; a short dwell measures the velocity too. The
+action is available when a target was just found and the dwell ends strictly before the budget
+(otherwise it is the follow). At the end of the budget, or when no action is
 available, the value of the state is ``-U`` with ``U = sum_i log det Sigma^xy_i`` at step ``N``
 (Sec. III).
 """
@@ -94,6 +102,7 @@ class Model(NamedTuple):
         follow_len: ``(n,)`` number of valid entries of each target's maps.
         sharp: expand with the sharp estimator instead of the paper's (see
             :class:`PlanningProblem`).
+        dwell_steps: length of the dwell action in steps; 0: no dwell action (the paper).
     """
 
     means: np.ndarray
@@ -109,6 +118,7 @@ class Model(NamedTuple):
     follow_h: np.ndarray
     follow_len: np.ndarray
     sharp: bool
+    dwell_steps: int
 
 
 class Memo(NamedTuple):
@@ -149,6 +159,9 @@ class PlanningProblem:
             (:mod:`hptrack.coverage.sharp_estimator`: detections on the intercept flight and the
             footprint's reach; the find outcome then lasts the estimated duration from
             departure, and the estimate depends on the approach, so it is not memoised).
+        dwell_time: length of the dwell action, s (rounded to whole steps, at least one); 0
+            (the paper): no dwell action. With it, action ``n_targets`` is the dwell and
+            ``current_action`` may be it.
     """
 
     agent_position: np.ndarray
@@ -165,6 +178,7 @@ class PlanningProblem:
     last_found: int | None = None
     current_action: int | None = None
     estimator: str = "paper"
+    dwell_time: float = 0.0
 
     def __post_init__(self) -> None:
         means = _frozen(self.means, "means")
@@ -196,10 +210,19 @@ class PlanningProblem:
             raise ValueError("measurement_noise must be symmetric positive definite")
         if self.estimator not in ("paper", "sharp"):
             raise ValueError(f"estimator must be 'paper' or 'sharp', got {self.estimator!r}")
-        for name in ("last_found", "current_action"):
-            value = getattr(self, name)
-            if value is not None and not (0 <= value < n and available[value]):
-                raise ValueError(f"{name}={value} is not an available target")
+        dwell = float(self.dwell_time)
+        if not (math.isfinite(dwell) and dwell >= 0.0):
+            raise ValueError(f"dwell_time must be a non-negative finite number, got {dwell!r}")
+        object.__setattr__(self, "dwell_time", dwell)
+        if self.last_found is not None and not (0 <= self.last_found < n
+                                                and available[self.last_found]):
+            raise ValueError(f"last_found={self.last_found} is not an available target")
+        action = self.current_action
+        if action is not None and not ((0 <= action < n and available[action])
+                                       or (action == n and self.dwell_steps > 0
+                                           and self.last_found is not None)):
+            raise ValueError(f"current_action={action} is not an available target"
+                             + (" or the dwell" if self.dwell_steps > 0 else ""))
         object.__setattr__(self, "means", means)
         object.__setattr__(self, "available", available)
         for name, array in arrays.items():
@@ -210,7 +233,7 @@ class PlanningProblem:
                      available: np.ndarray | None = None,
                      last_found: int | None = None,
                      current_action: int | None = None,
-                     estimator: str = "paper") -> PlanningProblem:
+                     estimator: str = "paper", dwell_time: float = 0.0) -> PlanningProblem:
         """The problem seen from an :class:`~hptrack.interface.Observation` of a mission
         described by a :class:`~hptrack.interface.MissionSpec`."""
         return cls(
@@ -220,7 +243,8 @@ class PlanningProblem:
             c_per_step=mission.c_per_step, agent_speed=mission.agent_speed,
             sensor_diameter=mission.sensor_diameter,
             measurement_noise=mission.measurement_noise, available=available,
-            last_found=last_found, current_action=current_action, estimator=estimator)
+            last_found=last_found, current_action=current_action, estimator=estimator,
+            dwell_time=dwell_time)
 
     @property
     def n_targets(self) -> int:
@@ -230,6 +254,16 @@ class PlanningProblem:
     def n_steps(self) -> int:
         """``N``: whole steps left in the budget."""
         return int(math.floor(self.remaining_budget / self.time_step + 1e-9))
+
+    @property
+    def dwell_steps(self) -> int:
+        """Steps of the dwell action (0: none)."""
+        return dwell_steps(self.dwell_time, self.time_step)
+
+    @property
+    def n_actions(self) -> int:
+        """Actions of the MDP: one per target, and the dwell if there is one."""
+        return self.n_targets + (1 if self.dwell_steps > 0 else 0)
 
     @property
     def mask(self) -> int:
@@ -247,7 +281,8 @@ class PlanningProblem:
         return Model(np.ascontiguousarray(self.means), np.ascontiguousarray(self.process_noise),
                      np.ascontiguousarray(self.measurement_noise), self.time_step,
                      self.c_per_step, self.agent_speed, self.sensor_diameter, n_steps,
-                     stacked[0], stacked[1], stacked[2], lengths, self.estimator == "sharp")
+                     stacked[0], stacked[1], stacked[2], lengths, self.estimator == "sharp",
+                     self.dwell_steps)
 
     def root_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Fresh state arrays ``(si, sf, base_cov, base_step)`` of the root (``base_step`` 0)."""
@@ -256,6 +291,13 @@ class PlanningProblem:
         return (si, np.array(self.agent_position, dtype=np.float64),
                 np.array(self.covariances, dtype=np.float64),
                 np.zeros(self.n_targets, dtype=np.int64))
+
+
+def dwell_steps(dwell_time: float, time_step: float) -> int:
+    """Whole steps of a dwell of ``dwell_time`` s (nearest, at least one; 0 for no dwell)."""
+    if dwell_time == 0.0:
+        return 0
+    return max(1, int(math.floor(dwell_time / time_step + 0.5)))
 
 
 def _frozen(value, name: str) -> np.ndarray:
@@ -314,11 +356,17 @@ def intercept_of(model, sf, a, t):
 @numba.njit(cache=True)
 def is_available(env, state, a):
     """Whether target ``a`` is an action of the state: in the action list and either followed
-    (``a`` was just found) or interceptable strictly before the end of the budget."""
+    (``a`` was just found) or interceptable strictly before the end of the budget; or, for
+    ``a = n``, whether the dwell is (a target was just found, and the dwell ends before the
+    budget)."""
     model = env.model
     si, sf = state[0], state[1]
     t = si[I_STEP]
-    if t >= model.n_steps or not (si[I_MASK] >> a) & 1:
+    if t >= model.n_steps:
+        return False
+    if a == model.means.shape[0]:
+        return si[I_LAST] >= 0 and model.dwell_steps < model.n_steps - t
+    if not (si[I_MASK] >> a) & 1:
         return False
     if a == si[I_LAST]:
         return True
@@ -332,7 +380,8 @@ def expand_action(env, state, a, work):
 
     Returns ``(p_find, find_steps, miss_steps)``: the probability of the find outcome and the
     sub-task's duration for each outcome, in steps. Following (``a`` was just found) has
-    ``p_find = 1`` and lasts to the end of the budget. ``work`` is ``(>= 1, 4, 4)`` scratch.
+    ``p_find = 1`` and lasts to the end of the budget; the dwell has ``p_find = 1`` and lasts
+    ``dwell_steps``. ``work`` is ``(>= 1, 4, 4)`` scratch.
     """
     model, memo = env.model, env.memo
     si, sf, base_cov, base_step = state
@@ -340,6 +389,8 @@ def expand_action(env, state, a, work):
     left = model.n_steps - t
     if a == si[I_LAST]:
         return 1.0, left, left
+    if a == model.means.shape[0]:
+        return 1.0, model.dwell_steps, model.dwell_steps
     ic = intercept_of(model, sf, a, t)
     start = t + ic
     if model.sharp:
@@ -387,14 +438,16 @@ def apply_outcome(env, state, a, found, payload, work):
     """Move the state through the sub-task "pursue ``a``" lasting ``payload`` steps.
 
     Found: ``a``'s covariance becomes the posterior of a measurement at the end step (or, when
-    following, the followed covariance at the end of the budget). Missed: ``a`` leaves the action
-    list. The agent ends at ``a``'s estimated position; other beliefs are implicit (they grow
-    from their base). ``work`` is ``(>= 5, 4, 4)`` scratch.
+    following or dwelling, the covariance measured at every step to the end). Missed: ``a``
+    leaves the action list. The agent ends at the pursued target's estimated position; other
+    beliefs are implicit (they grow from their base). ``work`` is ``(>= 5, 4, 4)`` scratch.
     """
     model = env.model
     si, sf, base_cov, base_step = state
     t = si[I_STEP]
     end = t + payload
+    if a == model.means.shape[0]:
+        a = si[I_LAST]  # the dwell measures the target just found, which stays the last found
     if found:
         prior = work[4]
         q = model.process_noise[a]

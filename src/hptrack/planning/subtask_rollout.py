@@ -50,10 +50,10 @@ def uniform_no_follow(policy, env, state, rng, candidates):
 @numba.njit(cache=True)
 def epsilon_greedy(epsilon, env, state, rng, candidates, uncertainty):
     """With probability ``epsilon`` an available action drawn uniformly, otherwise the best
-    available target other than the one just found (the lower index on a tie): the one whose
-    position ``log det Sigma^xy`` is largest when the agent reaches its belief mean
-    (``uncertainty``), or the one reached in the fewest intercept steps. ``-1`` when no action
-    is available; the target just found when it is the only one."""
+    available target other than the one just found (neither its follow nor its dwell; the lower
+    index on a tie): the one whose position ``log det Sigma^xy`` is largest when the agent
+    reaches its belief mean (``uncertainty``), or the one reached in the fewest intercept steps.
+    ``-1`` when no action is available; the first available action when no other target is."""
     count = available_actions(env, state, candidates)
     if count == 0:
         return -1
@@ -66,7 +66,7 @@ def epsilon_greedy(epsilon, env, state, rng, candidates, uncertainty):
     best_score = -np.inf
     for k in range(count):
         a = candidates[k]
-        if a == si[I_LAST]:
+        if a == si[I_LAST] or a == model.means.shape[0]:  # the follow, the dwell
             continue
         steps = intercept_of(model, sf, a, t)
         if uncertainty:
