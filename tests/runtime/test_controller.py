@@ -279,3 +279,24 @@ def test_the_mission_ends_at_the_budget(flight_scenario):
         math.log(np.linalg.det(cov[:2, :2])), rel=1e-10)
     assert not ctrl.detection(60.1, "p1", [30.0, 10.0])
     assert ctrl.rejected["detection: after the end"] == 1
+
+
+def test_the_current_sub_task_names_a_follow_a_dwell_and_a_pursuit():
+    from hptrack.cli.flight import _subtask_text
+    from hptrack.runtime.controller import _subtask_of
+
+    class Logged:
+        def __init__(self, entry):
+            self.entry = entry
+
+        def episode_info(self):
+            return {"subtasks": [self.entry]}
+
+    ids = ("t1", "t2")
+    dwell = _subtask_of(Logged({"dwell": 1, "start_step": 30}), ids)
+    assert dwell == {"dwell": "t2", "since_step": 30}
+    assert _subtask_text(dwell) == "dwell on t2 (since step 30)"
+    follow = _subtask_of(Logged({"follow": 0, "start_step": 7}), ids)
+    assert _subtask_text(follow) == "follow t1 (since step 7)"
+    pursuit = _subtask_of(Logged({"target_index": 0, "start_step": 0, "p_find": 0.5}), ids)
+    assert _subtask_text(pursuit) == "pursue t1 (since step 0, p_find 0.50)"

@@ -47,12 +47,13 @@ def test_subtask_labels_follow_the_planner_log():
     info = {"subtasks": [
         {"target_index": 1, "start_step": 0, "end_step": 10, "outcome": "found"},
         {"target_index": 0, "start_step": 10, "end_step": 30, "outcome": "missed"},
-        {"follow": 1, "start_step": 30},
+        {"dwell": 1, "start_step": 30, "end_step": 35, "plan_after_dwell": 1},
+        {"follow": 1, "start_step": 35},
     ]}
-    labels, focus = subtask_at(info, ("a", "b"), np.array([0, 9, 10, 29, 30, 40]))
-    assert labels == ["pursuing b", "pursuing b", "pursuing a", "pursuing a", "following b",
-                      "following b"]
-    assert focus.tolist() == [1, 1, 0, 0, 1, 1]
+    labels, focus = subtask_at(info, ("a", "b"), np.array([0, 9, 10, 29, 30, 34, 35, 40]))
+    assert labels == ["pursuing b", "pursuing b", "pursuing a", "pursuing a", "dwelling on b",
+                      "dwelling on b", "following b", "following b"]
+    assert focus.tolist() == [1, 1, 0, 0, 1, 1, 1, 1]
     ended = {"subtasks": [{"target_index": 0, "start_step": 0, "end_step": 5,
                            "outcome": "missed"}, {"follow": None, "start_step": 8}]}
     labels, focus = subtask_at(ended, ("a",), np.array([4, 5, 8]))

@@ -64,6 +64,8 @@ def _subtask_text(subtask: dict | None) -> str:
         return "-"
     if "follow" in subtask:
         return f"follow {subtask['follow']} (since step {subtask.get('since_step')})"
+    if "dwell" in subtask:
+        return f"dwell on {subtask['dwell']} (since step {subtask.get('since_step')})"
     p_find = subtask.get("p_find")
     extra = f", p_find {p_find:.2f}" if isinstance(p_find, float) else ""
     return f"pursue {subtask['target']} (since step {subtask.get('since_step')}{extra})"

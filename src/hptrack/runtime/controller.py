@@ -131,6 +131,8 @@ def _subtask_of(planner: Planner, target_ids: tuple[str, ...]) -> dict[str, Any]
     last = subtasks[-1]
     if last.get("follow") is not None:
         return {"follow": target_ids[int(last["follow"])], "since_step": last.get("start_step")}
+    if "dwell" in last:
+        return {"dwell": target_ids[int(last["dwell"])], "since_step": last.get("start_step")}
     if "target_index" in last:
         return {"target": target_ids[int(last["target_index"])],
                 "since_step": last.get("start_step"), "p_find": last.get("p_find"),

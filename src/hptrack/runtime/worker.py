@@ -29,7 +29,8 @@ class PlanOutcome:
         error: the failure (``"TypeError: ..."``), or ``None``.
         compute_s: wall time the call took, s.
         subtask: the planner's current sub-task after the call (``{"target": i, "outcome":
-            ...}`` or ``{"follow": i}``), or ``None`` for planners without sub-tasks.
+            ...}``, ``{"follow": i}`` or ``{"dwell": i}``), or ``None`` for planners without
+            sub-tasks.
     """
 
     tick: int

@@ -75,8 +75,9 @@ def subtask_at(info: dict, target_ids: Sequence[str], steps: np.ndarray
                ) -> tuple[list[str], np.ndarray]:
     """What the planner was doing at each step, from its sub-task log (``info["subtasks"]``).
 
-    Returns a label per step (``"pursuing t2"``, ``"following t1"``, ``"hover"``, or ``""``
-    without a log) and the index of the target in focus (``-1`` for none).
+    Returns a label per step (``"pursuing t2"``, ``"following t1"``, ``"dwelling on t1"``,
+    ``"hover"``, or ``""`` without a log) and the index of the target in focus (``-1`` for
+    none).
     """
     entries = info.get("subtasks") or []
     starts = [e["start_step"] for e in entries]
@@ -96,6 +97,9 @@ def subtask_at(info: dict, target_ids: Sequence[str], steps: np.ndarray
         elif entry.get("follow") is not None:
             focus[f] = entry["follow"]
             labels.append(f"following {target_ids[entry['follow']]}")
+        elif "dwell" in entry:
+            focus[f] = entry["dwell"]
+            labels.append(f"dwelling on {target_ids[entry['dwell']]}")
         else:
             labels.append("hover")
     return labels, focus
