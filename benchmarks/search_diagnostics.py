@@ -6,6 +6,9 @@
     python3 benchmarks/search_diagnostics.py paired --db results/default-effort.db \\
         --against docs/results/benchmark/episodes.csv \\
         --against docs/results/learning-benchmark/episodes.csv
+    # ... of some of its episodes against others of the same database (resolved mcts options)
+    python3 benchmarks/search_diagnostics.py paired --db results/default-effort.db \\
+        --where dwell=20 --against results/default-effort.db --against-where dwell=0
     # simulations per second of each backup on a first plan
     python3 benchmarks/search_diagnostics.py rates --targets 6,12
     # what a rollout is: sub-tasks, how often it ends in a follow, its time, per policy
@@ -57,7 +60,21 @@ def follows(db: Path) -> None:
               "episodes follow early")
 
 
-def _published(paths: list[Path]) -> dict:
+def _matches(settings: str, where: list[str]) -> bool:
+    """Whether the mcts settings (canonical text) have every resolved ``option=value`` of
+    ``where`` (an option a canonical text leaves out has the paper's value)."""
+    from hptrack.planning.hierarchical import MctsSettings
+
+    resolved = MctsSettings.from_canonical(settings).as_json()
+    for condition in where:
+        key, _, value = condition.partition("=")
+        have = resolved[key]
+        if (have != float(value)) if isinstance(have, float) else (str(have) != value):
+            return False
+    return True
+
+
+def _published(paths: list[Path], where: list[str]) -> dict:
     out = {}
     for path in paths:
         if path.suffix == ".csv":
@@ -67,14 +84,17 @@ def _published(paths: list[Path]) -> dict:
                         out[(r["setting"], int(r["n_targets"]), int(r["seed"]))] = float(r["U"])
         else:
             for r in _rows(path):
-                out[(r.key.setting, r.key.n_targets, r.key.seed)] = r.uncertainty
+                if _matches(r.key.settings, where):
+                    out[(r.key.setting, r.key.n_targets, r.key.seed)] = r.uncertainty
     return out
 
 
-def paired(db: Path, against: list[Path]) -> None:
-    reference = _published(against)
+def paired(db: Path, against: list[Path], where: list[str], against_where: list[str]) -> None:
+    reference = _published(against, against_where)
     diffs = defaultdict(list)
     for r in _rows(db):
+        if not _matches(r.key.settings, where):
+            continue
         ref = reference.get((r.key.setting, r.key.n_targets, r.key.seed))
         if ref is not None:
             diffs[(r.key.setting, r.key.n_targets)].append(r.uncertainty - ref)
@@ -244,6 +264,10 @@ def main() -> None:
     p.add_argument("--db", type=Path, required=True)
     p.add_argument("--against", type=Path, action="append", required=True,
                    help="a published episodes.csv or another results database")
+    p.add_argument("--where", action="append", default=[], metavar="OPTION=VALUE",
+                   help="only --db's episodes with this resolved mcts option")
+    p.add_argument("--against-where", action="append", default=[], metavar="OPTION=VALUE",
+                   help="only the reference databases' episodes with this resolved option")
     p = sub.add_parser("rates")
     p.add_argument("--targets", default="6,12")
     p.add_argument("--seconds", type=float, default=1.0)
@@ -262,7 +286,7 @@ def main() -> None:
     if args.command == "follows":
         follows(args.db)
     elif args.command == "paired":
-        paired(args.db, args.against)
+        paired(args.db, args.against, args.where, args.against_where)
     elif args.command == "rollouts":
         rollouts([int(n) for n in args.targets.split(",")], args.count)
     elif args.command == "rates":
