@@ -198,10 +198,10 @@ def model_accuracy(db: Path) -> None:
     """Each pursuit sub-task flown by the max-backup searches of ``db``: its duration against
     the MDP's (intercept plus ``E[T_find]`` or ``t_cutoff``), and the find rate against the
     mean ``p_find``."""
+    from hptrack.experiments.benchmark import scenario_for
+
     flown = defaultdict(list)
     for r in _rows(db):
-        from hptrack.experiments.benchmark import scenario_for
-
         if '"backup":"max"' not in r.key.settings:
             continue
         tau = scenario_for(r.key).time_step

@@ -33,7 +33,7 @@ from hptrack.interface import MissionSpec, Observation
 from hptrack.models.motion import predicted_positions
 from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchResult, search
-from hptrack.planning.subtask_mdp import PlanningProblem, dwell_steps
+from hptrack.planning.subtask_mdp import PlanningProblem, dwell_steps, steps_left
 from hptrack.planning.subtask_rollout import MostUncertain, Nearest, UniformNoFollow
 from hptrack.settings import PlannerSettings
 
@@ -212,12 +212,11 @@ class HierarchicalPlanner:
         m, agent, mission = observation.means[target], observation.agent_position, self._mission
         steps = intercept_steps(agent[0], agent[1], m[0], m[1], m[2], m[3], mission.agent_speed,
                                 mission.time_step, mission.sensor_radius)
-        left = int(np.floor(observation.remaining_budget / mission.time_step + 1e-9))
-        return 0 <= steps < left
+        return 0 <= steps < steps_left(observation.remaining_budget, mission.time_step)
 
     def _dwell_feasible(self, observation: Observation, last_found: int | None) -> bool:
         """A target was just found and the dwell ends before the budget (as in the MDP)."""
-        left = int(np.floor(observation.remaining_budget / self._mission.time_step + 1e-9))
+        left = steps_left(observation.remaining_budget, self._mission.time_step)
         return last_found is not None and 0 < self._dwell_steps < left
 
     def _start_dwell(self, observation: Observation, target: int) -> None:

@@ -253,7 +253,7 @@ class PlanningProblem:
     @property
     def n_steps(self) -> int:
         """``N``: whole steps left in the budget."""
-        return int(math.floor(self.remaining_budget / self.time_step + 1e-9))
+        return steps_left(self.remaining_budget, self.time_step)
 
     @property
     def dwell_steps(self) -> int:
@@ -291,6 +291,11 @@ class PlanningProblem:
         return (si, np.array(self.agent_position, dtype=np.float64),
                 np.array(self.covariances, dtype=np.float64),
                 np.zeros(self.n_targets, dtype=np.int64))
+
+
+def steps_left(remaining_budget: float, time_step: float) -> int:
+    """Whole steps of ``time_step`` s in ``remaining_budget`` s (``N``)."""
+    return int(math.floor(remaining_budget / time_step + 1e-9))
 
 
 def dwell_steps(dwell_time: float, time_step: float) -> int:
@@ -353,6 +358,12 @@ def intercept_of(model, sf, a, t):
                            0.5 * model.sensor_diameter)
 
 
+@numba.njit(cache=True, inline="always")
+def is_dwell(model, a):
+    """Whether action ``a`` is the dwell (index ``n``, after the targets)."""
+    return a == model.means.shape[0]
+
+
 @numba.njit(cache=True)
 def is_available(env, state, a):
     """Whether target ``a`` is an action of the state: in the action list and either followed
@@ -364,7 +375,7 @@ def is_available(env, state, a):
     t = si[I_STEP]
     if t >= model.n_steps:
         return False
-    if a == model.means.shape[0]:
+    if is_dwell(model, a):
         return si[I_LAST] >= 0 and model.dwell_steps < model.n_steps - t
     if not (si[I_MASK] >> a) & 1:
         return False
@@ -389,7 +400,7 @@ def expand_action(env, state, a, work):
     left = model.n_steps - t
     if a == si[I_LAST]:
         return 1.0, left, left
-    if a == model.means.shape[0]:
+    if is_dwell(model, a):
         return 1.0, model.dwell_steps, model.dwell_steps
     ic = intercept_of(model, sf, a, t)
     start = t + ic
@@ -446,7 +457,7 @@ def apply_outcome(env, state, a, found, payload, work):
     si, sf, base_cov, base_step = state
     t = si[I_STEP]
     end = t + payload
-    if a == model.means.shape[0]:
+    if is_dwell(model, a):
         a = si[I_LAST]  # the dwell measures the target just found, which stays the last found
     if found:
         prior = work[4]

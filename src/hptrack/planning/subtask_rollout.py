@@ -27,7 +27,7 @@ from hptrack.models.beliefs import logdet_xy
 from hptrack.models.motion import position_covariance_after
 from hptrack.planning.rollout import available_actions, register_policy
 from hptrack.planning.stream import uniform
-from hptrack.planning.subtask_mdp import I_LAST, I_STEP, intercept_of
+from hptrack.planning.subtask_mdp import I_LAST, I_STEP, intercept_of, is_dwell
 
 
 class UniformNoFollow(NamedTuple):
@@ -66,7 +66,7 @@ def epsilon_greedy(epsilon, env, state, rng, candidates, uncertainty):
     best_score = -np.inf
     for k in range(count):
         a = candidates[k]
-        if a == si[I_LAST] or a == model.means.shape[0]:  # the follow, the dwell
+        if a == si[I_LAST] or is_dwell(model, a):  # the follow, the dwell
             continue
         steps = intercept_of(model, sf, a, t)
         if uncertainty:
