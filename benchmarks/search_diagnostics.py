@@ -19,6 +19,8 @@
     python3 benchmarks/search_diagnostics.py model-accuracy --db results/targets.db
     # what a dwell after a find buys: the belief's uncertainty later, with and without it
     python3 benchmarks/search_diagnostics.py dwell
+    # the targets a search never finds, and what U is with none, one, two... of them
+    python3 benchmarks/search_diagnostics.py lost --db results/targets.db --where time_limit=1
 """
 
 from __future__ import annotations
@@ -223,6 +225,38 @@ def model_accuracy(db: Path) -> None:
               f"{rows[:, 3].mean():.3f}")
 
 
+def lost(db: Path, where: list[str]) -> None:
+    """Per ``n`` and settings of ``db``'s homogeneous mcts episodes matching ``where``: the
+    targets no pursuit found (never pursued, or only missed), mean ``U`` by their number, and
+    what one such target adds to ``U`` if nothing else measures it (its prior grown to the end:
+    the never-observed ``U`` over ``n``, the same for every target of a homogeneous scenario)."""
+    groups = defaultdict(list)
+    for r in _rows(db):
+        if r.key.setting != "homogeneous" or not _matches(r.key.settings, where):
+            continue
+        tried, found = set(), set()
+        for e in (r.info or {}).get("subtasks", []):
+            if "target_index" in e:
+                tried.add(e["target_index"])
+                if e.get("outcome") == "found":
+                    found.add(e["target_index"])
+        n = r.key.n_targets
+        groups[(n, r.key.settings)].append((r.uncertainty, n - len(tried), len(tried - found),
+                                            r.never_observed / n))
+    for (n, settings), rows in sorted(groups.items()):
+        a = np.array(rows)
+        lost_count = a[:, 1] + a[:, 2]
+        by = ", ".join(f"{k:.0f}: {a[lost_count == k, 0].mean():.1f} ({(lost_count == k).sum()})"
+                       for k in np.unique(lost_count))
+        share = (lost_count * a[:, 3]).sum() / a[:, 0].sum()
+        others = (a[:, 0] - lost_count * a[:, 3]).sum() / (n * len(a) - lost_count.sum())
+        print(f"n={n} {settings}: {len(a)} episodes, mean U {a[:, 0].mean():.2f}; never found "
+              f"{lost_count.mean():.2f} per episode (never pursued {a[:, 1].mean():.2f}, only "
+              f"missed {a[:, 2].mean():.2f}), each worth up to {a[:, 3].mean():.2f} of U, "
+              f"together at most {100 * share:.0f} % of U; the others at least "
+              f"{others:.1f} per target; mean U by the number never found: {by}")
+
+
 def dwell(unseen: float, q: float) -> None:
     """A target unseen for ``unseen`` s from a typical prior, found, optionally followed for a
     dwell, then left: its position ``log det Sigma^xy`` and variance later, per dwell length."""
@@ -279,6 +313,10 @@ def main() -> None:
     p.add_argument("--iterations", type=int, default=100_000)
     p = sub.add_parser("model-accuracy")
     p.add_argument("--db", type=Path, required=True)
+    p = sub.add_parser("lost")
+    p.add_argument("--db", type=Path, required=True)
+    p.add_argument("--where", action="append", default=[], metavar="OPTION=VALUE",
+                   help="only the episodes with this resolved mcts option")
     p = sub.add_parser("dwell")
     p.add_argument("--unseen", type=float, default=200.0, help="s")
     p.add_argument("--q", type=float, default=3e-4, help="m^2/s^3")
@@ -293,6 +331,8 @@ def main() -> None:
         rates([int(n) for n in args.targets.split(",")], args.seconds)
     elif args.command == "model-accuracy":
         model_accuracy(args.db)
+    elif args.command == "lost":
+        lost(args.db, args.where)
     elif args.command == "dwell":
         dwell(args.unseen, args.q)
     else:
