@@ -48,10 +48,10 @@ def _rows(path: Path) -> list:
 
 
 def follows(db: Path) -> None:
+    from hptrack.experiments.benchmark import scenario_for
+
     counts, totals = defaultdict(int), defaultdict(int)
     for r in _rows(db):
-        from hptrack.experiments.benchmark import scenario_for
-
         group = (r.key.setting, r.key.n_targets, r.key.settings)
         totals[group] += 1
         entries = [e for e in (r.info or {}).get("subtasks", []) if "follow" in e]
