@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import math
 from collections import defaultdict
 from pathlib import Path
@@ -62,12 +63,19 @@ def follows(db: Path) -> None:
               "episodes follow early")
 
 
-def _matches(settings: str, where: list[str]) -> bool:
-    """Whether the mcts settings (canonical text) have every resolved ``option=value`` of
-    ``where`` (an option a canonical text leaves out has the paper's value)."""
+@functools.cache
+def _resolved(settings: str) -> dict:
+    """The resolved mcts options of a canonical settings text (an option it leaves out has the
+    paper's value)."""
     from hptrack.planning.hierarchical import MctsSettings
 
-    resolved = MctsSettings.from_canonical(settings).as_json()
+    return MctsSettings.from_canonical(settings).as_json()
+
+
+def _matches(settings: str, where: list[str]) -> bool:
+    """Whether the mcts settings (canonical text) have every resolved ``option=value`` of
+    ``where``."""
+    resolved = _resolved(settings)
     for condition in where:
         key, _, value = condition.partition("=")
         have = resolved[key]
@@ -204,7 +212,7 @@ def model_accuracy(db: Path) -> None:
 
     flown = defaultdict(list)
     for r in _rows(db):
-        if '"backup":"max"' not in r.key.settings:
+        if not _matches(r.key.settings, ["backup=max"]):
             continue
         tau = scenario_for(r.key).time_step
         for e in (r.info or {}).get("subtasks", []):
@@ -289,6 +297,10 @@ def dwell(unseen: float, q: float) -> None:
         print(f"{length:7d} | {cov[2, 2]:.4f} | {logdets} | {later[2][0, 0]:.0f}")
 
 
+def _where(parser: argparse.ArgumentParser, flag: str, text: str) -> None:
+    parser.add_argument(flag, action="append", default=[], metavar="OPTION=VALUE", help=text)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -298,10 +310,8 @@ def main() -> None:
     p.add_argument("--db", type=Path, required=True)
     p.add_argument("--against", type=Path, action="append", required=True,
                    help="a published episodes.csv or another results database")
-    p.add_argument("--where", action="append", default=[], metavar="OPTION=VALUE",
-                   help="only --db's episodes with this resolved mcts option")
-    p.add_argument("--against-where", action="append", default=[], metavar="OPTION=VALUE",
-                   help="only the reference databases' episodes with this resolved option")
+    _where(p, "--where", "only --db's episodes with this resolved mcts option")
+    _where(p, "--against-where", "only the reference databases' episodes with this option")
     p = sub.add_parser("rates")
     p.add_argument("--targets", default="6,12")
     p.add_argument("--seconds", type=float, default=1.0)
@@ -315,8 +325,7 @@ def main() -> None:
     p.add_argument("--db", type=Path, required=True)
     p = sub.add_parser("lost")
     p.add_argument("--db", type=Path, required=True)
-    p.add_argument("--where", action="append", default=[], metavar="OPTION=VALUE",
-                   help="only the episodes with this resolved mcts option")
+    _where(p, "--where", "only the episodes with this resolved mcts option")
     p = sub.add_parser("dwell")
     p.add_argument("--unseen", type=float, default=200.0, help="s")
     p.add_argument("--q", type=float, default=3e-4, help="m^2/s^3")
