@@ -53,10 +53,15 @@ def measure(name: str, n_targets: int, seeds: range, options: dict) -> dict:
         never.append(scenario.never_observed_uncertainty())
     times_ms = 1e3 * np.array(times)
     return {
-        "mean_ms": times_ms.mean(), "p95_ms": np.percentile(times_ms, 95),
-        "max_ms": times_ms.max(), "capped": np.mean(capped), "expanded": np.mean(expanded),
-        "mission_s": np.mean(walls), "mission_max_s": np.max(walls),
-        "u": np.mean(u), "never": np.mean(never),
+        "mean_ms": times_ms.mean(),
+        "p95_ms": np.percentile(times_ms, 95),
+        "max_ms": times_ms.max(),
+        "capped": np.mean(capped),
+        "expanded": np.mean(expanded),
+        "mission_s": np.mean(walls),
+        "mission_max_s": np.max(walls),
+        "u": np.mean(u),
+        "never": np.mean(never),
     }
 
 
@@ -72,18 +77,23 @@ def main() -> None:
     options = planner_options(args.option, tuple(names))
     warm_up(names, options)
     seeds = range(args.first_seed, args.first_seed + args.scenarios)
-    header = (f"{'planner':8} {'n':>2} {'decision ms mean':>16} {'p95':>7} {'max':>7} "
-              f"{'capped':>7} {'expanded':>9} {'mission s':>9} {'max':>6} {'U':>7} "
-              f"{'never':>7}")
+    header = (
+        f"{'planner':8} {'n':>2} {'decision ms mean':>16} {'p95':>7} {'max':>7} "
+        f"{'capped':>7} {'expanded':>9} {'mission s':>9} {'max':>6} {'U':>7} "
+        f"{'never':>7}"
+    )
     print(f"{len(seeds)} missions per n (seeds {seeds.start}..{seeds.stop - 1}), 900 s each")
     print(header)
     for name in names:
         for n in (int(t) for t in args.targets.split(",")):
             r = measure(name, n, seeds, options.get(name, {}))
-            print(f"{name:8} {n:>2} {r['mean_ms']:>16.1f} {r['p95_ms']:>7.1f} "
-                  f"{r['max_ms']:>7.1f} {r['capped']:>7.1%} {r['expanded']:>9.0f} "
-                  f"{r['mission_s']:>9.2f} {r['mission_max_s']:>6.2f} {r['u']:>7.2f} "
-                  f"{r['never']:>7.2f}", flush=True)
+            print(
+                f"{name:8} {n:>2} {r['mean_ms']:>16.1f} {r['p95_ms']:>7.1f} "
+                f"{r['max_ms']:>7.1f} {r['capped']:>7.1%} {r['expanded']:>9.0f} "
+                f"{r['mission_s']:>9.2f} {r['mission_max_s']:>6.2f} {r['u']:>7.2f} "
+                f"{r['never']:>7.2f}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -51,27 +51,36 @@ def measure(env_id: str, n_targets: int, seconds: float, seed: int = 0) -> dict:
         steps += info["step"]
         episodes += 1
     elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu_start
-    return {"steps_per_s": steps / elapsed, "steps_per_cpu_s": steps / cpu,
-            "decisions_per_s": decisions / elapsed, "decisions_per_cpu_s": decisions / cpu,
-            "episodes": episodes}
+    return {
+        "steps_per_s": steps / elapsed,
+        "steps_per_cpu_s": steps / cpu,
+        "decisions_per_s": decisions / elapsed,
+        "decisions_per_cpu_s": decisions / cpu,
+        "episodes": episodes,
+    }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--targets", default="2,6", help="comma-separated numbers of targets")
     parser.add_argument("--seconds", type=float, default=10.0, help="timing per case, s")
-    parser.add_argument("--pin", type=int, default=None, metavar="CPU",
-                        help="bind the process to this CPU")
+    parser.add_argument(
+        "--pin", type=int, default=None, metavar="CPU", help="bind the process to this CPU"
+    )
     args = parser.parse_args()
     print(f"hptrack env benchmark ({pin(args.pin)}); per wall second / per CPU second")
     for n in (int(v) for v in args.targets.split(",")):
         r = measure("hptrack/Tracking-v0", n, args.seconds)
-        print(f"Tracking-v0         n={n}: env steps/s {r['steps_per_s']:9,.0f} / "
-              f"{r['steps_per_cpu_s']:9,.0f} ({r['episodes']} episodes)")
+        print(
+            f"Tracking-v0         n={n}: env steps/s {r['steps_per_s']:9,.0f} / "
+            f"{r['steps_per_cpu_s']:9,.0f} ({r['episodes']} episodes)"
+        )
         r = measure("hptrack/SubtaskTracking-v0", n, args.seconds)
-        print(f"SubtaskTracking-v0  n={n}: decisions/s {r['decisions_per_s']:7,.1f} / "
-              f"{r['decisions_per_cpu_s']:7,.1f}, simulator steps/s {r['steps_per_s']:9,.0f} / "
-              f"{r['steps_per_cpu_s']:9,.0f} ({r['episodes']} episodes)")
+        print(
+            f"SubtaskTracking-v0  n={n}: decisions/s {r['decisions_per_s']:7,.1f} / "
+            f"{r['decisions_per_cpu_s']:7,.1f}, simulator steps/s {r['steps_per_s']:9,.0f} / "
+            f"{r['steps_per_cpu_s']:9,.0f} ({r['episodes']} episodes)"
+        )
 
 
 if __name__ == "__main__":

@@ -44,19 +44,29 @@ def estimate_all(covs, qs, tau, c_per_step, speed, diameter, max_steps):
 
 
 @numba.njit(cache=True)
-def estimate_all_sharp(covs, qs, tau, c_per_step, speed, diameter, max_steps, flights,
-                       approach):
+def estimate_all_sharp(covs, qs, tau, c_per_step, speed, diameter, max_steps, flights, approach):
     """:func:`estimate_all` with the sharp kernel (each belief's flight steps and approach)."""
     total = 0.0
     for i in range(covs.shape[0]):
-        k, p, e = sharp_coverage_outcome(covs[i], qs[i], tau, c_per_step, speed, diameter,
-                                         max_steps, flights[i], approach[i, 0], approach[i, 1])
+        k, p, e = sharp_coverage_outcome(
+            covs[i],
+            qs[i],
+            tau,
+            c_per_step,
+            speed,
+            diameter,
+            max_steps,
+            flights[i],
+            approach[i, 0],
+            approach[i, 1],
+        )
         total += p + 1e-9 * (k + e)
     return total
 
 
-def start_covariances(n: int, settings: MissionSpec, seed: int = 0, age: float | None = None
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def start_covariances(
+    n: int, settings: MissionSpec, seed: int = 0, age: float | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Beliefs of the paper's distributions left unobserved 0 to 600 s (or ``age`` s), then
     intercepted from the origin: ``(means, covariances at the start of coverage, q, flight
     steps, approach per step)``."""
@@ -69,12 +79,14 @@ def start_covariances(n: int, settings: MissionSpec, seed: int = 0, age: float |
         mean = random_mean(rng)
         unobserved = rng.integers(0, 1201) * settings.time_step if age is None else age
         m, c = motion.predict(mean[None], cov[None], q, unobserved)
-        steps = intercept_steps(0.0, 0.0, *m[0], settings.agent_speed, settings.time_step,
-                                settings.sensor_radius)
+        steps = intercept_steps(
+            0.0, 0.0, *m[0], settings.agent_speed, settings.time_step, settings.sensor_radius
+        )
         start = motion.predict(m, c, q, steps * settings.time_step)[1][0]
         means[i], covs[i], qs[i], flights[i] = m[0], start, q, steps
-        approach[i] = approach_step(0.0, 0.0, *m[0], settings.agent_speed, settings.time_step,
-                                    steps)
+        approach[i] = approach_step(
+            0.0, 0.0, *m[0], settings.agent_speed, settings.time_step, steps
+        )
     return means, covs, qs, flights, approach
 
 
@@ -91,27 +103,43 @@ def best_time(function, *args, repeats: int = 5) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=20000, help="beliefs per measurement")
-    parser.add_argument("--age", type=float, default=None,
-                        help="seconds every belief goes unobserved (default: 0 to 600 s)")
+    parser.add_argument(
+        "--age",
+        type=float,
+        default=None,
+        help="seconds every belief goes unobserved (default: 0 to 600 s)",
+    )
     args = parser.parse_args()
     settings = MissionSpec()
     means, covs, qs, flights, approach = start_covariances(args.n, settings, age=args.age)
-    call = (settings.time_step, settings.c_per_step, settings.agent_speed,
-            settings.sensor_diameter, 1800)
+    call = (
+        settings.time_step,
+        settings.c_per_step,
+        settings.agent_speed,
+        settings.sensor_diameter,
+        1800,
+    )
     estimate_all(covs[:10], qs[:10], *call)  # compile
     estimate_all_sharp(covs[:10], qs[:10], *call, flights[:10], approach[:10])
     # alternate the two kernels so that both see the same machine load
     paper, sharp = math.inf, math.inf
     for _ in range(3):
         paper = min(paper, best_time(estimate_all, covs, qs, *call, repeats=1))
-        sharp = min(sharp, best_time(estimate_all_sharp, covs, qs, *call, flights, approach,
-                                     repeats=1))
-    cutoffs = [estimate_coverage(c, q, settings, 900.0).cutoff_steps
-               for c, q in zip(covs[:2000], qs[:2000], strict=True)]
-    print(f"kernel : {args.n / paper:12,.0f} estimates/s  ({paper / args.n * 1e6:.2f} us each; "
-          f"mean t_cutoff {np.mean(cutoffs):.0f} steps)")
-    print(f"sharp  : {args.n / sharp:12,.0f} estimates/s  ({sharp / args.n * 1e6:.2f} us each; "
-          f"{sharp / paper:.2f} x the paper kernel's time)")
+        sharp = min(
+            sharp, best_time(estimate_all_sharp, covs, qs, *call, flights, approach, repeats=1)
+        )
+    cutoffs = [
+        estimate_coverage(c, q, settings, 900.0).cutoff_steps
+        for c, q in zip(covs[:2000], qs[:2000], strict=True)
+    ]
+    print(
+        f"kernel : {args.n / paper:12,.0f} estimates/s  ({paper / args.n * 1e6:.2f} us each; "
+        f"mean t_cutoff {np.mean(cutoffs):.0f} steps)"
+    )
+    print(
+        f"sharp  : {args.n / sharp:12,.0f} estimates/s  ({sharp / args.n * 1e6:.2f} us each; "
+        f"{sharp / paper:.2f} x the paper kernel's time)"
+    )
 
     m = min(args.n, 5000)
     start = time.perf_counter()
@@ -120,8 +148,14 @@ def main() -> None:
     elapsed = time.perf_counter() - start
     print(f"wrapper: {m / elapsed:12,.0f} estimates/s  ({elapsed / m * 1e6:.1f} us each)")
 
-    spiral = ShiftingSpiral(np.zeros(2), means[0, 2:], covs[0, :2, :2], settings.agent_speed,
-                            settings.time_step, settings.sensor_diameter)
+    spiral = ShiftingSpiral(
+        np.zeros(2),
+        means[0, 2:],
+        covs[0, :2, :2],
+        settings.agent_speed,
+        settings.time_step,
+        settings.sensor_diameter,
+    )
     spiral.positions(10)
     start = time.perf_counter()
     spiral.positions(20000)

@@ -44,9 +44,18 @@ def _problem(n: int, seed: int):
     rng = np.random.default_rng(seed)
     priors = [random_prior(rng) for _ in range(n)]
     means = np.array([random_mean(rng) for _ in range(n)])
-    return PlanningProblem(np.zeros(2), means, np.array([c for c, _ in priors]),
-                           np.array([q for _, q in priors]), 900.0, 0.5, 0.5, 30.0, 100.0,
-                           10.0 * np.eye(2))
+    return PlanningProblem(
+        np.zeros(2),
+        means,
+        np.array([c for c, _ in priors]),
+        np.array([q for _, q in priors]),
+        900.0,
+        0.5,
+        0.5,
+        30.0,
+        100.0,
+        10.0 * np.eye(2),
+    )
 
 
 def worker(n: int, seed: int, duration: float) -> dict:
@@ -67,11 +76,18 @@ def worker(n: int, seed: int, duration: float) -> dict:
     long = search(_problem(n, seed), time_limit=duration, seed=0)
     cpu = time.process_time() - cpu
     return {
-        "n": n, "import_s": imported, "first_plan_s": first_plan, "plan": first.best_action,
-        "fresh_2000_per_s": sorted(rates)[2], "long_per_s": long.simulations / long.elapsed,
-        "long_per_cpu_s": long.simulations / cpu, "long_simulations": long.simulations,
-        "long_elapsed_s": long.elapsed, "state_nodes": long.state_nodes,
-        "action_nodes": long.action_nodes, "tree_mb": long.tree_bytes / 2**20,
+        "n": n,
+        "import_s": imported,
+        "first_plan_s": first_plan,
+        "plan": first.best_action,
+        "fresh_2000_per_s": sorted(rates)[2],
+        "long_per_s": long.simulations / long.elapsed,
+        "long_per_cpu_s": long.simulations / cpu,
+        "long_simulations": long.simulations,
+        "long_elapsed_s": long.elapsed,
+        "state_nodes": long.state_nodes,
+        "action_nodes": long.action_nodes,
+        "tree_mb": long.tree_bytes / 2**20,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }
 
@@ -79,11 +95,13 @@ def worker(n: int, seed: int, duration: float) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--targets", type=int, nargs="+", default=[2, 3, 4, 5, 6])
-    parser.add_argument("--duration", type=float, default=10.0,
-                        help="length of the long search, s (default 10)")
+    parser.add_argument(
+        "--duration", type=float, default=10.0, help="length of the long search, s (default 10)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="scenario seed")
-    parser.add_argument("--compare", metavar="SRC",
-                        help="another checkout's src/ folder, timed side by side")
+    parser.add_argument(
+        "--compare", metavar="SRC", help="another checkout's src/ folder, timed side by side"
+    )
     parser.add_argument("--worker", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker is not None:
@@ -94,42 +112,80 @@ def main() -> None:
         env = dict(os.environ)
         if src is not None:
             env["PYTHONPATH"] = os.pathsep.join([src, env.get("PYTHONPATH", "")])
-        out = subprocess.run([sys.executable, "-W", "ignore", __file__, "--worker", str(n),
-                              "--seed", str(args.seed), "--duration", str(duration)],
-                             check=True, capture_output=True, text=True, env=env,
-                             cwd=src or None)
+        out = subprocess.run(
+            [
+                sys.executable,
+                "-W",
+                "ignore",
+                __file__,
+                "--worker",
+                str(n),
+                "--seed",
+                str(args.seed),
+                "--duration",
+                str(duration),
+            ],
+            check=True,
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=src or None,
+        )
         return json.loads(out.stdout.strip().splitlines()[-1])
 
     run(args.targets[0], 0.1)  # compile and cache the kernels
     if args.compare:
         run(args.targets[0], 0.1, args.compare)
         print(f"side by side with {args.compare}: ratios new / old (higher is faster)")
-        header = ("n", "sims/s first 2000", f"sims/s {args.duration:g} s", "sims/CPU-s",
-                  "first plan s (old, new)")
+        header = (
+            "n",
+            "sims/s first 2000",
+            f"sims/s {args.duration:g} s",
+            "sims/CPU-s",
+            "first plan s (old, new)",
+        )
         print(" | ".join(header))
         print(" | ".join("---" for _ in header))
         for n in args.targets:
             old = run(n, args.duration, args.compare)
             new = run(n, args.duration)
-            print(f"{n} | {new['fresh_2000_per_s'] / old['fresh_2000_per_s']:.3f} | "
-                  f"{new['long_per_s'] / old['long_per_s']:.3f} | "
-                  f"{new['long_per_cpu_s'] / old['long_per_cpu_s']:.3f} | "
-                  f"{old['first_plan_s']:.2f}, {new['first_plan_s']:.2f}", flush=True)
+            print(
+                f"{n} | {new['fresh_2000_per_s'] / old['fresh_2000_per_s']:.3f} | "
+                f"{new['long_per_s'] / old['long_per_s']:.3f} | "
+                f"{new['long_per_cpu_s'] / old['long_per_cpu_s']:.3f} | "
+                f"{old['first_plan_s']:.2f}, {new['first_plan_s']:.2f}",
+                flush=True,
+            )
         return
-    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; long search "
-          f"{args.duration:g} s; scenario seed {args.seed}")
-    header = ("n", "import s", "first plan s", "sims/s first 2000", f"sims/s {args.duration:g} s",
-              "sims/CPU-s", "simulations", "state nodes", "action nodes", "tree MB",
-              "peak RSS MB")
+    print(
+        f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; long search "
+        f"{args.duration:g} s; scenario seed {args.seed}"
+    )
+    header = (
+        "n",
+        "import s",
+        "first plan s",
+        "sims/s first 2000",
+        f"sims/s {args.duration:g} s",
+        "sims/CPU-s",
+        "simulations",
+        "state nodes",
+        "action nodes",
+        "tree MB",
+        "peak RSS MB",
+    )
     print(" | ".join(header))
     print(" | ".join("---" for _ in header))
     for n in args.targets:
         r = run(n, args.duration)
-        print(f"{n} | {r['import_s']:.2f} | {r['first_plan_s']:.2f} | "
-              f"{r['fresh_2000_per_s']:,.0f} | "
-              f"{r['long_per_s']:,.0f} | {r['long_per_cpu_s']:,.0f} | "
-              f"{r['long_simulations']:,} | {r['state_nodes']:,} | {r['action_nodes']:,} | "
-              f"{r['tree_mb']:.1f} | {r['peak_rss_mb']:.0f}", flush=True)
+        print(
+            f"{n} | {r['import_s']:.2f} | {r['first_plan_s']:.2f} | "
+            f"{r['fresh_2000_per_s']:,.0f} | "
+            f"{r['long_per_s']:,.0f} | {r['long_per_cpu_s']:,.0f} | "
+            f"{r['long_simulations']:,} | {r['state_nodes']:,} | {r['action_nodes']:,} | "
+            f"{r['tree_mb']:.1f} | {r['peak_rss_mb']:.0f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

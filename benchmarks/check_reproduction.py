@@ -33,8 +33,9 @@ def published_key(planner: str, n: int, seed: int):
     from hptrack.registry import planner_settings
 
     options = {"preset": "paper"} if planner == "mcts" else None  # the published search
-    return EpisodeKey(planner, n, seed, "homogeneous",
-                      planner_settings(planner, options).canonical())
+    return EpisodeKey(
+        planner, n, seed, "homogeneous", planner_settings(planner, options).canonical()
+    )
 
 
 def run(key) -> tuple[float, int]:
@@ -52,9 +53,14 @@ def stored(db: Path, planners: list[str], counts: list[int], seeds: int) -> dict
 
     store = ResultStore(db)
     try:
-        return {r.key: (r.uncertainty, r.detections) for r in store.rows()
-                if r.key.planner in planners and r.key.n_targets in counts
-                and r.key.seed < seeds and json.loads(r.key.settings).get("time_limit") is None}
+        return {
+            r.key: (r.uncertainty, r.detections)
+            for r in store.rows()
+            if r.key.planner in planners
+            and r.key.n_targets in counts
+            and r.key.seed < seeds
+            and json.loads(r.key.settings).get("time_limit") is None
+        }
     finally:
         store.close()
 
@@ -64,18 +70,24 @@ def main() -> None:
     parser.add_argument("--planners", default="mcts,arvi,astar")
     parser.add_argument("--targets", default="4,6")
     parser.add_argument("--seeds", type=int, default=10, help="seeds 0..N-1")
-    parser.add_argument("--tolerance", type=float, default=1e-9,
-                        help="largest relative difference of U accepted (0: bit-identical)")
+    parser.add_argument(
+        "--tolerance",
+        type=float,
+        default=1e-9,
+        help="largest relative difference of U accepted (0: bit-identical)",
+    )
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--db", type=Path, default=None,
-                        help="re-run this results database's episodes instead")
+    parser.add_argument(
+        "--db", type=Path, default=None, help="re-run this results database's episodes instead"
+    )
     args = parser.parse_args()
     planners = args.planners.split(",")
     counts = [int(n) for n in args.targets.split(",")]
     if args.db is None:
         with PUBLISHED.open(newline="") as fh:
-            published = {(r["planner"], int(r["n_targets"]), int(r["seed"])): r
-                         for r in csv.DictReader(fh)}
+            published = {
+                (r["planner"], int(r["n_targets"]), int(r["seed"])): r for r in csv.DictReader(fh)
+            }
         expected = {}
         for n in counts:
             for s in range(args.seeds):
@@ -96,11 +108,15 @@ def main() -> None:
         identical += u == u_ref
         ok = rel <= args.tolerance and detections == d_ref
         bad += not ok
-        print(f"{p:6s} {key.setting} n={n} seed={s}: U {u:.15g} stored {u_ref:.15g} "
-              f"(rel diff {rel:.2e}), "
-              f"detections {detections} / {d_ref} {'ok' if ok else 'DIFFERS'}")
-    print(f"{len(jobs)} episodes: {identical} bit-identical U, largest relative difference "
-          f"{worst:.2e}, {bad} beyond tolerance {args.tolerance:g} or with other detections")
+        print(
+            f"{p:6s} {key.setting} n={n} seed={s}: U {u:.15g} stored {u_ref:.15g} "
+            f"(rel diff {rel:.2e}), "
+            f"detections {detections} / {d_ref} {'ok' if ok else 'DIFFERS'}"
+        )
+    print(
+        f"{len(jobs)} episodes: {identical} bit-identical U, largest relative difference "
+        f"{worst:.2e}, {bad} beyond tolerance {args.tolerance:g} or with other detections"
+    )
     sys.exit(1 if bad else 0)
 
 

@@ -48,9 +48,17 @@ def first_plan(n: int, seed: int):
     scenario = random_scenario(n, seed=seed, homogeneous=True)
     spec = scenario.mission_spec()
     return PlanningProblem(
-        scenario.agent.position, scenario.means(), scenario.covariances(),
-        scenario.process_noise(), scenario.budget, spec.time_step, spec.c_per_step,
-        spec.agent_speed, spec.sensor_diameter, spec.measurement_noise)
+        scenario.agent.position,
+        scenario.means(),
+        scenario.covariances(),
+        scenario.process_noise(),
+        scenario.budget,
+        spec.time_step,
+        spec.c_per_step,
+        spec.agent_speed,
+        spec.sensor_diameter,
+        spec.measurement_noise,
+    )
 
 
 def count(mode: str, n: int, seed: int, seconds: float) -> int:
@@ -80,8 +88,12 @@ def main() -> None:
         return
 
     def run(mode: str, n: int, seed: int, seconds: float) -> int:
-        out = subprocess.run([sys.executable, __file__, "--one", mode, str(n), str(seed),
-                              str(seconds)], check=True, capture_output=True, text=True)
+        out = subprocess.run(
+            [sys.executable, __file__, "--one", mode, str(n), str(seed), str(seconds)],
+            check=True,
+            capture_output=True,
+            text=True,
+        )
         return int(out.stdout.split()[-1])
 
     rows = {}
@@ -91,8 +103,11 @@ def main() -> None:
         py = [run("python", n, s, args.seconds) for s in range(args.seeds)]
         jit = [run("compiled", n, s, 1.0) for s in range(args.seeds)]
         rows[n] = {"python": py, "compiled_1s": jit, "python_median": statistics.median(py)}
-        print(f"{n:>3} {statistics.median(py):>22,.0f} {statistics.median(jit):>20,.0f}  "
-              f"(per seed {py} / {jit})", flush=True)
+        print(
+            f"{n:>3} {statistics.median(py):>22,.0f} {statistics.median(jit):>20,.0f}  "
+            f"(per seed {py} / {jit})",
+            flush=True,
+        )
     print(json.dumps(rows))
 
 

@@ -39,8 +39,7 @@ SETTING = "homogeneous"
 def settings(variant: str, level: float) -> str:
     from hptrack.planning.hierarchical import MctsSettings
 
-    return MctsSettings.from_options("mcts", {**VARIANTS[variant], "time_limit": level}
-                                     ).canonical()
+    return MctsSettings.from_options("mcts", {**VARIANTS[variant], "time_limit": level}).canonical()
 
 
 def keys(targets, scenarios, first_seed, levels, variants, greedy, only=None):
@@ -53,8 +52,11 @@ def keys(targets, scenarios, first_seed, levels, variants, greedy, only=None):
     for seed in range(first_seed, first_seed + scenarios):
         for n in targets:
             for level in levels:
-                out += [EpisodeKey("mcts", n, seed, SETTING, settings(v, level))
-                        for v in variants if only is None or (v, level) in only]
+                out += [
+                    EpisodeKey("mcts", n, seed, SETTING, settings(v, level))
+                    for v in variants
+                    if only is None or (v, level) in only
+                ]
             if greedy:
                 out.append(EpisodeKey("greedy", n, seed, SETTING, NoSettings().canonical()))
     return out
@@ -95,12 +97,20 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
     ns = sorted({n for (_, _, n) in by})
     out.mkdir(parents=True, exist_ok=True)
     write_csv(mine, out / "episodes.csv")
-    lines = ["Mean U +- standard error (episodes), homogeneous scenarios; time limit per "
-             "decision in s.", "", "| variant | time, s | " + " | ".join(f"n={n}" for n in ns)
-             + " |", "|---|---|" + "---|" * len(ns)]
-    cells = sorted({(v, lv) for (v, lv, _) in by},
-                   key=lambda c: (c[0] != "greedy", list(VARIANTS).index(c[0])
-                                  if c[0] in VARIANTS else -1, c[1]))
+    lines = [
+        "Mean U +- standard error (episodes), homogeneous scenarios; time limit per decision in s.",
+        "",
+        "| variant | time, s | " + " | ".join(f"n={n}" for n in ns) + " |",
+        "|---|---|" + "---|" * len(ns),
+    ]
+    cells = sorted(
+        {(v, lv) for (v, lv, _) in by},
+        key=lambda c: (
+            c[0] != "greedy",
+            list(VARIANTS).index(c[0]) if c[0] in VARIANTS else -1,
+            c[1],
+        ),
+    )
     for v, lv in cells:
         row = []
         for n in ns:
@@ -110,8 +120,11 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
                 row.append(f"{m:.2f} +- {se:.2f} ({len(seeds)})")
             else:
                 row.append("")
-        lines.append(f"| {v} | {lv:g} | " + " | ".join(row) + " |" if v != "greedy" else
-                     "| greedy | - | " + " | ".join(row) + " |")
+        lines.append(
+            f"| {v} | {lv:g} | " + " | ".join(row) + " |"
+            if v != "greedy"
+            else "| greedy | - | " + " | ".join(row) + " |"
+        )
 
     def paired(a, b, relative=False):
         """Mean of ``U_a - U_b`` over the shared scenarios (percent of mean ``U_b``)."""
@@ -133,28 +146,46 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
     for v in variants:
         if v == "paper":
             continue
-        comparisons.append((f"{v} @ {min(levels):g} s - paper @ {top:g} s", (v, min(levels)),
-                            ("paper", top), False))
+        comparisons.append(
+            (
+                f"{v} @ {min(levels):g} s - paper @ {top:g} s",
+                (v, min(levels)),
+                ("paper", top),
+                False,
+            )
+        )
         for lv in levels:
-            comparisons.append((f"{v} @ {lv:g} s - paper @ {lv:g} s, % of paper", (v, lv),
-                                ("paper", lv), True))
+            comparisons.append(
+                (f"{v} @ {lv:g} s - paper @ {lv:g} s, % of paper", (v, lv), ("paper", lv), True)
+            )
     if reference != "paper":
         for v in variants:
             if v in ("paper", reference):
                 continue
             for lv in levels:
-                comparisons.append((f"{v} @ {lv:g} s - {reference} @ {lv:g} s, % of "
-                                    f"{reference}", (v, lv), (reference, lv), True))
+                comparisons.append(
+                    (
+                        f"{v} @ {lv:g} s - {reference} @ {lv:g} s, % of {reference}",
+                        (v, lv),
+                        (reference, lv),
+                        True,
+                    )
+                )
     for v in variants:
         for lv in sorted(levels)[:-1]:
             comparisons.append((f"{v} @ {top:g} s - {v} @ {lv:g} s", (v, top), (v, lv), False))
     for v in variants:
-        comparisons.append((f"{v} @ {top:g} s - greedy, % of greedy", (v, top),
-                            ("greedy", 0.0), True))
-    lines += ["", "Paired differences of U on the same scenarios, mean +- standard error "
-              "(scenarios); negative: the first is better.", "",
-              "| comparison | " + " | ".join(f"n={n}" for n in ns) + " |",
-              "|---|" + "---|" * len(ns)]
+        comparisons.append(
+            (f"{v} @ {top:g} s - greedy, % of greedy", (v, top), ("greedy", 0.0), True)
+        )
+    lines += [
+        "",
+        "Paired differences of U on the same scenarios, mean +- standard error "
+        "(scenarios); negative: the first is better.",
+        "",
+        "| comparison | " + " | ".join(f"n={n}" for n in ns) + " |",
+        "|---|" + "---|" * len(ns),
+    ]
     for name, a, b, rel in comparisons:
         cells_ = paired(a, b, rel)
         if any(cells_):
@@ -167,14 +198,19 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
     for i, n in enumerate(ns):
         ax = fig.add_subplot(math.ceil(len(ns) / cols), cols, i + 1)
         for v in variants:
-            pts = [(lv, *mean_se(list(by[(v, lv, n)].values()))) for lv in levels
-                   if by.get((v, lv, n))]
+            pts = [
+                (lv, *mean_se(list(by[(v, lv, n)].values()))) for lv in levels if by.get((v, lv, n))
+            ]
             if pts:
                 x, m, se = map(np.array, zip(*pts, strict=True))
                 ax.errorbar(x, m, yerr=se, marker="o", capsize=3, label=v)
         if by.get(("greedy", 0.0, n)):
-            ax.axhline(mean_se(list(by[("greedy", 0.0, n)].values()))[0], color="grey",
-                       ls="--", label="greedy")
+            ax.axhline(
+                mean_se(list(by[("greedy", 0.0, n)].values()))[0],
+                color="grey",
+                ls="--",
+                label="greedy",
+            )
         ax.set_xscale("log")
         ax.set_title(f"n = {n}")
         ax.set_xlabel("planning time per decision, s")
@@ -193,17 +229,26 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--levels", default="0.05,0.2,1", help="seconds per decision")
     parser.add_argument("--variants", default="paper,improved")
-    parser.add_argument("--define", action="append", default=[], metavar="NAME=JSON",
-                        help='another variant, e.g. max_c1=\'{"backup": "max", '
-                             '"exploration": 1.0}\'')
-    parser.add_argument("--only", default=None, metavar="VARIANT@LEVEL,...",
-                        help="run only these pairs of variant and level (e.g. paper@1)")
+    parser.add_argument(
+        "--define",
+        action="append",
+        default=[],
+        metavar="NAME=JSON",
+        help='another variant, e.g. max_c1=\'{"backup": "max", "exploration": 1.0}\'',
+    )
+    parser.add_argument(
+        "--only",
+        default=None,
+        metavar="VARIANT@LEVEL,...",
+        help="run only these pairs of variant and level (e.g. paper@1)",
+    )
     parser.add_argument("--no-greedy", action="store_true")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--db", type=Path, default=Path("results/quality_vs_time.db"))
     parser.add_argument("--report", action="store_true", help="only write the report")
-    parser.add_argument("--reference", default="paper",
-                        help="the report also compares every variant with this one")
+    parser.add_argument(
+        "--reference", default="paper", help="the report also compares every variant with this one"
+    )
     parser.add_argument("--out", type=Path, default=Path("results/quality-vs-time"))
     args = parser.parse_args()
     levels = [float(x) for x in args.levels.split(",")]
@@ -220,8 +265,7 @@ def main() -> None:
         for pair in args.only.split(","):
             v, _, level = pair.partition("@")
             if v not in variants or not level or float(level) not in levels:
-                parser.error(f"--only: {pair!r} is not a variant@level of --variants and "
-                             "--levels")
+                parser.error(f"--only: {pair!r} is not a variant@level of --variants and --levels")
             only.add((v, float(level)))
     if args.report:
         report(args.db, args.out, levels, variants, args.reference)
@@ -231,14 +275,24 @@ def main() -> None:
 
     args.db.parent.mkdir(parents=True, exist_ok=True)
     store = ResultStore(args.db)
-    todo = keys([int(n) for n in args.targets.split(",")], args.scenarios, args.first_seed,
-                levels, variants, not args.no_greedy, only)
+    todo = keys(
+        [int(n) for n in args.targets.split(",")],
+        args.scenarios,
+        args.first_seed,
+        levels,
+        variants,
+        not args.no_greedy,
+        only,
+    )
 
     def on_done(row, finished, total):
         s = json.loads(row.key.settings)
-        print(f"[{finished}/{total}] {row.key.planner} n={row.key.n_targets} "
-              f"seed={row.key.seed} {s.get('time_limit', '')} {s.get('backup', '')} "
-              f"U={row.uncertainty:.2f} wall={row.wall_time_s:.1f}s", flush=True)
+        print(
+            f"[{finished}/{total}] {row.key.planner} n={row.key.n_targets} "
+            f"seed={row.key.seed} {s.get('time_limit', '')} {s.get('backup', '')} "
+            f"U={row.uncertainty:.2f} wall={row.wall_time_s:.1f}s",
+            flush=True,
+        )
 
     try:
         run_keys(todo, store, workers=args.workers, on_done=on_done)

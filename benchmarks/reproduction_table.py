@@ -51,25 +51,45 @@ def main() -> None:
 
     def cell(values) -> str:
         a = np.asarray(values)
-        return (f"{a.mean():.2f} +- {a.std():.2f} (se {a.std(ddof=1) / math.sqrt(a.size):.2f}, "
-                f"{a.size})")
+        return (
+            f"{a.mean():.2f} +- {a.std():.2f} (se {a.std(ddof=1) / math.sqrt(a.size):.2f}, "
+            f"{a.size})"
+        )
 
-    lines = ["Mean +- std of U (standard error of the mean, episodes), homogeneous scenarios "
-             "0..99 per n, the paper's search (`-o mcts.preset=paper`).", "",
-             "| search effort, Q | " + " | ".join(f"n={n}" for n in ns) + " |",
-             "|---|" + "---|" * len(ns)]
+    lines = [
+        "Mean +- std of U (standard error of the mean, episodes), homogeneous scenarios "
+        "0..99 per n, the paper's search (`-o mcts.preset=paper`).",
+        "",
+        "| search effort, Q | " + " | ".join(f"n={n}" for n in ns) + " |",
+        "|---|" + "---|" * len(ns),
+    ]
     for form, name in FORMS.items():
         if any((form, n) in cells for n in ns):
-            lines.append(f"| paper-comparable effort, {name} | " + " | ".join(
-                cell(cells[(form, n)]) if (form, n) in cells else "" for n in ns) + " |")
-    lines.append("| 100,000 simulations, q tau I (continuous) | " + " | ".join(
-        cell(cells[("published", n)]) if ("published", n) in cells else "" for n in ns) + " |")
+            lines.append(
+                f"| paper-comparable effort, {name} | "
+                + " | ".join(cell(cells[(form, n)]) if (form, n) in cells else "" for n in ns)
+                + " |"
+            )
+    lines.append(
+        "| 100,000 simulations, q tau I (continuous) | "
+        + " | ".join(cell(cells[("published", n)]) if ("published", n) in cells else "" for n in ns)
+        + " |"
+    )
     paper = PAPER_TABLE["hierarchical, homogeneous (paper)"]
-    lines.append("| paper (30 s of Python per search, q I printed) | " + " | ".join(
-        f"{paper[n][0]:.2f} +- {paper[n][1]:.2f}" if n in paper else "" for n in ns) + " |")
-    lines += ["", "Effort (simulations per search) per n: " + "; ".join(
-        f"{FORMS[f]}: " + ", ".join(f"n={n} {e}" for n, e in sorted(v))
-        for f, v in sorted(efforts.items())) + "."]
+    lines.append(
+        "| paper (30 s of Python per search, q I printed) | "
+        + " | ".join(f"{paper[n][0]:.2f} +- {paper[n][1]:.2f}" if n in paper else "" for n in ns)
+        + " |"
+    )
+    lines += [
+        "",
+        "Effort (simulations per search) per n: "
+        + "; ".join(
+            f"{FORMS[f]}: " + ", ".join(f"n={n} {e}" for n, e in sorted(v))
+            for f, v in sorted(efforts.items())
+        )
+        + ".",
+    ]
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "table.md").write_text(text)

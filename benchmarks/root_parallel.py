@@ -34,9 +34,18 @@ def scaling(seconds: float = 3.0) -> None:
 
     sc = random_scenario(10, seed=0, homogeneous=True)
     spec = sc.mission_spec()
-    problem = PlanningProblem(sc.agent.position, sc.means(), sc.covariances(),
-                              sc.process_noise(), sc.budget, spec.time_step, spec.c_per_step,
-                              spec.agent_speed, spec.sensor_diameter, spec.measurement_noise)
+    problem = PlanningProblem(
+        sc.agent.position,
+        sc.means(),
+        sc.covariances(),
+        sc.process_noise(),
+        sc.budget,
+        spec.time_step,
+        spec.c_per_step,
+        spec.agent_speed,
+        spec.sensor_diameter,
+        spec.measurement_noise,
+    )
     search(problem, iterations=64, backup="max", threads=2)  # load the kernels
     for threads in (1, 2):
         start = time.perf_counter()
@@ -64,8 +73,11 @@ def main() -> None:
     print("| trees x simulations | " + " | ".join(f"n={n}" for n in ns) + " |")
     print("|---|" + "---|" * len(ns))
     for lb in labels:
-        print(f"| {lb} | " + " | ".join(f"{np.mean(list(runs[(lb, n)].values())):.2f}"
-                                        for n in ns) + " |")
+        print(
+            f"| {lb} | "
+            + " | ".join(f"{np.mean(list(runs[(lb, n)].values())):.2f}" for n in ns)
+            + " |"
+        )
     two = next(lb for lb in labels if lb.startswith("2 x"))
     print("\nPaired differences of U, mean +- standard error (negative: two trees better):")
     for other in labels:
@@ -75,8 +87,9 @@ def main() -> None:
         for n in ns:
             a, b = runs[(two, n)], runs[(other, n)]
             d = np.array([a[s] - b[s] for s in sorted(set(a) & set(b))])
-            cells.append(f"n={n}: {d.mean():+.2f} +- {d.std(ddof=1) / math.sqrt(d.size):.2f}"
-                         f" ({d.size})")
+            cells.append(
+                f"n={n}: {d.mean():+.2f} +- {d.std(ddof=1) / math.sqrt(d.size):.2f} ({d.size})"
+            )
         print(f"{two} - {other}: " + "; ".join(cells))
     if args.scaling:
         scaling()

@@ -59,8 +59,10 @@ def follows(db: Path) -> None:
         limit = EARLY * scenario_for(r.key).n_steps
         counts[group] += bool(entries and entries[0]["start_step"] < limit)
     for group in sorted(totals):
-        print(f"{group[0]} n={group[1]} {group[2]}: {counts[group]} of {totals[group]} "
-              "episodes follow early")
+        print(
+            f"{group[0]} n={group[1]} {group[2]}: {counts[group]} of {totals[group]} "
+            "episodes follow early"
+        )
 
 
 @functools.cache
@@ -122,9 +124,18 @@ def _first_problem(n: int):
 
     sc = random_scenario(n, seed=0, homogeneous=True)
     spec = sc.mission_spec()
-    return PlanningProblem(sc.agent.position, sc.means(), sc.covariances(), sc.process_noise(),
-                           sc.budget, spec.time_step, spec.c_per_step, spec.agent_speed,
-                           spec.sensor_diameter, spec.measurement_noise)
+    return PlanningProblem(
+        sc.agent.position,
+        sc.means(),
+        sc.covariances(),
+        sc.process_noise(),
+        sc.budget,
+        spec.time_step,
+        spec.c_per_step,
+        spec.agent_speed,
+        spec.sensor_diameter,
+        spec.measurement_noise,
+    )
 
 
 def rates(targets: list[int], seconds: float) -> None:
@@ -136,8 +147,10 @@ def rates(targets: list[int], seconds: float) -> None:
         search(problem, iterations=64)  # load the kernels
         for backup in BACKUPS:
             result = search(problem, time_limit=seconds, seed=0, backup=backup)
-            print(f"n={n} {backup}: {result.simulations / result.elapsed:,.0f} simulations/s, "
-                  f"{result.state_nodes:,} state nodes")
+            print(
+                f"n={n} {backup}: {result.simulations / result.elapsed:,.0f} simulations/s, "
+                f"{result.state_nodes:,} state nodes"
+            )
 
 
 def rollouts(targets: list[int], count: int) -> None:
@@ -168,14 +181,18 @@ def rollouts(targets: list[int], count: int) -> None:
             total += mdp.terminal_value(env, state)
         return subtasks, follows, total
 
-    print("| rollout policy | n | sub-tasks per rollout | rollouts that end in a follow | "
-          "time per rollout | mean U |")
+    print(
+        "| rollout policy | n | sub-tasks per rollout | rollouts that end in a follow | "
+        "time per rollout | mean U |"
+    )
     print("|---|---|---|---|---|---|")
     for n in targets:
         problem = _first_problem(n)
-        for name, policy in (("uniform", UniformRandom()), ("uniform_no_follow",
-                                                             UniformNoFollow()),
-                             ("nearest, epsilon 0.6", Nearest(0.6))):
+        for name, policy in (
+            ("uniform", UniformRandom()),
+            ("uniform_no_follow", UniformNoFollow()),
+            ("nearest, epsilon 0.6", Nearest(0.6)),
+        ):
             env = mdp.SubtaskEnv(problem.model(), mdp.new_memo(n, problem.n_steps))
             root = problem.root_state()
             state = tuple(a.copy() for a in root)
@@ -184,8 +201,10 @@ def rollouts(targets: list[int], count: int) -> None:
             start = time.perf_counter()
             steps, follows, total = run(env, root, state, policy, *args, count)
             elapsed = time.perf_counter() - start
-            print(f"| `{name}` | {n} | {steps / count:.1f} | {100 * follows / count:.0f} % | "
-                  f"{elapsed / count * 1e6:.0f} us | {-total / count:.1f} |")
+            print(
+                f"| `{name}` | {n} | {steps / count:.1f} | {100 * follows / count:.0f} % | "
+                f"{elapsed / count * 1e6:.0f} us | {-total / count:.1f} |"
+            )
 
 
 def subtasks(path: Path, iterations: int) -> None:
@@ -196,11 +215,16 @@ def subtasks(path: Path, iterations: int) -> None:
     scenario = load_scenario(path)
     ids = scenario.target_ids
     for preset in ("paper", "improved"):
-        record = run_episode(scenario, make_planner("mcts", {"preset": preset,
-                                                            "iterations": iterations}))
-        steps = [f"follow {ids[e['follow']]}" if "follow" in e and e["follow"] is not None
-                 else f"{ids[e['target_index']]} {e.get('outcome', '')}".strip()
-                 for e in record.info["subtasks"] if "follow" in e or "target_index" in e]
+        record = run_episode(
+            scenario, make_planner("mcts", {"preset": preset, "iterations": iterations})
+        )
+        steps = [
+            f"follow {ids[e['follow']]}"
+            if "follow" in e and e["follow"] is not None
+            else f"{ids[e['target_index']]} {e.get('outcome', '')}".strip()
+            for e in record.info["subtasks"]
+            if "follow" in e or "target_index" in e
+        ]
         print(f"{preset}: U = {record.uncertainty:.2f}; " + ", ".join(steps))
 
 
@@ -220,17 +244,21 @@ def model_accuracy(db: Path) -> None:
                 found = e["outcome"] == "found"
                 predicted = e["intercept_time"] + (e["expected_time"] if found else e["t_cutoff"])
                 flown[r.key.n_targets].append(
-                    (found, (e["end_step"] - e["start_step"]) * tau, predicted, e["p_find"]))
+                    (found, (e["end_step"] - e["start_step"]) * tau, predicted, e["p_find"])
+                )
     for n in sorted(flown):
         rows = np.array(flown[n])
         for found, name in ((1.0, "found"), (0.0, "missed")):
             part = rows[rows[:, 0] == found]
             if len(part):
-                print(f"n={n} {name}: {len(part)} sub-tasks, mean duration "
-                      f"{part[:, 1].mean():.1f} s flown against {part[:, 2].mean():.1f} s "
-                      "predicted")
-        print(f"n={n}: find rate {rows[:, 0].mean():.3f} against mean p_find "
-              f"{rows[:, 3].mean():.3f}")
+                print(
+                    f"n={n} {name}: {len(part)} sub-tasks, mean duration "
+                    f"{part[:, 1].mean():.1f} s flown against {part[:, 2].mean():.1f} s "
+                    "predicted"
+                )
+        print(
+            f"n={n}: find rate {rows[:, 0].mean():.3f} against mean p_find {rows[:, 3].mean():.3f}"
+        )
 
 
 def lost(db: Path, where: list[str]) -> None:
@@ -249,20 +277,25 @@ def lost(db: Path, where: list[str]) -> None:
                 if e.get("outcome") == "found":
                     found.add(e["target_index"])
         n = r.key.n_targets
-        groups[(n, r.key.settings)].append((r.uncertainty, n - len(tried), len(tried - found),
-                                            r.never_observed / n))
+        groups[(n, r.key.settings)].append(
+            (r.uncertainty, n - len(tried), len(tried - found), r.never_observed / n)
+        )
     for (n, settings), rows in sorted(groups.items()):
         a = np.array(rows)
         lost_count = a[:, 1] + a[:, 2]
-        by = ", ".join(f"{k:.0f}: {a[lost_count == k, 0].mean():.1f} ({(lost_count == k).sum()})"
-                       for k in np.unique(lost_count))
+        by = ", ".join(
+            f"{k:.0f}: {a[lost_count == k, 0].mean():.1f} ({(lost_count == k).sum()})"
+            for k in np.unique(lost_count)
+        )
         share = (lost_count * a[:, 3]).sum() / a[:, 0].sum()
         others = (a[:, 0] - lost_count * a[:, 3]).sum() / (n * len(a) - lost_count.sum())
-        print(f"n={n} {settings}: {len(a)} episodes, mean U {a[:, 0].mean():.2f}; never found "
-              f"{lost_count.mean():.2f} per episode (never pursued {a[:, 1].mean():.2f}, only "
-              f"missed {a[:, 2].mean():.2f}), each worth up to {a[:, 3].mean():.2f} of U, "
-              f"together at most {100 * share:.0f} % of U; the others at least "
-              f"{others:.1f} per target; mean U by the number never found: {by}")
+        print(
+            f"n={n} {settings}: {len(a)} episodes, mean U {a[:, 0].mean():.2f}; never found "
+            f"{lost_count.mean():.2f} per episode (never pursued {a[:, 1].mean():.2f}, only "
+            f"missed {a[:, 2].mean():.2f}), each worth up to {a[:, 3].mean():.2f} of U, "
+            f"together at most {100 * share:.0f} % of U; the others at least "
+            f"{others:.1f} per target; mean U by the number never found: {by}"
+        )
 
 
 def dwell(unseen: float, q: float) -> None:
@@ -286,8 +319,10 @@ def dwell(unseen: float, q: float) -> None:
 
     found = measure(grow(np.diag([1000.0, 1000.0, 0.4, 0.4]), unseen))
     print(f"q = {q:g} m^2/s^3, unseen {unseen:g} s before the find, R = 10 I m^2, tau = {tau} s")
-    print("dwell s | velocity variance (m/s)^2 | log det after 60 / 150 / 300 s | x variance "
-          "after 300 s, m^2")
+    print(
+        "dwell s | velocity variance (m/s)^2 | log det after 60 / 150 / 300 s | x variance "
+        "after 300 s, m^2"
+    )
     for length in (0, 5, 10, 20, 40):
         cov = found
         for _ in range(round(length / tau)):
@@ -308,8 +343,13 @@ def main() -> None:
     p.add_argument("--db", type=Path, required=True)
     p = sub.add_parser("paired")
     p.add_argument("--db", type=Path, required=True)
-    p.add_argument("--against", type=Path, action="append", required=True,
-                   help="a published episodes.csv or another results database")
+    p.add_argument(
+        "--against",
+        type=Path,
+        action="append",
+        required=True,
+        help="a published episodes.csv or another results database",
+    )
     _where(p, "--where", "only --db's episodes with this resolved mcts option")
     _where(p, "--against-where", "only the reference databases' episodes with this option")
     p = sub.add_parser("rates")

@@ -92,28 +92,42 @@ def scenario(setup: Setup) -> tuple[list[GaussianState], np.ndarray]:
         r, bearing = rng.uniform(*setup.range_m), rng.uniform(0.0, 2.0 * np.pi)
         vx, vy = rng.uniform(-3.0, 3.0, size=2)
         mean = np.array([r * np.cos(bearing), vx, r * np.sin(bearing), vy])
-        cov = np.diag([rng.uniform(500.0, 1000.0), rng.uniform(0.25, 0.5),
-                       rng.uniform(500.0, 1000.0), rng.uniform(0.25, 0.5)])
+        cov = np.diag(
+            [
+                rng.uniform(500.0, 1000.0),
+                rng.uniform(0.25, 0.5),
+                rng.uniform(500.0, 1000.0),
+                rng.uniform(0.25, 0.5),
+            ]
+        )
         priors.append(GaussianState(mean, cov, timestamp=START))
         states[0, i] = rng.multivariate_normal(mean, cov)
         for k in range(1, setup.steps + 1):
             step_noise = rng.multivariate_normal(np.zeros(4), noise).reshape(4, 1)
-            states[k, i] = model.function(State(states[k - 1, i].reshape(4, 1)),
-                                          noise=step_noise, time_interval=dt).ravel()
+            states[k, i] = model.function(
+                State(states[k - 1, i].reshape(4, 1)), noise=step_noise, time_interval=dt
+            ).ravel()
     return priors, states
 
 
 def transition_model(setup: Setup) -> CombinedLinearGaussianTransitionModel:
     return CombinedLinearGaussianTransitionModel(
-        [ConstantVelocity(setup.process_noise), ConstantVelocity(setup.process_noise)])
+        [ConstantVelocity(setup.process_noise), ConstantVelocity(setup.process_noise)]
+    )
 
 
 def make_platform(setup: Setup, sensor_seed: int) -> MovingPlatform:
-    sensor = FootprintPositionSensor(noise_covar=setup.noise_variance * np.eye(2),
-                                     diameter=setup.sensor_diameter, seed=sensor_seed)
-    movable = MaxSpeedActionableMovable(states=[State([[0.0], [0.0]], timestamp=START)],
-                                        position_mapping=(0, 1), action_mapping=(0, 1),
-                                        max_speed=setup.agent_speed)
+    sensor = FootprintPositionSensor(
+        noise_covar=setup.noise_variance * np.eye(2),
+        diameter=setup.sensor_diameter,
+        seed=sensor_seed,
+    )
+    movable = MaxSpeedActionableMovable(
+        states=[State([[0.0], [0.0]], timestamp=START)],
+        position_mapping=(0, 1),
+        action_mapping=(0, 1),
+        max_speed=setup.agent_speed,
+    )
     return MovingPlatform(movement_controller=movable, sensors=[sensor])
 
 
@@ -138,8 +152,11 @@ def fly(setup: Setup, make_manager, name: str) -> Run:
         for track in tracks:
             prediction = predictor.predict(track.state, timestamp=time)
             detection = measured.get(track.id)
-            track.append(prediction if detection is None
-                         else updater.update(SingleHypothesis(prediction, detection)))
+            track.append(
+                prediction
+                if detection is None
+                else updater.update(SingleHypothesis(prediction, detection))
+            )
         return len(measured)
 
     detections += sense(0)
@@ -151,11 +168,16 @@ def fly(setup: Setup, make_manager, name: str) -> Run:
                 actionable.act(time)
         detections += sense(k)
 
-    path = np.array([np.asarray(s.state_vector, dtype=float).ravel()
-                     for s in platform.movement_controller.states])
+    path = np.array(
+        [
+            np.asarray(s.state_vector, dtype=float).ravel()
+            for s in platform.movement_controller.states
+        ]
+    )
     _, covs = hptrack_beliefs([track.state for track in tracks])
-    return Run(name, position_logdet(covs), detections,
-               float(np.sum(np.hypot(*np.diff(path, axis=0).T))))
+    return Run(
+        name, position_logdet(covs), detections, float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
+    )
 
 
 def compare(setup: Setup, planner: str, options: dict | None) -> tuple[Run, Run]:
@@ -164,22 +186,33 @@ def compare(setup: Setup, planner: str, options: dict | None) -> tuple[Run, Run]
     q = process_noise_of(transition_model(setup))
 
     def hptrack_manager(platform):
-        return HptrackSensorManager(process_noise=q, time_step=setup.time_step,
-                                    planner=planner, planner_options=options,
-                                    budget=setup.steps * setup.time_step,
-                                    platforms={platform}, seed=seed)
+        return HptrackSensorManager(
+            process_noise=q,
+            time_step=setup.time_step,
+            planner=planner,
+            planner_options=options,
+            budget=setup.steps * setup.time_step,
+            platforms={platform},
+            seed=seed,
+        )
 
-    return (fly(setup, hptrack_manager, f"hptrack {planner}"),
-            fly(setup, lambda platform: HoverSensorManager(platforms={platform}), "hover"))
+    return (
+        fly(setup, hptrack_manager, f"hptrack {planner}"),
+        fly(setup, lambda platform: HoverSensorManager(platforms={platform}), "hover"),
+    )
 
 
 def report(setup: Setup, runs: tuple[Run, Run]) -> str:
-    lines = [f"{setup.n_targets} targets, {setup.steps} steps of {setup.time_step} s, "
-             f"seed {setup.seed}: mean final log det Sigma_xy (log m^4, lower is tighter)"]
+    lines = [
+        f"{setup.n_targets} targets, {setup.steps} steps of {setup.time_step} s, "
+        f"seed {setup.seed}: mean final log det Sigma_xy (log m^4, lower is tighter)"
+    ]
     for run in runs:
         per_track = " ".join(f"{v:.2f}" for v in run.logdets)
-        lines.append(f"  {run.manager:<16} {run.mean_logdet:8.3f}   per track: {per_track}   "
-                     f"detections {run.detections}, flown {run.distance_m:.0f} m")
+        lines.append(
+            f"  {run.manager:<16} {run.mean_logdet:8.3f}   per track: {per_track}   "
+            f"detections {run.detections}, flown {run.distance_m:.0f} m"
+        )
     lines.append(f"  hptrack - hover  {runs[0].mean_logdet - runs[1].mean_logdet:8.3f}")
     return "\n".join(lines)
 
@@ -194,17 +227,24 @@ def _option(text: str) -> tuple[str, str]:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--planner", default="mcts", help="hptrack planner (default mcts)")
-    parser.add_argument("-o", "--option", type=_option, action="append", default=[],
-                        metavar="KEY=VALUE",
-                        help="planner option (mcts default: iterations=300)")
+    parser.add_argument(
+        "-o",
+        "--option",
+        type=_option,
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="planner option (mcts default: iterations=300)",
+    )
     parser.add_argument("--targets", type=int, default=Setup.n_targets)
     parser.add_argument("--steps", type=int, default=Setup.steps)
     parser.add_argument("--time-step", type=float, default=Setup.time_step, help="s")
     parser.add_argument("--seed", type=int, default=Setup.seed)
     args = parser.parse_args(argv)
     options = dict(args.option) or (DEFAULT_MCTS_OPTIONS if args.planner == "mcts" else None)
-    setup = Setup(n_targets=args.targets, steps=args.steps, time_step=args.time_step,
-                  seed=args.seed)
+    setup = Setup(
+        n_targets=args.targets, steps=args.steps, time_step=args.time_step, seed=args.seed
+    )
     print(report(setup, compare(setup, args.planner, options)))
 
 

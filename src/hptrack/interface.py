@@ -147,8 +147,9 @@ class Planner(Protocol):
 
     name: str
 
-    def reset(self, mission: MissionSpec, observation: Observation,
-              rng: np.random.Generator) -> None: ...
+    def reset(
+        self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
+    ) -> None: ...
 
     def act(self, observation: Observation) -> np.ndarray: ...
 

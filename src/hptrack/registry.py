@@ -32,19 +32,30 @@ class PlannerEntry:
 
 
 PLANNERS: dict[str, PlannerEntry] = {
-    "mcts": PlannerEntry(MctsSettings, HierarchicalPlanner,
-                         "the paper's hierarchical planner (MCTS over coverage sub-tasks)"),
+    "mcts": PlannerEntry(
+        MctsSettings,
+        HierarchicalPlanner,
+        "the paper's hierarchical planner (MCTS over coverage sub-tasks)",
+    ),
     "stationary": PlannerEntry(NoSettings, StationaryPlanner, "stays at its start"),
-    "greedy": PlannerEntry(NoSettings, GreedyPlanner,
-                           "chases the most uncertain reachable target"),
-    "coverage": PlannerEntry(CoverageSettings, CoveragePlanner,
-                             "pursues one target (-o target=ID) with coverage sub-tasks"),
+    "greedy": PlannerEntry(NoSettings, GreedyPlanner, "chases the most uncertain reachable target"),
+    "coverage": PlannerEntry(
+        CoverageSettings,
+        CoveragePlanner,
+        "pursues one target (-o target=ID) with coverage sub-tasks",
+    ),
     "arvi": PlannerEntry(ArviSettings, ArviPlanner, "Anytime Reduced Value Iteration"),
     "astar": PlannerEntry(AStarSettings, AStarPlanner, "A* with an information heuristic"),
-    "adfq": PlannerEntry(AdfqSettings, AdfqPlanner,
-                         "Deep ADFQ policy (-o model=PATH, epsilon; default: shipped model for n)"),
-    "sb3": PlannerEntry(Sb3Settings, Sb3Planner,
-                        "stable-baselines3 PPO policy (-o model=PATH; default: shipped for n)"),
+    "adfq": PlannerEntry(
+        AdfqSettings,
+        AdfqPlanner,
+        "Deep ADFQ policy (-o model=PATH, epsilon; default: shipped model for n)",
+    ),
+    "sb3": PlannerEntry(
+        Sb3Settings,
+        Sb3Planner,
+        "stable-baselines3 PPO policy (-o model=PATH; default: shipped for n)",
+    ),
 }
 
 
@@ -53,8 +64,9 @@ def planner_entry(name: str) -> PlannerEntry:
     try:
         return PLANNERS[name]
     except KeyError:
-        raise InputError(f"unknown planner {name!r}; choose from "
-                         f"{', '.join(sorted(PLANNERS))}") from None
+        raise InputError(
+            f"unknown planner {name!r}; choose from {', '.join(sorted(PLANNERS))}"
+        ) from None
 
 
 def planner_settings(name: str, options: dict[str, Any] | None = None) -> PlannerSettings:

@@ -50,8 +50,12 @@ def _phrase(error: dict) -> str:
     template = _PHRASES.get(error["type"])
     if template is None:
         return error["msg"].removeprefix("Value error, ")
-    return template.format(**{k: f"{v:g}" if isinstance(v, int | float) else v
-                              for k, v in (error.get("ctx") or {}).items()})
+    return template.format(
+        **{
+            k: f"{v:g}" if isinstance(v, int | float) else v
+            for k, v in (error.get("ctx") or {}).items()
+        }
+    )
 
 
 def _json_value(value: Any) -> Any:
@@ -72,8 +76,9 @@ class PlannerSettings(BaseModel):
     """Base of every planner's settings: frozen, no unknown options, finite numbers unless a
     field says otherwise."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False,
-                              validate_default=True)
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, allow_inf_nan=False, validate_default=True
+    )
 
     effort_fields: ClassVar[dict[str, str]] = {}
     """Generic effort flag (``iterations``, ``time_limit``) -> the field it sets."""
@@ -93,17 +98,18 @@ class PlannerSettings(BaseModel):
             option = ".".join(str(p) for p in first["loc"]) or "settings"
             if first["type"] == "extra_forbidden":
                 known = ", ".join(sorted(cls.model_fields)) or "none"
-                raise InputError(f"planner {planner!r}: unknown option {option} "
-                                 f"(its options: {known})") from None
+                raise InputError(
+                    f"planner {planner!r}: unknown option {option} (its options: {known})"
+                ) from None
             shown = f", got {first['input']!r}" if first["type"] != "missing" else ""
             if not first["loc"]:  # a check across fields: the message names them
                 raise InputError(f"planner {planner!r}: {_phrase(first)}") from None
-            raise InputError(f"planner {planner!r}: option {option} {_phrase(first)}"
-                             f"{shown}") from None
+            raise InputError(
+                f"planner {planner!r}: option {option} {_phrase(first)}{shown}"
+            ) from None
 
     @classmethod
-    def effort_options(cls, iterations: int | None, time_limit: float | None
-                       ) -> dict[str, Any]:
+    def effort_options(cls, iterations: int | None, time_limit: float | None) -> dict[str, Any]:
         """The options that the generic effort flags set on this planner (none if it has no
         such notion)."""
         out = {}
@@ -132,8 +138,11 @@ class PlannerSettings(BaseModel):
     def effort_label(self) -> str:
         """The effort fields that are set, e.g. ``"iterations=100000"`` (``"none"`` without)."""
         values = self.model_dump()
-        parts = [f"{flag}={values[name]}" for flag, name in sorted(self.effort_fields.items())
-                 if values.get(name) is not None]
+        parts = [
+            f"{flag}={values[name]}"
+            for flag, name in sorted(self.effort_fields.items())
+            if values.get(name) is not None
+        ]
         return ",".join(parts) or "none"
 
 

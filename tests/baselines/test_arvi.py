@@ -15,8 +15,12 @@ from hptrack.scenario import Scenario, TargetSpec
 from hptrack.sim.episode import run_episode
 
 EAST, HOVER = 1, 0
-STATIC_PRIOR = ((900.0, 100.0, 0.0, 0.0), (100.0, 800.0, 0.0, 0.0), (0.0, 0.0, 0.3, 0.0),
-                (0.0, 0.0, 0.0, 0.3))
+STATIC_PRIOR = (
+    (900.0, 100.0, 0.0, 0.0),
+    (100.0, 800.0, 0.0, 0.0),
+    (0.0, 0.0, 0.3, 0.0),
+    (0.0, 0.0, 0.0, 0.3),
+)
 
 
 def planner_for(mission, obs, **settings):
@@ -27,8 +31,16 @@ def planner_for(mission, obs, **settings):
 
 def static_scenario(xs, budget):
     """Targets whose truth sits still at their mean (q = 0), on the x axis."""
-    targets = [TargetSpec(id=f"t{i}", mean=(x, 0.0, 0.0, 0.0), covariance=STATIC_PRIOR,
-                          process_noise=0.0, truth=(x, 0.0, 0.0, 0.0)) for i, x in enumerate(xs)]
+    targets = [
+        TargetSpec(
+            id=f"t{i}",
+            mean=(x, 0.0, 0.0, 0.0),
+            covariance=STATIC_PRIOR,
+            process_noise=0.0,
+            truth=(x, 0.0, 0.0, 0.0),
+        )
+        for i, x in enumerate(xs)
+    ]
     return Scenario(seed=1, targets=targets, budget=budget)
 
 
@@ -51,8 +63,9 @@ def test_hovers_when_nothing_is_reachable(make_mission, make_observation):
     mission, obs = make_mission(1), make_observation([[3000.0, 0.0, 0.0, 0.0]])
     plan, stats = planner_for(mission, obs).search(obs)
     np.testing.assert_array_equal(plan, [HOVER] * 12)
-    _, predicted = mission.motion.predict(obs.means, obs.covariances, mission.process_noise,
-                                          120 * mission.time_step)
+    _, predicted = mission.motion.predict(
+        obs.means, obs.covariances, mission.process_noise, 120 * mission.time_step
+    )
     growth = position_logdet(predicted) - position_logdet(obs.covariances)
     assert stats.predicted_cost == pytest.approx(growth.sum(), rel=1e-12)
 
@@ -61,16 +74,18 @@ def test_alternates_between_two_near_targets():
     # The seed paper (Sec. V-B) saw ARVI with the difference cost move back and forth between
     # targets in small environments.
     record = run_episode(static_scenario([-300.0, 300.0], budget=300.0), ArviPlanner())
-    order = [i for k in range(record.detections.shape[0])
-             for i in np.flatnonzero(record.detections[k])]
+    order = [
+        i for k in range(record.detections.shape[0]) for i in np.flatnonzero(record.detections[k])
+    ]
     visits = [i for i, _ in itertools.groupby(order)]
     assert len(visits) >= 6
     assert visits[:6] in ([0, 1, 0, 1, 0, 1], [1, 0, 1, 0, 1, 0])
     assert record.detections.sum(axis=0).min() >= 30
 
 
-def test_anytime_search_returns_the_best_pass_and_exact_vi_is_exhaustive(make_mission,
-                                                                         make_observation):
+def test_anytime_search_returns_the_best_pass_and_exact_vi_is_exhaustive(
+    make_mission, make_observation
+):
     means = [[100.0, 60.0, -2.0, 1.0], [-150.0, 100.0, 1.0, -1.0]]
     mission, obs = make_mission(2), make_observation(means)
     planner = planner_for(mission, obs, horizon=3)
@@ -83,8 +98,13 @@ def test_anytime_search_returns_the_best_pass_and_exact_vi_is_exhaustive(make_mi
     # Exhaustive: all 9^3 sequences.
     pos, covs = obs.agent_position[None], obs.covariances[None]
     for level in range(3):
-        pos, covs, unc = expand(planner.mission, planner.step_displacements,
-                                mp[level * 10:(level + 1) * 10 + 1], pos, covs)
+        pos, covs, unc = expand(
+            planner.mission,
+            planner.step_displacements,
+            mp[level * 10 : (level + 1) * 10 + 1],
+            pos,
+            covs,
+        )
     costs = unc - position_logdet(obs.covariances).sum()
     best = int(np.argmin(costs))
     assert exact.cost == pytest.approx(costs[best], abs=1e-9)
@@ -93,8 +113,9 @@ def test_anytime_search_returns_the_best_pass_and_exact_vi_is_exhaustive(make_mi
     assert stats.predicted_cost >= exact.cost - 1e-12
 
 
-def test_time_limit_stops_after_the_first_pass_and_default_is_deterministic(make_mission,
-                                                                            make_observation):
+def test_time_limit_stops_after_the_first_pass_and_default_is_deterministic(
+    make_mission, make_observation
+):
     means = [[400.0, 300.0, -2.0, 1.0], [-500.0, 150.0, 1.0, 0.0]]
     mission, obs = make_mission(2), make_observation(means)
     # a limit of 0 is refused; 1 ns is spent before the first pass ends
@@ -114,6 +135,7 @@ def test_original_sum_cost_also_steers_to_the_target(make_mission, make_observat
 
 # --- pruning -------------------------------------------------------------------------------
 
+
 def test_pruning_keeps_the_cheapest_node_even_when_it_comes_last():
     positions = np.array([[0.0, 0.0], [30.0, 0.0], [200.0, 0.0], [210.0, 0.0]])
     costs = np.array([2.0, 1.0, 3.0, 0.5])
@@ -124,8 +146,7 @@ def test_pruning_keeps_the_cheapest_node_even_when_it_comes_last():
     np.testing.assert_array_equal(kept, [3])
     assert capped
     np.testing.assert_array_equal(prune(positions, costs, None, math.inf, math.inf, 10)[0], [3])
-    np.testing.assert_array_equal(prune(positions, costs, None, 0.0, math.inf, 10)[0],
-                                  [3, 1, 0, 2])
+    np.testing.assert_array_equal(prune(positions, costs, None, 0.0, math.inf, 10)[0], [3, 1, 0, 2])
 
 
 def test_epsilon_redundancy_is_checked_on_whole_blocks():
@@ -139,8 +160,7 @@ def test_epsilon_redundancy_is_checked_on_whole_blocks():
     positions = np.zeros((2, 2))
     costs = np.array([0.0, 1.0])
     for epsilon, expected in [(0.0, [0, 1]), (2.0, [0, 1]), (2.999, [0, 1]), (3.001, [0])]:
-        np.testing.assert_array_equal(prune(positions, costs, covs, 10.0, epsilon, 10)[0],
-                                      expected)
+        np.testing.assert_array_equal(prune(positions, costs, covs, 10.0, epsilon, 10)[0], expected)
     with pytest.raises(ValueError, match="finite epsilon needs the covariances"):
         prune(positions, costs, None, 10.0, 1.0, 10)
 
@@ -150,13 +170,18 @@ def redundant(positions, covs, j, k, delta, epsilon):
         return False
     if math.isinf(epsilon):
         return True
-    return all(np.linalg.eigvalsh(covs[j, i] + epsilon * np.eye(4) - covs[k, i]).min() >= -1e-9
-               for i in range(covs.shape[1]))
+    return all(
+        np.linalg.eigvalsh(covs[j, i] + epsilon * np.eye(4) - covs[k, i]).min() >= -1e-9
+        for i in range(covs.shape[1])
+    )
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 100_000), delta=st.sampled_from([0.0, 20.0, 75.0, math.inf]),
-       epsilon=st.sampled_from([0.0, 5.0, 50.0, math.inf]))
+@given(
+    seed=st.integers(0, 100_000),
+    delta=st.sampled_from([0.0, 20.0, 75.0, math.inf]),
+    epsilon=st.sampled_from([0.0, 5.0, 50.0, math.inf]),
+)
 def test_pruning_matches_the_greedy_rule_and_never_drops_the_best(seed, delta, epsilon):
     rng = np.random.default_rng(seed)
     m = int(rng.integers(1, 60))

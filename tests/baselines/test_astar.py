@@ -14,8 +14,12 @@ from hptrack.scenario import Scenario, TargetSpec
 from hptrack.sim.episode import run_episode
 
 EAST, HOVER = 1, 0
-STATIC_PRIOR = ((900.0, 100.0, 0.0, 0.0), (100.0, 800.0, 0.0, 0.0), (0.0, 0.0, 0.3, 0.0),
-                (0.0, 0.0, 0.0, 0.3))
+STATIC_PRIOR = (
+    (900.0, 100.0, 0.0, 0.0),
+    (100.0, 800.0, 0.0, 0.0),
+    (0.0, 0.0, 0.3, 0.0),
+    (0.0, 0.0, 0.0, 0.3),
+)
 
 
 def planner_for(mission, obs, **settings):
@@ -32,8 +36,13 @@ def exhaustive_costs(planner, obs, horizon, kind):
     total = np.zeros(1)
     previous = np.array([position_logdet(obs.covariances).sum()])
     for level in range(horizon):
-        pos, covs, unc = expand(planner.mission, planner.step_displacements,
-                                mp[level * k:(level + 1) * k + 1], pos, covs)
+        pos, covs, unc = expand(
+            planner.mission,
+            planner.step_displacements,
+            mp[level * k : (level + 1) * k + 1],
+            pos,
+            covs,
+        )
         step = unc - np.repeat(previous, 9) if kind == "difference" else unc
         total = np.repeat(total, 9) + step
         previous = unc
@@ -45,8 +54,13 @@ def test_flies_straight_to_a_reachable_target(make_mission, make_observation):
     plan, stats = planner_for(mission, obs).search(obs)
     np.testing.assert_array_equal(plan, [EAST] * 4 + [HOVER] * 2)
     assert not stats.capped
-    target = TargetSpec(id="t", mean=(600.0, 0.0, 0.0, 0.0), covariance=STATIC_PRIOR,
-                        process_noise=0.0, truth=(600.0, 0.0, 0.0, 0.0))
+    target = TargetSpec(
+        id="t",
+        mean=(600.0, 0.0, 0.0, 0.0),
+        covariance=STATIC_PRIOR,
+        process_noise=0.0,
+        truth=(600.0, 0.0, 0.0, 0.0),
+    )
     record = run_episode(Scenario(seed=1, targets=[target], budget=60.0), AStarPlanner())
     assert np.flatnonzero(record.detections[:, 0])[0] == 37
     assert record.detections[37:, 0].all()
@@ -54,16 +68,19 @@ def test_flies_straight_to_a_reachable_target(make_mission, make_observation):
 
 def test_hovers_along_one_branch_when_nothing_is_reachable(make_mission, make_observation):
     # 6 primitives reach 900 m + 50 m: every sequence ties; the tie-break pops the hover chain.
-    mission, obs = make_mission(2), make_observation([[1000.0, 0.0, 0.0, 0.0],
-                                                      [0.0, -1200.0, 0.0, 1.0]])
+    mission, obs = (
+        make_mission(2),
+        make_observation([[1000.0, 0.0, 0.0, 0.0], [0.0, -1200.0, 0.0, 1.0]]),
+    )
     plan, stats = planner_for(mission, obs).search(obs)
     np.testing.assert_array_equal(plan, [HOVER] * 6)
     assert stats.nodes_expanded == 6 and not stats.capped
 
 
 @pytest.mark.parametrize("kind", ["difference", "sum"])
-def test_same_best_sequence_as_exhaustive_search_with_fewer_expansions(make_mission,
-                                                                       make_observation, kind):
+def test_same_best_sequence_as_exhaustive_search_with_fewer_expansions(
+    make_mission, make_observation, kind
+):
     means = [[100.0, 60.0, -2.0, 1.0], [-150.0, 100.0, 1.0, -1.0]]
     mission, obs = make_mission(2), make_observation(means)
     horizon = 3
@@ -79,8 +96,7 @@ def test_same_best_sequence_as_exhaustive_search_with_fewer_expansions(make_miss
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_optimal_like_exact_value_iteration_on_random_beliefs(make_mission, make_observation,
-                                                              seed):
+def test_optimal_like_exact_value_iteration_on_random_beliefs(make_mission, make_observation, seed):
     rng = np.random.default_rng(seed)
     means = np.column_stack([rng.uniform(-300, 300, (3, 2)), rng.uniform(-3, 3, (3, 2))])
     mission, obs = make_mission(3), make_observation(means)
@@ -106,12 +122,20 @@ def test_expansion_cap_returns_the_most_promising_open_node(make_mission, make_o
 def test_dwells_on_the_tracked_target_where_arvi_alternates():
     # Module docstring: with the difference cost A* postpones leaving a tracked target; in the
     # scene where ARVI alternates at least 6 times (test_arvi), A* switches once.
-    targets = [TargetSpec(id=f"t{i}", mean=(x, 0.0, 0.0, 0.0), covariance=STATIC_PRIOR,
-                          process_noise=0.0, truth=(x, 0.0, 0.0, 0.0))
-               for i, x in enumerate([-300.0, 300.0])]
+    targets = [
+        TargetSpec(
+            id=f"t{i}",
+            mean=(x, 0.0, 0.0, 0.0),
+            covariance=STATIC_PRIOR,
+            process_noise=0.0,
+            truth=(x, 0.0, 0.0, 0.0),
+        )
+        for i, x in enumerate([-300.0, 300.0])
+    ]
     record = run_episode(Scenario(seed=1, targets=targets, budget=300.0), AStarPlanner())
-    order = [i for k in range(record.detections.shape[0])
-             for i in np.flatnonzero(record.detections[k])]
+    order = [
+        i for k in range(record.detections.shape[0]) for i in np.flatnonzero(record.detections[k])
+    ]
     visits = [(i, len(list(run))) for i, run in itertools.groupby(order)]
     assert len(visits) == 2
     assert visits[0][1] >= 300  # steps with the first target in view before the switch

@@ -48,10 +48,12 @@ def fly(planner, mission, observation, n_steps):
     return np.array(path)
 
 
-@pytest.mark.parametrize(("replan_period", "searches"), [(1, [0, 2, 4, 6]), (2, [0, 4]),
-                                                         (3, [0, 6])])
+@pytest.mark.parametrize(
+    ("replan_period", "searches"), [(1, [0, 2, 4, 6]), (2, [0, 4]), (3, [0, 6])]
+)
 def test_plans_are_flown_primitive_by_primitive_and_replanned_on_schedule(
-        make_mission, make_observation, replan_period, searches):
+    make_mission, make_observation, replan_period, searches
+):
     mission = make_mission(1)
     planner = FixedPlan(PrimitiveSettings(control_steps=2, replan_period=replan_period))
 
@@ -78,10 +80,13 @@ def test_horizon_is_cut_to_the_primitives_left_in_the_budget(make_mission, make_
 
 
 def test_options_from_the_command_line_are_parsed_by_field():
-    settings = ArviSettings.from_options("arvi", {"horizon": "8", "delta_schedule_m": "inf,100",
-                                                  "time_limit_s": "0.5", "cost": "sum"})
-    assert settings == ArviSettings(horizon=8, delta_schedule_m=(math.inf, 100.0),
-                                    time_limit_s=0.5, cost="sum")
+    settings = ArviSettings.from_options(
+        "arvi",
+        {"horizon": "8", "delta_schedule_m": "inf,100", "time_limit_s": "0.5", "cost": "sum"},
+    )
+    assert settings == ArviSettings(
+        horizon=8, delta_schedule_m=(math.inf, 100.0), time_limit_s=0.5, cost="sum"
+    )
     # the CLI reads "none" as None before validation (hptrack.cli.common.parse_value)
     assert ArviSettings.from_options("arvi", {"time_limit_s": None}).time_limit_s is None
     yaml_list = ArviSettings.from_options("arvi", {"delta_schedule_m": [math.inf, 100]})
@@ -98,15 +103,18 @@ def test_options_from_the_command_line_are_parsed_by_field():
         ArviSettings(delta_schedule_m=(100.0, 50.0), epsilon_schedule=(1.0, 2.0, 3.0))
 
 
-@pytest.mark.parametrize(("options", "message"), [
-    ({"horizon": "abc"}, "option horizon must be an integer, got 'abc'"),
-    ({"horizon": 0}, "option horizon must be >= 1, got 0"),
-    ({"control_steps": 2.5}, "option control_steps"),
-    ({"delta_schedule_m": "nan"}, "option delta_schedule_m"),
-    ({"delta_schedule_m": "100,-1"}, "option delta_schedule_m"),
-    ({"time_limit_s": 0}, "option time_limit_s must be > 0"),
-    ({"epsilon_schedule": "1,2,3"}, "option epsilon_schedule needs one value or one per"),
-])
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"horizon": "abc"}, "option horizon must be an integer, got 'abc'"),
+        ({"horizon": 0}, "option horizon must be >= 1, got 0"),
+        ({"control_steps": 2.5}, "option control_steps"),
+        ({"delta_schedule_m": "nan"}, "option delta_schedule_m"),
+        ({"delta_schedule_m": "100,-1"}, "option delta_schedule_m"),
+        ({"time_limit_s": 0}, "option time_limit_s must be > 0"),
+        ({"epsilon_schedule": "1,2,3"}, "option epsilon_schedule needs one value or one per"),
+    ],
+)
 def test_bad_options_are_refused_in_one_line_naming_planner_option_and_value(options, message):
     with pytest.raises(InputError, match=f"^planner 'arvi': {message}") as err:
         ArviSettings.from_options("arvi", options)

@@ -14,23 +14,37 @@ VALID = {
     "budget": 30.0,
     "seed": 3,
     "process_noise_form": "continuous",
-    "agent": {"position": [0.0, 0.0], "speed": 30.0, "sensor_diameter": 100.0,
-              "measurement_noise_std": 3.1623},
+    "agent": {
+        "position": [0.0, 0.0],
+        "speed": 30.0,
+        "sensor_diameter": 100.0,
+        "measurement_noise_std": 3.1623,
+    },
     "targets": [
-        {"id": "t1", "mean": [120.0, -80.0, 1.5, -2.0],
-         "covariance": [[900, 100, 0, 0], [100, 800, 0, 0], [0, 0, 0.3, 0], [0, 0, 0, 0.4]],
-         "process_noise": 0.0003, "truth": [130.0, -70.0, 1.4, -2.2]},
-        {"id": "t2", "mean": [-150.0, 60.0, 0.0, 1.0],
-         "covariance": [[900, 0, 0, 0], [0, 800, 0, 0], [0, 0, 0.3, 0], [0, 0, 0, 0.4]],
-         "process_noise": 0.0002},
+        {
+            "id": "t1",
+            "mean": [120.0, -80.0, 1.5, -2.0],
+            "covariance": [[900, 100, 0, 0], [100, 800, 0, 0], [0, 0, 0.3, 0], [0, 0, 0, 0.4]],
+            "process_noise": 0.0003,
+            "truth": [130.0, -70.0, 1.4, -2.2],
+        },
+        {
+            "id": "t2",
+            "mean": [-150.0, 60.0, 0.0, 1.0],
+            "covariance": [[900, 0, 0, 0], [0, 800, 0, 0], [0, 0, 0.3, 0], [0, 0, 0, 0.4]],
+            "process_noise": 0.0002,
+        },
     ],
 }
 
 ODD_VALUES = st.one_of(
-    st.none(), st.booleans(), st.integers(min_value=-10**30, max_value=10**30),
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(10**30), max_value=10**30),
     st.floats(allow_nan=True, allow_infinity=True),
     st.sampled_from([0.0, -0.0, 1e-300, -1e-300, 1e300, -1e300, 1e12, 5e-324, 0.5, 7]),
-    st.text(max_size=12), st.sampled_from(["[/x]", "[bold]", "nan", "inf", "1e999", "", "t1"]),
+    st.text(max_size=12),
+    st.sampled_from(["[/x]", "[bold]", "nan", "inf", "1e999", "", "t1"]),
     st.lists(st.floats(allow_nan=False, width=32), max_size=5),
     st.dictionaries(st.text(max_size=4), st.integers(), max_size=2),
 )
@@ -84,16 +98,21 @@ def _finite_numbers(value):
     return True
 
 
-@settings(max_examples=60, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@settings(
+    max_examples=60,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 @given(text=mutated())
 def test_mutated_scenarios_run_or_are_refused_in_one_line(cli, tmp_path, text):
     path = tmp_path / "s.yaml"
     path.write_text(text)
     out = tmp_path / "o.json"
     out.unlink(missing_ok=True)
-    for args in (["scenario", "check", path],
-                 ["simulate", path, "--planner", "greedy", "--json", out]):
+    for args in (
+        ["scenario", "check", path],
+        ["simulate", path, "--planner", "greedy", "--json", out],
+    ):
         result = cli(*args)
         assert result.code in (0, 2), (result.code, result.err[-2000:])
         assert "Traceback" not in result.err

@@ -32,7 +32,7 @@ def test_p_cdf_rises_to_t_cutoff_and_not_after(seed, delay):
     assert k > 0
     assert np.all(np.diff(long[: k + 1]) > 0)
     assert long[k + 1] <= long[k]
-    assert np.max(long[k + 1:]) <= long[k]  # t_cutoff is the global maximum
+    assert np.max(long[k + 1 :]) <= long[k]  # t_cutoff is the global maximum
     assert est.p_find == pytest.approx(long[k], rel=1e-12)
     np.testing.assert_allclose(est.cdf, long[: k + 1], rtol=1e-12)
 
@@ -85,13 +85,16 @@ def test_paper_text_noise_form_grows_faster():
     assert text.p_find < cont.p_find
 
 
-@pytest.mark.parametrize("cov, match", [
-    (np.full((4, 4), np.nan), "finite 4x4"),
-    (np.eye(3), "finite 4x4"),
-    (np.diag([100.0, 100.0, 1.0, 1.0]) + np.triu(np.ones((4, 4)), 1), "not symmetric"),
-    (np.diag([100.0, 100.0, -1.0, 1.0]), "not positive semi-definite"),
-    (np.diag([100.0, 0.0, 1.0, 1.0]), "position covariance is not positive definite"),
-])
+@pytest.mark.parametrize(
+    "cov, match",
+    [
+        (np.full((4, 4), np.nan), "finite 4x4"),
+        (np.eye(3), "finite 4x4"),
+        (np.diag([100.0, 100.0, 1.0, 1.0]) + np.triu(np.ones((4, 4)), 1), "not symmetric"),
+        (np.diag([100.0, 100.0, -1.0, 1.0]), "not positive semi-definite"),
+        (np.diag([100.0, 0.0, 1.0, 1.0]), "position covariance is not positive definite"),
+    ],
+)
 def test_bad_covariances_get_clear_errors(cov, match):
     with pytest.raises(ValueError, match=match):
         estimate_coverage(cov, 1e-4, MISSION)
@@ -135,8 +138,9 @@ def test_kernels_are_callable_from_numba():
 
 def test_the_mission_constants_are_the_ones_estimated_with():
     cov, q = prior(4, 100.0)
-    mission = MissionSpec(time_step=0.25, agent_speed=20.0, sensor_diameter=80.0,
-                          process_noise_form="paper_text")
+    mission = MissionSpec(
+        time_step=0.25, agent_speed=20.0, sensor_diameter=80.0, process_noise_form="paper_text"
+    )
     est = estimate_coverage(cov, q, mission, remaining_time=400.0)
     k, p, e = coverage_outcome(cov, q, 0.25, 1.0, 20.0, 80.0, 1600)
     assert (est.cutoff_steps, est.p_find, est.expected_time) == (k, p, e * 0.25)

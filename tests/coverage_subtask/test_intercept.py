@@ -48,21 +48,28 @@ def test_kernel_flags_a_target_not_slower_than_the_agent():
 
 def test_wrapper_names_the_speeds():
     with pytest.raises(ValueError, match=r"speed 30\.5 m/s is not below the agent speed 30 m/s"):
-        plan_intercept(np.zeros(2), np.array([500.0, 0.0]), np.array([30.5, 0.0]), 30.0, 0.5,
-                       100.0)
+        plan_intercept(np.zeros(2), np.array([500.0, 0.0]), np.array([30.5, 0.0]), 30.0, 0.5, 100.0)
 
 
-@pytest.mark.parametrize("bad", [
-    dict(agent_position=np.array([np.nan, 0.0])),
-    dict(mean_velocity=np.array([1.0, 2.0, 3.0])),
-    dict(speed=0.0),
-    dict(time_step=-0.5),
-    dict(sensor_diameter=math.inf),
-])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(agent_position=np.array([np.nan, 0.0])),
+        dict(mean_velocity=np.array([1.0, 2.0, 3.0])),
+        dict(speed=0.0),
+        dict(time_step=-0.5),
+        dict(sensor_diameter=math.inf),
+    ],
+)
 def test_bad_inputs_are_rejected(bad):
-    args = dict(agent_position=np.zeros(2), mean_position=np.array([800.0, 0.0]),
-                mean_velocity=np.array([1.0, 1.0]), speed=30.0, time_step=0.5,
-                sensor_diameter=100.0)
+    args = dict(
+        agent_position=np.zeros(2),
+        mean_position=np.array([800.0, 0.0]),
+        mean_velocity=np.array([1.0, 1.0]),
+        speed=30.0,
+        time_step=0.5,
+        sensor_diameter=100.0,
+    )
     args.update(bad)
     with pytest.raises(ValueError):
         plan_intercept(**args)
@@ -102,16 +109,15 @@ def test_path_flies_straight_at_full_speed_and_meets_the_mean(seed):
 
 def test_path_at_chosen_steps_and_single_waypoints_match_the_whole_path():
     agent = np.array([-200.0, 50.0])
-    plan = plan_intercept(agent, np.array([700.0, 400.0]), np.array([1.5, -2.0]), 30.0, 0.5,
-                          100.0)
+    plan = plan_intercept(agent, np.array([700.0, 400.0]), np.array([1.5, -2.0]), 30.0, 0.5, 100.0)
     whole = intercept_path(agent, plan, 15.0)
     chosen = np.array([0, 3, plan.steps - 1, plan.steps, plan.steps + 40])
     got = intercept_path(agent, plan, 15.0, chosen)
     np.testing.assert_array_equal(got[:4], whole[chosen[:4]])
     np.testing.assert_array_equal(got[4], plan.start)  # after arrival it stays at the start
     for j in chosen:
-        np.testing.assert_array_equal(intercept_waypoint(agent, plan, 15.0, int(j)),
-                                      got[list(chosen).index(j)])
+        np.testing.assert_array_equal(
+            intercept_waypoint(agent, plan, 15.0, int(j)), got[list(chosen).index(j)]
+        )
     at_once = plan_intercept(agent, agent + [10.0, 0.0], np.zeros(2), 30.0, 0.5, 100.0)
-    np.testing.assert_array_equal(intercept_path(agent, at_once, 15.0, np.arange(3)),
-                                  [agent] * 3)
+    np.testing.assert_array_equal(intercept_path(agent, at_once, 15.0, np.arange(3)), [agent] * 3)

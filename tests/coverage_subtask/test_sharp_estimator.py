@@ -56,7 +56,8 @@ def reference_model(cov, q, n, approach, cutoff):
     rate = 4 * math.pi * pitch * SPEED * TAU / per  # s^2 per step
     scale = np.sqrt(rate * k_fine)
     h_out = (math.pi * a * b * scale**2 + R * per * scale + math.pi * R * R) / (
-        math.pi * np.sqrt(det))
+        math.pi * np.sqrt(det)
+    )
     h_max = np.maximum.accumulate(h_out)
     alpha = (np.arange(400) + 0.5) / 400 * 2 * math.pi
     ks = np.arange(cutoff + 1.0)
@@ -84,8 +85,11 @@ def reference_model(cov, q, n, approach, cutoff):
         chord = np.sqrt(R * R - c * c)
         step = np.hypot(*approach)
         for j in range(n):
-            flight_sum += np.sum(wc * norm.pdf(c, scale=math.sqrt(var_c))
-                                 * norm.sf(((n - j) * step - chord - mu) / sd))
+            flight_sum += np.sum(
+                wc
+                * norm.pdf(c, scale=math.sqrt(var_c))
+                * norm.sf(((n - j) * step - chord - mu) / sd)
+            )
     p = found[-1]
     return p, ((n + cutoff) * p - flight_sum - np.sum(found[:-1])) / p
 
@@ -103,7 +107,8 @@ def test_a_static_round_belief_covers_the_paper_area_less_two_thirds_of_the_foot
     assert p == pytest.approx(-math.expm1(-area / (2 * math.pi * sigma2)), rel=1e-12)
     paper = coverage_outcome(cov, 0.0, TAU, CPS, SPEED, W, 300)
     assert paper[1] == pytest.approx(
-        -math.expm1(-(area + 2 * math.pi * R * R / 3) / (2 * math.pi * sigma2)), rel=1e-12)
+        -math.expm1(-(area + 2 * math.pi * R * R / 3) / (2 * math.pi * sigma2)), rel=1e-12
+    )
     ref_p, ref_e = reference_model(cov, 0.0, 0, (0.0, 0.0), 300)
     assert p == pytest.approx(ref_p, rel=1e-4)
     assert e == pytest.approx(ref_e, rel=2e-3)
@@ -119,8 +124,9 @@ def test_the_kernel_computes_its_model_as_a_brute_force_integration_does(case, d
     assert e == pytest.approx(ref_e, rel=5e-3)
 
 
-@pytest.mark.parametrize("h, width", [(0.5, 0.3), (3.0, 0.3), (0.5, 2.0), (4.0, 2.0),
-                                      (2.0, math.sqrt(2.0))])
+@pytest.mark.parametrize(
+    "h, width", [(0.5, 0.3), (3.0, 0.3), (0.5, 2.0), (4.0, 2.0), (2.0, math.sqrt(2.0))]
+)
 def test_strip_mass_is_the_half_strip_outside_the_disk(h, width):
     y = np.linspace(-width, width, 20001)
     wy = np.full(y.size, y[1] - y[0])
@@ -153,8 +159,9 @@ def test_flight_sum_counts_the_flight_steps_after_the_find_as_a_simulation_does(
 def test_the_sharp_estimate_matches_the_simulation_where_the_paper_is_conservative():
     # Case 2 after 200 s: the paper's estimator misses 0.08 of P_find.
     plan = plan_coverage(draw_case(2, 0), 400, MISSION)
-    first_any, _ = first_detections(plan, draw_case(2, 0).q, MISSION, 3000,
-                                    np.random.default_rng(11))
+    first_any, _ = first_detections(
+        plan, draw_case(2, 0).q, MISSION, 3000, np.random.default_rng(11)
+    )
     found = first_any >= 0
     p_emp = found.mean()  # standard error about 0.008
     t_emp = first_any[found].mean() * TAU
@@ -177,8 +184,7 @@ def test_budget_truncation_and_a_budget_that_ends_before_the_coverage():
     full = sharp_coverage_outcome(cov, q, TAU, CPS, SPEED, W, 10_000_000, n, *approach)
     short = sharp_coverage_outcome(cov, q, TAU, CPS, SPEED, W, 40, n, *approach)
     assert short[0] == 40 and short[1] < full[1] and short[2] < full[2]
-    assert sharp_coverage_outcome(cov, q, TAU, CPS, SPEED, W, -1, n, *approach) == (0.0, 0.0,
-                                                                                    0.0)
+    assert sharp_coverage_outcome(cov, q, TAU, CPS, SPEED, W, -1, n, *approach) == (0.0, 0.0, 0.0)
     est = estimate_sharp(cov, q, MISSION, n, approach, remaining_time=20.0)
     assert (est.cutoff_steps, est.p_find, est.budget_limited) == (40, short[1], True)
     assert est.expected_time == pytest.approx(short[2] * TAU)
@@ -216,8 +222,14 @@ def test_the_subtask_exposes_the_sharp_estimate_of_its_own_flight():
     agent = np.array([100.0, -50.0])
     sub = CoverageSubtask(agent, case.mean, case.covariance, case.q, mission, 900.0)
     n = sub.intercept.steps
-    direct = estimate_sharp(sub.start_covariance, case.q, mission, n,
-                            approach_step(*agent, *case.mean, SPEED, TAU, n), 900.0 - n * TAU)
+    direct = estimate_sharp(
+        sub.start_covariance,
+        case.q,
+        mission,
+        n,
+        approach_step(*agent, *case.mean, SPEED, TAU, n),
+        900.0 - n * TAU,
+    )
     assert sub.sharp_estimate == direct
     assert direct.cutoff_steps == sub.estimate.cutoff_steps
 
@@ -234,9 +246,14 @@ def _node_expansion(agent, mean, cov, q, left):
 def test_the_kernel_is_callable_from_numba_like_the_paper_one():
     case = draw_case(7, 0)
     n, (k, p, e) = _node_expansion(np.zeros(2), case.mean, case.covariance, case.q, 1800)
-    est = estimate_sharp(MISSION.motion.predict(case.mean[None], case.covariance[None], case.q,
-                                                n * TAU)[1][0], case.q, MISSION, n,
-                         approach_step(0.0, 0.0, *case.mean, SPEED, TAU, n), 900.0 - n * TAU)
+    est = estimate_sharp(
+        MISSION.motion.predict(case.mean[None], case.covariance[None], case.q, n * TAU)[1][0],
+        case.q,
+        MISSION,
+        n,
+        approach_step(0.0, 0.0, *case.mean, SPEED, TAU, n),
+        900.0 - n * TAU,
+    )
     assert (k, p) == (est.cutoff_steps, est.p_find)
     assert e == pytest.approx(est.expected_steps, rel=1e-12)
     assert e > n  # the duration counts the flight

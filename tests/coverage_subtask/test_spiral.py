@@ -47,16 +47,20 @@ def test_starts_at_the_belief_centre(spiral):
 
 def test_world_path_is_the_static_spiral_in_the_moving_frame(spiral):
     positions = spiral.positions(400)
-    np.testing.assert_allclose(moving_frame(spiral, positions), spiral.frame_positions(400),
-                               atol=1e-8)
+    np.testing.assert_allclose(
+        moving_frame(spiral, positions), spiral.frame_positions(400), atol=1e-8
+    )
 
 
 def axis_crossings(frame, axis):
     """Coordinate along ``axis`` where the path crosses it on its positive side, in order."""
     other = 1 - axis
     a, b = frame[:-1], frame[1:]
-    crossing = (a[:, other] < 0) & (b[:, other] >= 0) if axis == 0 else \
-        (a[:, other] >= 0) & (b[:, other] < 0)
+    crossing = (
+        (a[:, other] < 0) & (b[:, other] >= 0)
+        if axis == 0
+        else (a[:, other] >= 0) & (b[:, other] < 0)
+    )
     frac = a[crossing, other] / (a[crossing, other] - b[crossing, other])
     return a[crossing, axis] + frac * (b[crossing, axis] - a[crossing, axis])
 
@@ -117,13 +121,16 @@ def test_axes_and_proper_rotation():
     np.testing.assert_allclose(abs(rot[:, 0] @ [math.cos(0.3), math.sin(0.3)]), 1.0)
 
 
-@pytest.mark.parametrize("cov, match", [
-    (np.array([[100.0, 100.0], [100.0, 100.0]]), "not positive definite"),
-    (np.array([[100.0, 0.0], [0.0, -5.0]]), "not positive definite"),
-    (np.array([[100.0, 1.0], [0.0, 100.0]]), "not symmetric"),
-    (np.array([[np.nan, 0.0], [0.0, 1.0]]), "finite 2x2"),
-    (np.eye(3), "finite 2x2"),
-])
+@pytest.mark.parametrize(
+    "cov, match",
+    [
+        (np.array([[100.0, 100.0], [100.0, 100.0]]), "not positive definite"),
+        (np.array([[100.0, 0.0], [0.0, -5.0]]), "not positive definite"),
+        (np.array([[100.0, 1.0], [0.0, 100.0]]), "not symmetric"),
+        (np.array([[np.nan, 0.0], [0.0, 1.0]]), "finite 2x2"),
+        (np.eye(3), "finite 2x2"),
+    ],
+)
 def test_degenerate_covariances_are_rejected(cov, match):
     with pytest.raises(ValueError, match=match):
         ShiftingSpiral(np.zeros(2), np.zeros(2), cov, SPEED, TAU, W)

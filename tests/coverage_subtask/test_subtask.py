@@ -10,17 +10,31 @@ from hptrack.registry import make_planner
 from hptrack.scenario import random_scenario
 from hptrack.sim.episode import run_episode
 
-MISSION = MissionSpec(time_step=0.5, budget=900.0, agent_speed=30.0, sensor_diameter=100.0,
-                      measurement_noise=10.0 * np.eye(2), process_noise_form="continuous",
-                      process_noise=np.array([3e-4, 2e-4]), target_ids=("a", "b"))
+MISSION = MissionSpec(
+    time_step=0.5,
+    budget=900.0,
+    agent_speed=30.0,
+    sensor_diameter=100.0,
+    measurement_noise=10.0 * np.eye(2),
+    process_noise_form="continuous",
+    process_noise=np.array([3e-4, 2e-4]),
+    target_ids=("a", "b"),
+)
 MEAN = np.array([700.0, -400.0, 2.0, 1.0])
 COV = np.diag([1500.0, 900.0, 0.4, 0.3])
 COV[0, 1] = COV[1, 0] = 400.0
 
 
 def observation(step, agent, detected=(False, False), budget_used=0.0):
-    return Observation(step, step * 0.5, 900.0 - step * 0.5 - budget_used, np.asarray(agent),
-                       np.stack([MEAN, MEAN]), np.stack([COV, COV]), np.array(detected))
+    return Observation(
+        step,
+        step * 0.5,
+        900.0 - step * 0.5 - budget_used,
+        np.asarray(agent),
+        np.stack([MEAN, MEAN]),
+        np.stack([COV, COV]),
+        np.array(detected),
+    )
 
 
 def test_plan_flies_intercept_then_spiral_from_the_belief_centre():
@@ -45,8 +59,7 @@ def test_waypoints_follow_the_observation_steps_and_extend_past_the_cutoff():
     task = CoverageSubtask(np.zeros(2), MEAN, COV, 3e-4, MISSION, 900.0, start_step=40)
     path = task.planned_positions(task.total_steps + 50)
     for j in (0, 5, task.intercept.steps, task.total_steps + 20):
-        np.testing.assert_array_equal(task.next_waypoint(observation(40 + j, path[j])),
-                                      path[j + 1])
+        np.testing.assert_array_equal(task.next_waypoint(observation(40 + j, path[j])), path[j + 1])
 
 
 def test_done_on_detection_of_the_pursued_target_cutoff_or_budget():
@@ -96,8 +109,9 @@ def test_bad_inputs():
     with pytest.raises(ValueError, match="mean"):
         CoverageSubtask(np.zeros(2), [0.0, np.nan, 1.0, 0.0], COV, 3e-4, MISSION, 900.0)
     with pytest.raises(InputError, match="option target 'zz' is not a target of the scenario"):
-        CoveragePlanner(CoverageSettings(target="zz")).reset(MISSION, observation(0, np.zeros(2)),
-                                                             None)
+        CoveragePlanner(CoverageSettings(target="zz")).reset(
+            MISSION, observation(0, np.zeros(2)), None
+        )
     with pytest.raises(InputError, match="planner 'coverage': option target is required"):
         make_planner("coverage", {})
 

@@ -33,8 +33,9 @@ class ReplayPlanner:
 
 def fly_greedy_in_box_env(scenario):
     """Tracking-v0 with Box actions following the greedy planner's waypoints."""
-    env = gym.make("hptrack/Tracking-v0", n_targets=len(scenario.targets),
-                   action_type="box").unwrapped
+    env = gym.make(
+        "hptrack/Tracking-v0", n_targets=len(scenario.targets), action_type="box"
+    ).unwrapped
     env.reset(options={"scenario": scenario})
     world = env.world
     planner = GreedyPlanner()
@@ -118,8 +119,11 @@ class VectorPolicyPlanner:
         vector = self.layout.encode_observation(observation, self.mission.budget)
         self.vectors.append(vector)
         action = observation_policy(vector, self.layout)
-        return np.array(action_waypoint("discrete", action, observation.agent_position,
-                                        self.mission.step_length))
+        return np.array(
+            action_waypoint(
+                "discrete", action, observation.agent_position, self.mission.step_length
+            )
+        )
 
     def episode_info(self):
         return {}
@@ -152,8 +156,11 @@ def lost_target_scenario():
     return Scenario.model_validate(data)
 
 
-@pytest.mark.parametrize("scenario", [random_scenario(3, seed=1, budget=200.0),
-                                      lost_target_scenario()], ids=["random", "lost-target"])
+@pytest.mark.parametrize(
+    "scenario",
+    [random_scenario(3, seed=1, budget=200.0), lost_target_scenario()],
+    ids=["random", "lost-target"],
+)
 def test_subtask_env_replaying_the_tree_search_gives_its_mission(scenario):
     """The hierarchical planner's sub-tasks (the paper's search, which pursues the lost target
     and misses it), chosen one by one in SubtaskTracking-v0, fly the same mission: same sub-task

@@ -13,21 +13,37 @@ from hptrack.envs import HOVER, SubtaskTrackingEnv, TrackingEnv
 from hptrack.interface import InputError
 from hptrack.scenario import Scenario, TargetSpec, random_scenario
 
-COV = ((900.0, 100.0, 0.0, 0.0), (100.0, 800.0, 0.0, 0.0), (0.0, 0.0, 0.3, 0.0),
-       (0.0, 0.0, 0.0, 0.4))
+COV = (
+    (900.0, 100.0, 0.0, 0.0),
+    (100.0, 800.0, 0.0, 0.0),
+    (0.0, 0.0, 0.3, 0.0),
+    (0.0, 0.0, 0.0, 0.4),
+)
 
 
 def far_scenario(budget=60.0):
     """Two targets 5 km away: never measured by an agent that stays near the start."""
-    targets = [TargetSpec(id=f"t{i}", mean=(5000.0 + 1000 * i, 0.0, 1.0, 0.5), covariance=COV,
-                          process_noise=2e-4 * (i + 1)) for i in range(2)]
+    targets = [
+        TargetSpec(
+            id=f"t{i}",
+            mean=(5000.0 + 1000 * i, 0.0, 1.0, 0.5),
+            covariance=COV,
+            process_noise=2e-4 * (i + 1),
+        )
+        for i in range(2)
+    ]
     return Scenario(seed=3, targets=targets, budget=budget)
 
 
-@pytest.mark.parametrize(("env_id", "cls"), [
-    ("hptrack/Tracking-v0", TrackingEnv), ("hptrack.envs:Tracking-v0", TrackingEnv),
-    ("hptrack/SubtaskTracking-v0", SubtaskTrackingEnv),
-    ("hptrack.envs:SubtaskTracking-v0", SubtaskTrackingEnv)])
+@pytest.mark.parametrize(
+    ("env_id", "cls"),
+    [
+        ("hptrack/Tracking-v0", TrackingEnv),
+        ("hptrack.envs:Tracking-v0", TrackingEnv),
+        ("hptrack/SubtaskTracking-v0", SubtaskTrackingEnv),
+        ("hptrack.envs:SubtaskTracking-v0", SubtaskTrackingEnv),
+    ],
+)
 def test_both_ids_make_the_environment_with_its_options(env_id, cls):
     env = gym.make(env_id, n_targets=6, setting="homogeneous")
     assert isinstance(env.unwrapped, cls)
@@ -37,10 +53,13 @@ def test_both_ids_make_the_environment_with_its_options(env_id, cls):
 
 
 def test_module_colon_id_works_in_a_fresh_process_without_the_import():
-    code = ("import gymnasium as gym; "
-            "print(type(gym.make('hptrack.envs:SubtaskTracking-v0').unwrapped).__name__)")
-    out = subprocess.run([sys.executable, "-W", "error", "-c", code], capture_output=True,
-                         text=True, check=True)
+    code = (
+        "import gymnasium as gym; "
+        "print(type(gym.make('hptrack.envs:SubtaskTracking-v0').unwrapped).__name__)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-W", "error", "-c", code], capture_output=True, text=True, check=True
+    )
     assert out.stdout.strip() == "SubtaskTrackingEnv"
 
 
@@ -77,8 +96,9 @@ def test_discrete_headings_fly_at_full_speed(action):
     env.step(action)
     step = 30.0 * 0.5
     angle = math.radians(30.0 * action)
-    np.testing.assert_allclose(env.world.agent - start,
-                               [step * math.cos(angle), step * math.sin(angle)], atol=1e-12)
+    np.testing.assert_allclose(
+        env.world.agent - start, [step * math.cos(angle), step * math.sin(angle)], atol=1e-12
+    )
 
 
 def test_hover_stays():
@@ -89,10 +109,15 @@ def test_hover_stays():
     np.testing.assert_array_equal(env.world.agent, start)
 
 
-@pytest.mark.parametrize(("action", "displacement"), [
-    ((1.0, 0.0), (15.0, 0.0)), ((0.5, -0.2), (7.5, -3.0)),
-    ((1.0, 1.0), (15.0 / math.sqrt(2), 15.0 / math.sqrt(2))),  # capped at the top speed
-    ((0.0, 0.0), (0.0, 0.0))])
+@pytest.mark.parametrize(
+    ("action", "displacement"),
+    [
+        ((1.0, 0.0), (15.0, 0.0)),
+        ((0.5, -0.2), (7.5, -3.0)),
+        ((1.0, 1.0), (15.0 / math.sqrt(2), 15.0 / math.sqrt(2))),  # capped at the top speed
+        ((0.0, 0.0), (0.0, 0.0)),
+    ],
+)
 def test_box_action_is_a_velocity_fraction(action, displacement):
     env = TrackingEnv(n_targets=2, action_type="box")
     env.reset(options={"scenario": far_scenario()})
@@ -120,8 +145,11 @@ def test_observation_encodes_the_beliefs():
 
 
 def test_observation_is_clipped_to_its_bounds():
-    targets = [TargetSpec(id="far", mean=(50_000.0, -50_000.0, 1.0, 0.5), covariance=COV,
-                          process_noise=2e-4)]
+    targets = [
+        TargetSpec(
+            id="far", mean=(50_000.0, -50_000.0, 1.0, 0.5), covariance=COV, process_noise=2e-4
+        )
+    ]
     env = TrackingEnv(n_targets=1)
     obs, _ = env.reset(options={"scenario": Scenario(targets=targets, budget=10.0)})
     np.testing.assert_array_equal(obs[:2], [10.0, -10.0])
@@ -183,10 +211,17 @@ def test_scenario_option_uses_its_seed_unless_overridden():
     assert not np.array_equal(env.world.truth, truth)
 
 
-@pytest.mark.parametrize(("kwargs", "match"), [
-    ({"n_targets": 0}, "n_targets"), ({"n_targets": (2, 4)}, "max_targets"),
-    ({"n_targets": 4, "max_targets": 3}, "max_targets"), ({"setting": "mixed"}, "setting"),
-    ({"action_type": "polar"}, "action_type"), ({"render_mode": "human"}, "render_mode")])
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"n_targets": 0}, "n_targets"),
+        ({"n_targets": (2, 4)}, "max_targets"),
+        ({"n_targets": 4, "max_targets": 3}, "max_targets"),
+        ({"setting": "mixed"}, "setting"),
+        ({"action_type": "polar"}, "action_type"),
+        ({"render_mode": "human"}, "render_mode"),
+    ],
+)
 def test_bad_options_are_one_line_input_errors(kwargs, match):
     with pytest.raises(InputError, match=match):
         TrackingEnv(**kwargs)

@@ -88,12 +88,12 @@ def test_the_printed_q_form_is_part_of_the_setting_and_of_the_scenario(tmp_path)
     printed = config(process_noise_form="paper_text")
     key, base = printed.keys()[0], CONFIG.keys()[0]
     assert (key.setting, base.setting) == ("homogeneous+paper_text", "homogeneous")
-    assert scenario_for(key) == random_scenario(key.n_targets, key.seed, homogeneous=True,
-                                                process_noise_form="paper_text")
+    assert scenario_for(key) == random_scenario(
+        key.n_targets, key.seed, homogeneous=True, process_noise_form="paper_text"
+    )
     store = ResultStore(tmp_path / "r.db")
     run_benchmark(config(target_counts=(2,), scenarios=1), store)
-    run_benchmark(config(target_counts=(2,), scenarios=1, process_noise_form="paper_text"),
-                  store)
+    run_benchmark(config(target_counts=(2,), scenarios=1, process_noise_form="paper_text"), store)
     rows = {r.key.setting: r.uncertainty for r in store.rows() if r.key.planner == "greedy"}
     store.close()
     assert set(rows) == {"homogeneous", "homogeneous+paper_text"}
@@ -112,8 +112,10 @@ def test_a_different_option_never_reuses_another_settings_rows(tmp_path):
     horizons = sorted(json.loads(r.key.settings)["horizon"] for r in rows)
     assert horizons == [2, 3]
     assert len({r.key.settings_hash for r in rows}) == 2
-    assert rows[0].key.settings_hash == planner_settings(
-        "astar", json.loads(rows[0].key.settings)).digest()
+    assert (
+        rows[0].key.settings_hash
+        == planner_settings("astar", json.loads(rows[0].key.settings)).digest()
+    )
 
 
 def _run_in_process(path, delay_s, queue):
@@ -137,9 +139,12 @@ def test_two_runs_on_one_database_share_the_work(tmp_path):
     path = tmp_path / "b.db"
     ResultStore(path).close()
     queue = multiprocessing.get_context("spawn").Queue()
-    procs = [multiprocessing.get_context("spawn").Process(target=_run_in_process,
-                                                          args=(path, 0.3, queue))
-             for _ in range(2)]
+    procs = [
+        multiprocessing.get_context("spawn").Process(
+            target=_run_in_process, args=(path, 0.3, queue)
+        )
+        for _ in range(2)
+    ]
     for p in procs:
         p.start()
     for p in procs:
@@ -156,8 +161,10 @@ def test_claims_of_a_dead_run_are_released(tmp_path):
     store = ResultStore(tmp_path / "b.db")
     key = CONFIG.keys()[0]
     with sqlite3.connect(tmp_path / "b.db") as db:
-        db.execute("INSERT INTO claims VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                   (*key._id(), store._host, 2**22 + 12345, 0.0))
+        db.execute(
+            "INSERT INTO claims VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+            (*key._id(), store._host, 2**22 + 12345, 0.0),
+        )
     assert not store.claim(key)
     assert store.release_stale_claims() == 1
     assert store.claim(key)
@@ -176,15 +183,32 @@ def test_a_file_that_is_not_a_results_database_is_refused(tmp_path):
 
 
 def test_benchmark_command_end_to_end(cli, tmp_path):
-    result = cli("benchmark", "--targets", 2, "--scenarios", 2, "--planners",
-                 "greedy,stationary", "--db", tmp_path / "b.db", "--out", tmp_path / "out",
-                 "--json", tmp_path / "b.json")
+    result = cli(
+        "benchmark",
+        "--targets",
+        2,
+        "--scenarios",
+        2,
+        "--planners",
+        "greedy,stationary",
+        "--db",
+        tmp_path / "b.db",
+        "--out",
+        tmp_path / "out",
+        "--json",
+        tmp_path / "b.json",
+    )
     assert result.code == 0, result.err
     data = json.loads((tmp_path / "b.json").read_text())
     assert set(data) == {"greedy", "stationary"}
     assert data["greedy"]["2"]["episodes"] == 2
-    for name in ("table.md", "episodes.csv", "episodes_summary.csv", "uncertainty_boxes.png",
-                 "trajectories.png"):
+    for name in (
+        "table.md",
+        "episodes.csv",
+        "episodes_summary.csv",
+        "uncertainty_boxes.png",
+        "trajectories.png",
+    ):
         assert (tmp_path / "out" / name).exists(), name
     assert "never observed" in (tmp_path / "out" / "table.md").read_text()
     assert "greedy: none" in (tmp_path / "out" / "table.md").read_text()  # no effort claimed

@@ -20,10 +20,23 @@ from hptrack.interface import MissionSpec
 
 def test_command_runs_end_to_end_and_resumes(cli, tmp_path):
     out = tmp_path / "val"
-    args = ["validate-coverage", "--cases", "3", "--runs", "300", "--delays", "0,100",
-            "--seed", "5", "--out", str(out), "--json", str(tmp_path / "mape.json")]
+    args = [
+        "validate-coverage",
+        "--cases",
+        "3",
+        "--runs",
+        "300",
+        "--delays",
+        "0,100",
+        "--seed",
+        "5",
+        "--out",
+        str(out),
+        "--json",
+        str(tmp_path / "mape.json"),
+    ]
     result = cli(*args)
-    assert result.code == 0, (result.out + result.err)
+    assert result.code == 0, result.out + result.err
     assert "MAPE" in result.out and "3.58" in result.out  # the paper's figure alongside
     mape = json.loads((tmp_path / "mape.json").read_text())
     assert set(mape) == {"0", "100"}
@@ -34,10 +47,11 @@ def test_command_runs_end_to_end_and_resumes(cli, tmp_path):
     assert "| 100 | 3 |" in (out / "mape.md").read_text()
     first = read_rows(out / CASES_FILE)
     assert sorted((r["case"], r["delay"]) for r in first) == [
-        (c, d) for c in range(3) for d in (0.0, 100.0)]
+        (c, d) for c in range(3) for d in (0.0, 100.0)
+    ]
     # Resume with more cases: the three done are kept as they are, one case is added.
     result = cli(*args[:2] + ["4"] + args[3:])
-    assert result.code == 0, (result.out + result.err)
+    assert result.code == 0, result.out + result.err
     rows = read_rows(out / CASES_FILE)
     assert len(rows) == 8 and rows[:6] == first
     # Another configuration in the same folder is refused.
@@ -46,8 +60,7 @@ def test_command_runs_end_to_end_and_resumes(cli, tmp_path):
 
 
 def test_bad_options_exit_with_one_line(cli, tmp_path):
-    result = cli(*["validate-coverage", "--delays", "0,0.3", "--out",
-                                 str(tmp_path)])
+    result = cli(*["validate-coverage", "--delays", "0,0.3", "--out", str(tmp_path)])
     assert result.code == 2 and "whole number" in (result.out + result.err)
     result = cli(*["validate-coverage", "--delays", "a,b", "--out", str(tmp_path)])
     assert result.code == 2 and "--delays" in (result.out + result.err)
@@ -67,14 +80,16 @@ def test_detection_in_the_intercept_flight_counts_at_coverage_time_zero():
     case = draw_case(0, 0)
     plan = plan_coverage(case, 0, settings)
     n = plan.intercept_steps
-    first_any, first_spiral = first_detections(plan, case.q, settings, 3000,
-                                               np.random.default_rng(1))
+    first_any, first_spiral = first_detections(
+        plan, case.q, settings, 3000, np.random.default_rng(1)
+    )
     in_flight = (first_any >= 0) & (first_any < n)
     assert in_flight.mean() > 0.3  # the flight ends on the belief mean
     # a run found in flight is followed on to its first detection on the spiral
     assert np.all((first_spiral[in_flight] >= n) | (first_spiral[in_flight] == -1))
-    assert np.all(first_spiral[~in_flight & (first_any >= 0)] == first_any[~in_flight &
-                                                                         (first_any >= 0)])
+    assert np.all(
+        first_spiral[~in_flight & (first_any >= 0)] == first_any[~in_flight & (first_any >= 0)]
+    )
     assert first_any.max() <= n + plan.estimate.cutoff_steps
 
 
@@ -95,14 +110,32 @@ def test_simulated_detections_match_an_independent_step_by_step_simulation():
 
 
 def test_mape_is_mean_absolute_percentage_error_against_the_empirical_value():
-    rows = [dict(delay=0.0, est_p_find=0.9, emp_p_find=1.0, est_expected_time=2.0,
-                 emp_expected_time=4.0, emp_p_find_spiral_only=1.0,
-                 emp_expected_time_spiral_only=4.0, est_time_from_departure=10.0,
-                 emp_time_from_departure=8.0, emp_found_in_flight=0.5),
-            dict(delay=0.0, est_p_find=0.6, emp_p_find=0.5, est_expected_time=3.0,
-                 emp_expected_time=0.0, emp_p_find_spiral_only=0.5,
-                 emp_expected_time_spiral_only=math.nan, est_time_from_departure=10.0,
-                 emp_time_from_departure=10.0, emp_found_in_flight=0.1)]
+    rows = [
+        dict(
+            delay=0.0,
+            est_p_find=0.9,
+            emp_p_find=1.0,
+            est_expected_time=2.0,
+            emp_expected_time=4.0,
+            emp_p_find_spiral_only=1.0,
+            emp_expected_time_spiral_only=4.0,
+            est_time_from_departure=10.0,
+            emp_time_from_departure=8.0,
+            emp_found_in_flight=0.5,
+        ),
+        dict(
+            delay=0.0,
+            est_p_find=0.6,
+            emp_p_find=0.5,
+            est_expected_time=3.0,
+            emp_expected_time=0.0,
+            emp_p_find_spiral_only=0.5,
+            emp_expected_time_spiral_only=math.nan,
+            est_time_from_departure=10.0,
+            emp_time_from_departure=10.0,
+            emp_found_in_flight=0.1,
+        ),
+    ]
     s = summarise(rows, [0.0])["0"]
     assert s["mape_p_find"] == pytest.approx((10.0 + 20.0) / 2)
     assert s["mape_expected_time"] == pytest.approx(50.0)  # emp = 0 is left out

@@ -16,8 +16,13 @@ from hptrack.experiments.store import ResultStore  # noqa: E402
 from hptrack.registry import planner_settings  # noqa: E402
 
 PLANNERS = ("greedy", "stationary")
-CONFIG = BenchmarkConfig(planners=PLANNERS, settings={p: planner_settings(p) for p in PLANNERS},
-                         target_counts=(2,), scenarios=3, homogeneous=False)
+CONFIG = BenchmarkConfig(
+    planners=PLANNERS,
+    settings={p: planner_settings(p) for p in PLANNERS},
+    target_counts=(2,),
+    scenarios=3,
+    homogeneous=False,
+)
 ARGS = ("--targets", 2, "--scenarios", 3, "--planners", "greedy,stationary")
 
 
@@ -26,8 +31,9 @@ def scheduler():
     """The address of a local two-process Dask cluster shared by this module's tests."""
     from distributed import LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster:
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
         yield cluster.scheduler_address
 
 
@@ -42,13 +48,25 @@ def _claims(path) -> int:
 
 
 def test_dask_local_gives_the_table_of_the_process_pool(cli, tmp_path):
-    args = ("--targets", 2, "--scenarios", 2, "--planners", "greedy,stationary,mcts", "-o",
-            "mcts.iterations=200", "--figure-planners", "stationary")
-    pool = cli("benchmark", *args, "--workers", 2, "--db", tmp_path / "p.db",
-               "--out", tmp_path / "p")
+    args = (
+        "--targets",
+        2,
+        "--scenarios",
+        2,
+        "--planners",
+        "greedy,stationary,mcts",
+        "-o",
+        "mcts.iterations=200",
+        "--figure-planners",
+        "stationary",
+    )
+    pool = cli(
+        "benchmark", *args, "--workers", 2, "--db", tmp_path / "p.db", "--out", tmp_path / "p"
+    )
     assert pool.code == 0, pool.err
-    dask = cli("benchmark", *args, "--dask-local", 2, "--db", tmp_path / "d.db",
-               "--out", tmp_path / "d")
+    dask = cli(
+        "benchmark", *args, "--dask-local", 2, "--db", tmp_path / "d.db", "--out", tmp_path / "d"
+    )
     assert dask.code == 0, dask.err
     assert "2 worker threads, 2 episodes in flight" in dask.out
     assert "6 episodes run now, 6 of 6" in dask.out
@@ -71,8 +89,9 @@ def test_interrupted_dask_run_releases_its_claims_and_resumes(scheduler, tmp_pat
             raise KeyboardInterrupt
 
     with dask_executor(scheduler=scheduler) as pool, pytest.raises(KeyboardInterrupt):
-        run_benchmark(CONFIG, store, workers=pool.threads, on_done=stop_after_two,
-                      executor=pool.executor)
+        run_benchmark(
+            CONFIG, store, workers=pool.threads, on_done=stop_after_two, executor=pool.executor
+        )
     assert len(store.rows()) == 2
     assert _claims(tmp_path / "b.db") == 0  # the episode still in flight was given back
     with dask_executor(scheduler=scheduler) as pool:
@@ -95,18 +114,28 @@ def _killed_client(address, path):
         run_benchmark(CONFIG, store, workers=2, on_done=die, executor=pool.executor)
 
 
-def test_killed_client_resumes_on_the_scheduler_with_the_local_values(scheduler, cli,
-                                                                       tmp_path):
+def test_killed_client_resumes_on_the_scheduler_with_the_local_values(scheduler, cli, tmp_path):
     path = tmp_path / "b.db"
-    process = multiprocessing.get_context("spawn").Process(target=_killed_client,
-                                                           args=(scheduler, path))
+    process = multiprocessing.get_context("spawn").Process(
+        target=_killed_client, args=(scheduler, path)
+    )
     process.start()
     process.join(timeout=120)
     assert process.exitcode == -9
     assert len(ResultStore(path).rows()) == 2
     assert _claims(path) >= 1  # the dead client's episode in flight is still claimed
-    result = cli("benchmark", *ARGS, "--scheduler", scheduler, "--db", path,
-                 "--out", tmp_path / "out", "--figure-planners", "stationary")
+    result = cli(
+        "benchmark",
+        *ARGS,
+        "--scheduler",
+        scheduler,
+        "--db",
+        path,
+        "--out",
+        tmp_path / "out",
+        "--figure-planners",
+        "stationary",
+    )
     assert result.code == 0, result.err
     assert "4 episodes run now, 6 of 6" in result.out
     rows = ResultStore(path).rows()
@@ -122,16 +151,28 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-@pytest.mark.parametrize("args, message", [
-    (("--scheduler", "tcp://127.0.0.1:8786", "--dask-local", 2),
-     "give --scheduler (tcp://127.0.0.1:8786) or --dask-local (2), not both"),
-    (("--dask-local", 0), "--dask-local must be a positive number of worker processes, got 0"),
-    (("--scheduler", "bad://nowhere"), "--scheduler bad://nowhere: not a Dask scheduler address"),
-    (("--scheduler", "tcp://127.0.0.1:{port}", "--scheduler-timeout", 1),
-     "--scheduler tcp://127.0.0.1:{port}: no Dask scheduler answered within 1 s"),
-    (("--scheduler", "tcp://x:1", "--scheduler-timeout", 0),
-     "--scheduler-timeout must be a positive number of seconds, got 0.0"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ("--scheduler", "tcp://127.0.0.1:8786", "--dask-local", 2),
+            "give --scheduler (tcp://127.0.0.1:8786) or --dask-local (2), not both",
+        ),
+        (("--dask-local", 0), "--dask-local must be a positive number of worker processes, got 0"),
+        (
+            ("--scheduler", "bad://nowhere"),
+            "--scheduler bad://nowhere: not a Dask scheduler address",
+        ),
+        (
+            ("--scheduler", "tcp://127.0.0.1:{port}", "--scheduler-timeout", 1),
+            "--scheduler tcp://127.0.0.1:{port}: no Dask scheduler answered within 1 s",
+        ),
+        (
+            ("--scheduler", "tcp://x:1", "--scheduler-timeout", 0),
+            "--scheduler-timeout must be a positive number of seconds, got 0.0",
+        ),
+    ],
+)
 def test_bad_dask_options_are_one_line_refusals(cli, tmp_path, args, message):
     port = _free_port()
     args = [str(a).format(port=port) for a in args]

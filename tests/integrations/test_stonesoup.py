@@ -52,22 +52,27 @@ def at(seconds: float) -> datetime.datetime:
 
 
 def make_platform(speed=30.0, diameter=100.0, noise=10.0, **movable_options) -> MovingPlatform:
-    movable = MaxSpeedActionableMovable(states=[State([[0.0], [0.0]], timestamp=T0)],
-                                        position_mapping=(0, 1), max_speed=speed,
-                                        **movable_options)
+    movable = MaxSpeedActionableMovable(
+        states=[State([[0.0], [0.0]], timestamp=T0)],
+        position_mapping=(0, 1),
+        max_speed=speed,
+        **movable_options,
+    )
     sensor = FootprintPositionSensor(noise_covar=noise * np.eye(2), diameter=diameter)
     return MovingPlatform(movement_controller=movable, sensors=[sensor])
 
 
 def track(track_id: str, ss_mean, var=400.0, time=T0) -> Track:
     cov = np.diag([var, 0.3, var, 0.3])
-    return Track([GaussianState(np.asarray(ss_mean, dtype=float), cov, timestamp=time)],
-                 id=track_id)
+    return Track(
+        [GaussianState(np.asarray(ss_mean, dtype=float), cov, timestamp=time)], id=track_id
+    )
 
 
 def manager(platform, planner="greedy", **options) -> HptrackSensorManager:
-    return HptrackSensorManager(process_noise=3e-4, time_step=TAU, planner=planner,
-                                platforms={platform}, seed=1, **options)
+    return HptrackSensorManager(
+        process_noise=3e-4, time_step=TAU, planner=planner, platforms={platform}, seed=1, **options
+    )
 
 
 def target_xy(configs, platform) -> np.ndarray:
@@ -122,8 +127,7 @@ def test_permutation_reorders_mean_and_covariance():
     # hptrack (x, y) is Stone Soup (x, y) = (0, 2); (vx, vy) is (1, 3); (y, vx) is (2, 1)
     assert covs[0, 0, 1] == cov[0, 2] and covs[0, 2, 3] == cov[1, 3]
     assert covs[0, 1, 2] == cov[2, 1] and covs[0, 1, 1] == cov[2, 2]
-    np.testing.assert_array_equal(covs[0], cov[np.ix_(STONESOUP_TO_HPTRACK,
-                                                      STONESOUP_TO_HPTRACK)])
+    np.testing.assert_array_equal(covs[0], cov[np.ix_(STONESOUP_TO_HPTRACK, STONESOUP_TO_HPTRACK)])
     # a 3-D [x, vx, y, vy, z, vz] track plans in the x, y plane
     means3, _ = hptrack_beliefs([GaussianState(np.arange(6.0), np.eye(6))])
     np.testing.assert_array_equal(means3[0], [0.0, 2.0, 1.0, 3.0])
@@ -134,8 +138,9 @@ def test_permutation_reorders_mean_and_covariance():
 def test_hptrack_prediction_equals_stonesoup_kalman_prediction():
     rng = np.random.default_rng(3)
     q = 0.7
-    predictor = KalmanPredictor(CombinedLinearGaussianTransitionModel(
-        [ConstantVelocity(q), ConstantVelocity(q)]))
+    predictor = KalmanPredictor(
+        CombinedLinearGaussianTransitionModel([ConstantVelocity(q), ConstantVelocity(q)])
+    )
     a = rng.normal(size=(4, 4))
     prior = GaussianState(rng.normal(size=4) * 100.0, a @ a.T + np.eye(4), timestamp=T0)
     predicted = predictor.predict(prior, timestamp=at(7.3))
@@ -147,14 +152,18 @@ def test_hptrack_prediction_equals_stonesoup_kalman_prediction():
 
 
 def test_process_noise_of_reads_one_q():
-    assert process_noise_of(CombinedLinearGaussianTransitionModel(
-        [ConstantVelocity(2e-4), ConstantVelocity(2e-4)])) == 2e-4
+    assert (
+        process_noise_of(
+            CombinedLinearGaussianTransitionModel([ConstantVelocity(2e-4), ConstantVelocity(2e-4)])
+        )
+        == 2e-4
+    )
     with pytest.raises(ValueError, match="one process noise"):
-        process_noise_of(CombinedLinearGaussianTransitionModel(
-            [ConstantVelocity(1e-4), ConstantVelocity(2e-4)]))
+        process_noise_of(
+            CombinedLinearGaussianTransitionModel([ConstantVelocity(1e-4), ConstantVelocity(2e-4)])
+        )
     with pytest.raises(ValueError, match="ConstantVelocity"):
-        process_noise_of(CombinedLinearGaussianTransitionModel(
-            [RandomWalk(1.0), RandomWalk(1.0)]))
+        process_noise_of(CombinedLinearGaussianTransitionModel([RandomWalk(1.0), RandomWalk(1.0)]))
 
 
 def test_footprint_sensor_measures_within_half_the_diameter():
@@ -164,8 +173,7 @@ def test_footprint_sensor_measures_within_half_the_diameter():
     far = State(np.array([35.5, 0.0, 35.5, 0.0]))  # 50.2 m away
     assert sensor.is_detectable(near) and not sensor.is_detectable(far)
     assert sensor.is_clutter_detectable(Detection(np.array([[0.0], [-50.0]])))
-    np.testing.assert_array_equal(sensor.measurement_model.matrix(),
-                                  [[1, 0, 0, 0], [0, 0, 1, 0]])
+    np.testing.assert_array_equal(sensor.measurement_model.matrix(), [[1, 0, 0, 0], [0, 0, 1, 0]])
 
 
 # --- observation and mission ------------------------------------------------------------------
@@ -174,12 +182,20 @@ def test_observation_and_mission_come_from_tracks_and_platform(recorders):
     old = track("old", [300.0, 1.0, -50.0, 2.0], time=at(-2.0))
     fresh = track("fresh", [0.0, 0.0, 10.0, 0.0])
     measured = track("measured", [5.0, 0.0, 5.0, 0.0])
-    detection = Detection(np.array([[5.0], [5.0]]), timestamp=T0,
-                          measurement_model=platform.sensors[0].measurement_model)
+    detection = Detection(
+        np.array([[5.0], [5.0]]),
+        timestamp=T0,
+        measurement_model=platform.sensors[0].measurement_model,
+    )
     measured.append(KalmanUpdater(None).update(SingleHypothesis(measured.state, detection)))
-    sm = HptrackSensorManager(process_noise={"old": 1e-3, "fresh": 2e-4, "measured": 3e-4},
-                              time_step=TAU, planner="greedy", budget=30.0,
-                              platforms={platform}, seed=0)
+    sm = HptrackSensorManager(
+        process_noise={"old": 1e-3, "fresh": 2e-4, "measured": 3e-4},
+        time_step=TAU,
+        planner="greedy",
+        budget=30.0,
+        platforms={platform},
+        seed=0,
+    )
     sm.choose_actions({old, fresh, measured}, at(TAU))
     (planner,) = recorders
     (mission,) = planner.missions
@@ -193,8 +209,9 @@ def test_observation_and_mission_come_from_tracks_and_platform(recorders):
     np.testing.assert_array_equal(obs.detected, [False, True, False])
     np.testing.assert_array_equal(obs.agent_position, [0.0, 0.0])
     # the stale track is predicted 2 s to the platform's time by Stone Soup's own model
-    stone_soup = KalmanPredictor(CombinedLinearGaussianTransitionModel(
-        [ConstantVelocity(1e-3), ConstantVelocity(1e-3)])).predict(old.state, timestamp=T0)
+    stone_soup = KalmanPredictor(
+        CombinedLinearGaussianTransitionModel([ConstantVelocity(1e-3), ConstantVelocity(1e-3)])
+    ).predict(old.state, timestamp=T0)
     mean, cov = hptrack_beliefs([stone_soup])
     np.testing.assert_allclose(obs.means[2], mean[0], rtol=1e-12)
     np.testing.assert_allclose(obs.covariances[2], cov[0], rtol=1e-12)
@@ -219,8 +236,9 @@ def test_discrete_actions_take_the_generators_closest_action():
     tracks = {track("a", [300.0, 0.0, 100.0, 0.0])}
     continuous = target_xy(manager(platform).choose_actions(tracks, at(TAU)), platform)
     np.testing.assert_allclose(continuous, 15.0 * np.array([3.0, 1.0]) / np.sqrt(10.0))
-    discrete = target_xy(manager(platform, discrete_actions=True).choose_actions(tracks, at(TAU)),
-                         platform)
+    discrete = target_xy(
+        manager(platform, discrete_actions=True).choose_actions(tracks, at(TAU)), platform
+    )
     np.testing.assert_allclose(discrete, [15.0, 0.0], atol=1e-9)
 
 
@@ -242,8 +260,13 @@ def test_track_ids_keep_first_seen_order_and_changes_restart_the_mission(recorde
     platform = make_platform()
     sm = manager(platform)
     b, a, c = (track(i, [200.0 * (k + 1), 0.0, 0.0, 0.0]) for k, i in enumerate("bac"))
-    calls = [({b}, ("b",)), ({a, b}, ("b", "a")), ({a, b, c}, ("b", "a", "c")),
-             ({a, b, c}, ("b", "a", "c")), ({c, a}, ("a", "c"))]
+    calls = [
+        ({b}, ("b",)),
+        ({a, b}, ("b", "a")),
+        ({a, b, c}, ("b", "a", "c")),
+        ({a, b, c}, ("b", "a", "c")),
+        ({c, a}, ("a", "c")),
+    ]
     for k, (tracks, expected) in enumerate(calls):
         sm.choose_actions(tracks, at((k + 1) * TAU))
         assert sm.target_ids == expected
@@ -261,8 +284,7 @@ def test_missions_roll_over_when_the_budget_ends(recorders):
     for k in range(6):
         configs = sm.choose_actions({tr}, at((k + 1) * TAU))
         step(platform, configs, at((k + 1) * TAU))
-        tr.append(GaussianState(tr.state.state_vector, tr.state.covar,
-                                timestamp=at((k + 1) * TAU)))
+        tr.append(GaussianState(tr.state.state_vector, tr.state.covar, timestamp=at((k + 1) * TAU)))
     assert len(recorders) == 2
     assert [o.step for o in recorders[0].observations] == [0, 1, 2, 3]
     assert [o.step for o in recorders[1].observations] == [0, 1]
@@ -280,35 +302,54 @@ def test_refuses_what_it_cannot_plan():
     with pytest.raises(ValueError, match="ahead of the platform"):
         manager(platform).choose_actions({track("a", [0, 0, 0, 0], time=at(0.1))}, at(TAU))
     with pytest.raises(ValueError, match="no entry for track 'a'"):
-        HptrackSensorManager(process_noise={"b": 1e-4}, time_step=TAU, planner="greedy",
-                             platforms={platform}).choose_actions(tracks, at(TAU))
+        HptrackSensorManager(
+            process_noise={"b": 1e-4}, time_step=TAU, planner="greedy", platforms={platform}
+        ).choose_actions(tracks, at(TAU))
     with pytest.raises(InputError, match="unknown planner 'nope'"):
         manager(platform, planner="nope")
     with pytest.raises(InputError, match="iterations"):
         manager(platform, planner="mcts", planner_options={"iterations": 0})
     with pytest.raises(ValueError, match="exactly one platform"):
-        HptrackSensorManager(process_noise=1e-4, time_step=TAU,
-                             platforms={make_platform(), make_platform()})
-    fixed = MovingPlatform(movement_controller=FixedMovable(
-        states=[State([[0.0], [0.0]], timestamp=T0)], position_mapping=(0, 1)))
+        HptrackSensorManager(
+            process_noise=1e-4, time_step=TAU, platforms={make_platform(), make_platform()}
+        )
+    fixed = MovingPlatform(
+        movement_controller=FixedMovable(
+            states=[State([[0.0], [0.0]], timestamp=T0)], position_mapping=(0, 1)
+        )
+    )
     with pytest.raises(ValueError, match="MaxSpeedActionableMovable"):
         HptrackSensorManager(process_noise=1e-4, time_step=TAU, platforms={fixed})
-    bare = MovingPlatform(movement_controller=MaxSpeedActionableMovable(
-        states=[State([[0.0], [0.0]], timestamp=T0)], position_mapping=(0, 1)))
+    bare = MovingPlatform(
+        movement_controller=MaxSpeedActionableMovable(
+            states=[State([[0.0], [0.0]], timestamp=T0)], position_mapping=(0, 1)
+        )
+    )
     with pytest.raises(ValueError, match="FootprintPositionSensor"):
         HptrackSensorManager(process_noise=1e-4, time_step=TAU, platforms={bare})
-    HptrackSensorManager(process_noise=1e-4, time_step=TAU, platforms={bare},
-                         sensor_diameter=100.0, measurement_noise=10.0 * np.eye(2))
+    HptrackSensorManager(
+        process_noise=1e-4,
+        time_step=TAU,
+        platforms={bare},
+        sensor_diameter=100.0,
+        measurement_noise=10.0 * np.eye(2),
+    )
 
 
 # --- plugin -----------------------------------------------------------------------------------
 def test_pyproject_registers_the_stone_soup_plugin(monkeypatch):
-    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
-        "entry-points"]["stonesoup.plugins"]
-    points = [importlib.metadata.EntryPoint(name, value, "stonesoup.plugins")
-              for name, value in declared.items()]
-    monkeypatch.setattr(importlib.metadata, "entry_points",
-                        lambda group=None: [p for p in points if p.group == group])
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"][
+        "stonesoup.plugins"
+    ]
+    points = [
+        importlib.metadata.EntryPoint(name, value, "stonesoup.plugins")
+        for name, value in declared.items()
+    ]
+    monkeypatch.setattr(
+        importlib.metadata,
+        "entry_points",
+        lambda group=None: [p for p in points if p.group == group],
+    )
     names = ("stonesoup.plugins", "stonesoup.plugins.hptrack")
     saved = {name: sys.modules.pop(name) for name in names if name in sys.modules}
     try:
@@ -323,8 +364,9 @@ def test_pyproject_registers_the_stone_soup_plugin(monkeypatch):
 # --- closed loop ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def example():
-    spec = importlib.util.spec_from_file_location("stonesoup_tracking",
-                                                  ROOT / "examples" / "stonesoup_tracking.py")
+    spec = importlib.util.spec_from_file_location(
+        "stonesoup_tracking", ROOT / "examples" / "stonesoup_tracking.py"
+    )
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)

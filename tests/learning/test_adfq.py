@@ -15,13 +15,13 @@ def exact_posterior(mu, var, next_means, next_vars, reward, gamma, noise):
     tm = reward + gamma * next_means
     ts = np.sqrt(gamma**2 * next_vars + noise)
     sd = np.sqrt(var)
-    x = np.linspace(min(mu - 12 * sd, (tm - 12 * ts).min()),
-                    max(mu + 12 * sd, (tm + 12 * ts).max()), 40_001)
+    x = np.linspace(
+        min(mu - 12 * sd, (tm - 12 * ts).min()), max(mu + 12 * sd, (tm + 12 * ts).max()), 40_001
+    )
     z = (x[:, None] - tm) / ts
     log_cdf = log_ndtr(z)
     log_pdf = -0.5 * z**2 - np.log(ts * np.sqrt(2 * np.pi))
-    log_density_max = np.logaddexp.reduce(log_pdf + log_cdf.sum(1, keepdims=True) - log_cdf,
-                                          axis=1)
+    log_density_max = np.logaddexp.reduce(log_pdf + log_cdf.sum(1, keepdims=True) - log_cdf, axis=1)
     log_post = log_density_max - 0.5 * ((x - mu) / sd) ** 2
     w = np.exp(log_post - log_post.max())
     w /= w.sum()
@@ -31,8 +31,14 @@ def exact_posterior(mu, var, next_means, next_vars, reward, gamma, noise):
 
 def _random_case(rng):
     n_actions = int(rng.integers(2, 6))
-    return (rng.normal(0, 2), rng.uniform(0.3, 2) ** 2, rng.normal(0, 2, n_actions),
-            rng.uniform(0.2, 2, n_actions) ** 2, rng.normal(), float(rng.choice([0.0, 1.0])))
+    return (
+        rng.normal(0, 2),
+        rng.uniform(0.3, 2) ** 2,
+        rng.normal(0, 2, n_actions),
+        rng.uniform(0.2, 2, n_actions) ** 2,
+        rng.normal(),
+        float(rng.choice([0.0, 1.0])),
+    )
 
 
 def test_close_to_the_exact_posterior_on_random_cases():
@@ -47,8 +53,9 @@ def test_close_to_the_exact_posterior_on_random_cases():
     for _ in range(150):
         mu, var, nm, nv, r, noise = _random_case(rng)
         m, v = exact_posterior(mu, var, nm, nv, r, GAMMA, noise)
-        am, av = adfq_posterior(np.array([mu]), np.array([var]), nm[None], nv[None],
-                                np.array([r]), GAMMA, noise=noise)
+        am, av = adfq_posterior(
+            np.array([mu]), np.array([var]), nm[None], nv[None], np.array([r]), GAMMA, noise=noise
+        )
         mean_errors.append(abs(am[0] - m) / np.sqrt(v))
         var_ratios.append(av[0] / v)
     assert max(mean_errors) < 1.5
@@ -66,8 +73,9 @@ def test_accurate_when_one_target_dominates():
         nv = rng.uniform(0.2, 1.0, 4) ** 2
         mu, var = rng.normal(6, 1), rng.uniform(0.3, 1) ** 2
         m, v = exact_posterior(mu, var, nm, nv, 0.5, GAMMA, 1.0)
-        am, av = adfq_posterior(np.array([mu]), np.array([var]), nm[None], nv[None],
-                                np.array([0.5]), GAMMA, noise=1.0)
+        am, av = adfq_posterior(
+            np.array([mu]), np.array([var]), nm[None], nv[None], np.array([0.5]), GAMMA, noise=1.0
+        )
         assert am[0] == pytest.approx(m, abs=0.01 * np.sqrt(v))
         assert av[0] == pytest.approx(v, rel=0.02)
 
@@ -97,13 +105,18 @@ def test_small_variances_give_a_q_learning_step_to_the_max():
         mu, r = rng.normal(0, 1) + GAMMA * nm[best], rng.normal()
         var, nv = rng.uniform(0.5, 2), rng.uniform(0.5, 2, n_actions)
         scale = 1e-8
-        mean, post_var = adfq_posterior(np.array([mu]), np.array([var * scale]), nm[None],
-                                        nv[None] * scale, np.array([r]), GAMMA)
+        mean, post_var = adfq_posterior(
+            np.array([mu]),
+            np.array([var * scale]),
+            nm[None],
+            nv[None] * scale,
+            np.array([r]),
+            GAMMA,
+        )
         alpha = var / (var + GAMMA**2 * nv[best])
         target = r + GAMMA * nm[best]
         assert mean[0] == pytest.approx(mu + alpha * (target - mu), abs=1e-6)
-        assert post_var[0] == pytest.approx(scale / (1 / var + 1 / (GAMMA**2 * nv[best])),
-                                            rel=1e-6)
+        assert post_var[0] == pytest.approx(scale / (1 / var + 1 / (GAMMA**2 * nv[best])), rel=1e-6)
 
 
 def test_batch_rows_are_independent_and_order_free():
@@ -115,8 +128,15 @@ def test_batch_rows_are_independent_and_order_free():
     mean, post_var = adfq_posterior(mu, var, nm, nv, r, GAMMA, noise=1.0)
     for i in range(b):
         perm = rng.permutation(a)
-        m_i, v_i = adfq_posterior(mu[i:i + 1], var[i:i + 1], nm[i:i + 1, perm],
-                                  nv[i:i + 1, perm], r[i:i + 1], GAMMA, noise=1.0)
+        m_i, v_i = adfq_posterior(
+            mu[i : i + 1],
+            var[i : i + 1],
+            nm[i : i + 1, perm],
+            nv[i : i + 1, perm],
+            r[i : i + 1],
+            GAMMA,
+            noise=1.0,
+        )
         assert m_i[0] == pytest.approx(mean[i], rel=1e-12, abs=1e-12)
         assert v_i[0] == pytest.approx(post_var[i], rel=1e-12)
 

@@ -26,8 +26,7 @@ def test_standard_deviation_is_clipped():
     with torch.no_grad():
         net.head.bias[3:] = torch.tensor([100.0, -100.0, 0.0])
     _, log_sd = net(torch.zeros(1, 2))
-    np.testing.assert_allclose(log_sd.detach().exp().numpy()[0], [SD_MIN, SD_MAX, 1.0],
-                               rtol=1e-5)
+    np.testing.assert_allclose(log_sd.detach().exp().numpy()[0], [SD_MIN, SD_MAX, 1.0], rtol=1e-5)
 
 
 def test_thompson_sampling_follows_the_beliefs():
@@ -36,8 +35,7 @@ def test_thompson_sampling_follows_the_beliefs():
         agent.online.head.bias[:3] = torch.tensor([0.0, 0.5, -5.0])
         agent.online.head.bias[3:] = -torch.log(torch.tensor([1.0, 1.0, 1e-3]))
     rng = np.random.default_rng(0)
-    actions = np.array([agent.thompson_action(np.zeros(2, np.float32), rng)
-                        for _ in range(1000)])
+    actions = np.array([agent.thompson_action(np.zeros(2, np.float32), rng) for _ in range(1000)])
     p1 = norm.cdf(0.5 / np.sqrt(2.0))  # P(N(0.5, 1) > N(0, 1))
     assert np.mean(actions == 1) == pytest.approx(p1, abs=0.05)
     assert not np.any(actions == 2)
@@ -56,19 +54,27 @@ def test_training_targets_are_the_posterior_of_the_target_network():
     with torch.no_grad():
         agent.target.head.weight.normal_()
     rng = np.random.default_rng(0)
-    batch = {"obs": rng.normal(size=(5, 3)).astype(np.float32),
-             "next_obs": rng.normal(size=(5, 3)).astype(np.float32),
-             "action": np.array([0, 1, 2, 3, 0]), "reward": rng.normal(size=5),
-             "terminal": np.zeros(5, bool)}
+    batch = {
+        "obs": rng.normal(size=(5, 3)).astype(np.float32),
+        "next_obs": rng.normal(size=(5, 3)).astype(np.float32),
+        "action": np.array([0, 1, 2, 3, 0]),
+        "reward": rng.normal(size=5),
+        "terminal": np.zeros(5, bool),
+    }
     mean, var = agent.posterior_targets(batch)
     with torch.no_grad():
         m0, s0 = agent.target(torch.as_tensor(batch["obs"]))
         m1, s1 = agent.target(torch.as_tensor(batch["next_obs"]))
     rows = np.arange(5)
-    expected = adfq_posterior(m0.numpy()[rows, batch["action"]].astype(float),
-                              np.exp(2 * s0.numpy().astype(float))[rows, batch["action"]],
-                              m1.numpy().astype(float), np.exp(2 * s1.numpy().astype(float)),
-                              batch["reward"], 0.99, noise=1.0)
+    expected = adfq_posterior(
+        m0.numpy()[rows, batch["action"]].astype(float),
+        np.exp(2 * s0.numpy().astype(float))[rows, batch["action"]],
+        m1.numpy().astype(float),
+        np.exp(2 * s1.numpy().astype(float)),
+        batch["reward"],
+        0.99,
+        noise=1.0,
+    )
     np.testing.assert_allclose(mean, expected[0], rtol=1e-6)
     np.testing.assert_allclose(var, expected[1], rtol=1e-6)
 
@@ -78,8 +84,9 @@ def test_a_few_hundred_steps_lower_the_loss(prioritized):
     """On the chain, 300 gradient steps bring the loss well below its start."""
     torch.manual_seed(0)
     env = gym.make(CHAIN_ID)
-    config = AdfqConfig(buffer_size=2000, warmup_steps=100, target_update=50,
-                        prioritized=prioritized)
+    config = AdfqConfig(
+        buffer_size=2000, warmup_steps=100, target_update=50, prioritized=prioritized
+    )
     agent = AdfqAgent(env.observation_space.shape[0], env.action_space.n, config)
     rng = np.random.default_rng(0)
     obs, _ = env.reset(seed=0)

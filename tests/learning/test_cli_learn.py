@@ -25,13 +25,18 @@ def app():
     return app
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--targets", "0", "--steps", "10"], "--targets must be at least 1, got 0"),
-    (["--targets", "2", "--steps", "0"], "--steps must be at least 1, got 0"),
-    (["--targets", "2", "--steps", "10", "--seed", "-1"], "--seed"),
-    (["--targets", "2", "--steps", "10", "--validation-scenarios", "0"],
-     "--validation-scenarios must be at least 1"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--targets", "0", "--steps", "10"], "--targets must be at least 1, got 0"),
+        (["--targets", "2", "--steps", "0"], "--steps must be at least 1, got 0"),
+        (["--targets", "2", "--steps", "10", "--seed", "-1"], "--seed"),
+        (
+            ["--targets", "2", "--steps", "10", "--validation-scenarios", "0"],
+            "--validation-scenarios must be at least 1",
+        ),
+    ],
+)
 @pytest.mark.parametrize("command", ["adfq", "sb3-ppo"])
 def test_bad_options_are_one_line_input_errors(app, tmp_path, command, args, message):
     result = CliRunner().invoke(app, ["learn", command, *args, "--out", str(tmp_path / "r")])
@@ -41,20 +46,41 @@ def test_bad_options_are_one_line_input_errors(app, tmp_path, command, args, mes
 
 def test_out_that_is_a_file_is_refused(app, tmp_path):
     (tmp_path / "f").write_text("")
-    result = CliRunner().invoke(app, ["learn", "adfq", "--targets", "2", "--steps", "10",
-                                      "--out", str(tmp_path / "f")])
+    result = CliRunner().invoke(
+        app, ["learn", "adfq", "--targets", "2", "--steps", "10", "--out", str(tmp_path / "f")]
+    )
     assert isinstance(result.exception, InputError) and "is a file" in str(result.exception)
 
 
 def test_learn_adfq_trains_resumes_and_plots(app, tmp_path):
     out = tmp_path / "run"
-    args = ["learn", "adfq", "--targets", "2", "--steps", "300", "--warmup", "200",
-            "--validation-scenarios", "2", "--validation-interval", "300", "--out", str(out)]
+    args = [
+        "learn",
+        "adfq",
+        "--targets",
+        "2",
+        "--steps",
+        "300",
+        "--warmup",
+        "200",
+        "--validation-scenarios",
+        "2",
+        "--validation-interval",
+        "300",
+        "--out",
+        str(out),
+    ]
     first = CliRunner().invoke(app, args)
     assert first.exit_code == 0, first.output
     assert "300 steps" in first.output
-    assert {"best.pt", "checkpoint.pt", "config.json", "curve.json", "curve.png",
-            "replay-300.npz"} <= {p.name for p in out.iterdir()}
+    assert {
+        "best.pt",
+        "checkpoint.pt",
+        "config.json",
+        "curve.json",
+        "curve.png",
+        "replay-300.npz",
+    } <= {p.name for p in out.iterdir()}
     again = CliRunner().invoke(app, args)
     assert again.exit_code == 0 and "0 s this session" in again.output
     curve = json.loads((out / "curve.json").read_text())
@@ -70,8 +96,15 @@ def test_ppo_run_resumes_without_repeating_entries(tmp_path):
     task = Task(CHAIN_ID, {}, tuple({"seed": i} for i in range(2)), {"env": CHAIN_ID})
 
     def config(steps):
-        return PpoConfig(steps=steps, seed=1, validation_interval=80, checkpoint_interval=40,
-                         n_steps=40, batch_size=20, n_epochs=2)
+        return PpoConfig(
+            steps=steps,
+            seed=1,
+            validation_interval=80,
+            checkpoint_interval=40,
+            n_steps=40,
+            batch_size=20,
+            n_epochs=2,
+        )
 
     class Killed(Exception):
         pass

@@ -28,8 +28,10 @@ def _hover_network(n_targets):
 def _far_scenario(seed):
     """Two targets whose priors lie over 500 m from the agent's start (never seen hovering)."""
     scenario = random_scenario(2, seed)
-    targets = [t.model_copy(update={"mean": (900.0, -800.0 + 1600.0 * i, *t.mean[2:])})
-               for i, t in enumerate(scenario.targets)]
+    targets = [
+        t.model_copy(update={"mean": (900.0, -800.0 + 1600.0 * i, *t.mean[2:])})
+        for i, t in enumerate(scenario.targets)
+    ]
     return scenario.model_copy(update={"targets": targets})
 
 
@@ -61,12 +63,12 @@ def test_a_policy_that_never_detects_scores_the_never_observed_u(tmp_path):
 
 def test_validation_scores_are_the_env_scores():
     task = tracking_task(2, validation_scenarios=2)
-    results = run_validation(network_policy(_hover_network(2), 0.0, np.random.default_rng(0)),
-                             task)
+    results = run_validation(network_policy(_hover_network(2), 0.0, np.random.default_rng(0)), task)
     for kwargs, result in zip(task.validation, results, strict=True):
         scenario = kwargs["options"]["scenario"]
         assert result["never_observed_U"] == pytest.approx(
-            scenario.never_observed_uncertainty(), rel=1e-12)
+            scenario.never_observed_uncertainty(), rel=1e-12
+        )
         assert result["U"] <= result["never_observed_U"] + 1e-9
 
 
@@ -74,10 +76,10 @@ def _near_scenario():
     """A target at the agent's start and one 300 m away: a moving policy measures them."""
     scenario = random_scenario(2, 11)
     cov = scenario.targets[0].covariance
-    targets = [TargetSpec(id="a", mean=(20.0, 0.0, 1.0, 0.0), covariance=cov,
-                          process_noise=1e-4),
-               TargetSpec(id="b", mean=(300.0, 100.0, -1.0, 0.5), covariance=cov,
-                          process_noise=3e-4)]
+    targets = [
+        TargetSpec(id="a", mean=(20.0, 0.0, 1.0, 0.0), covariance=cov, process_noise=1e-4),
+        TargetSpec(id="b", mean=(300.0, 100.0, -1.0, 0.5), covariance=cov, process_noise=3e-4),
+    ]
     return scenario.model_copy(update={"targets": targets})
 
 
@@ -156,10 +158,12 @@ def test_sb3_planner_flies_a_ppo_model_like_the_env(tmp_path):
         obs, _, terminated, truncated, info = env.step(action)
         done = terminated or truncated
     assert record.uncertainty == pytest.approx(info["U"], rel=1e-9)
-    sampled = run_episode(scenario, Sb3Planner(Sb3Settings(model=str(tmp_path / "ppo.zip"),
-                                                           deterministic=False)))
-    again = run_episode(scenario, Sb3Planner(Sb3Settings(model=str(tmp_path / "ppo.zip"),
-                                                         deterministic=False)))
+    sampled = run_episode(
+        scenario, Sb3Planner(Sb3Settings(model=str(tmp_path / "ppo.zip"), deterministic=False))
+    )
+    again = run_episode(
+        scenario, Sb3Planner(Sb3Settings(model=str(tmp_path / "ppo.zip"), deterministic=False))
+    )
     assert sampled.info["action_counts"] == again.info["action_counts"]
 
 

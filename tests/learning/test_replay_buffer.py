@@ -52,7 +52,7 @@ def test_new_transitions_get_the_largest_priority():
     _fill(buffer, 2, dim=1)
     buffer.update_priorities(np.array([0, 1]), np.array([5.0, 0.1]))
     buffer.add(np.zeros(1), 0, 0.0, np.zeros(1), False)
-    leaves = buffer.tree[buffer._leaves:buffer._leaves + 3]
+    leaves = buffer.tree[buffer._leaves : buffer._leaves + 3]
     assert leaves[2] == pytest.approx(leaves[0])
     assert buffer.tree[1] == pytest.approx(leaves.sum())
 

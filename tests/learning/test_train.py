@@ -14,9 +14,13 @@ TASK = Task(CHAIN_ID, {}, tuple({"seed": i} for i in range(4)), {"env": CHAIN_ID
 
 
 def _config(steps, **agent):
-    return TrainConfig(steps=steps, seed=3, validation_interval=100, checkpoint_interval=40,
-                       agent=AdfqConfig(warmup_steps=50, target_update=25, buffer_size=500,
-                                        **agent))
+    return TrainConfig(
+        steps=steps,
+        seed=3,
+        validation_interval=100,
+        checkpoint_interval=40,
+        agent=AdfqConfig(warmup_steps=50, target_update=25, buffer_size=500, **agent),
+    )
 
 
 class Killed(Exception):
@@ -80,7 +84,14 @@ def test_best_model_is_the_lowest_validation_u(tmp_path):
 def test_a_restart_with_other_options_is_refused(tmp_path):
     Trainer(TASK, _config(60), tmp_path).run()
     with pytest.raises(InputError, match="seed=3, not 4"):
-        Trainer(TASK, TrainConfig(steps=60, seed=4, validation_interval=100,
-                                  checkpoint_interval=40,
-                                  agent=AdfqConfig(warmup_steps=50, target_update=25,
-                                                   buffer_size=500)), tmp_path)
+        Trainer(
+            TASK,
+            TrainConfig(
+                steps=60,
+                seed=4,
+                validation_interval=100,
+                checkpoint_interval=40,
+                agent=AdfqConfig(warmup_steps=50, target_update=25, buffer_size=500),
+            ),
+            tmp_path,
+        )

@@ -26,8 +26,9 @@ def test_solve4_is_the_linear_solve(columns, seed):
 
 def test_solve4_pivots_on_a_zero_leading_entry():
     # Without row exchanges the first elimination step would divide by m[0, 0] = 0.
-    m = np.array([[0.0, 2.0, 1.0, 0.0], [3.0, 1.0, 0.0, 1.0], [1.0, 0.0, 4.0, 2.0],
-                  [0.0, 1.0, 1.0, 5.0]])
+    m = np.array(
+        [[0.0, 2.0, 1.0, 0.0], [3.0, 1.0, 0.0, 1.0], [1.0, 0.0, 4.0, 2.0], [0.0, 1.0, 1.0, 5.0]]
+    )
     x = np.arange(8.0).reshape(4, 2)
     out = np.empty((4, 2))
     solve4(m.copy(), x.copy(), out)

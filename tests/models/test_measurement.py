@@ -17,8 +17,9 @@ FULL_R = np.array([[12.0, 5.0], [5.0, 7.0]])
 
 
 def close(got, expected, rtol=1e-12):
-    np.testing.assert_allclose(got, expected, rtol=rtol,
-                               atol=rtol * float(np.max(np.abs(expected))))
+    np.testing.assert_allclose(
+        got, expected, rtol=rtol, atol=rtol * float(np.max(np.abs(expected)))
+    )
 
 
 def test_update_equals_textbook_kalman():
@@ -81,8 +82,9 @@ def test_measurement_model_with_a_full_r_updates_stacked_beliefs():
         close(got_c[i], joseph_update(covs[i], FULL_R), rtol=1e-11)
     np.testing.assert_array_equal(sensor.noise_covariance, FULL_R)
     assert sensor.sensor_diameter == 80.0
-    np.testing.assert_array_equal(PositionMeasurementModel.isotropic(3.0).noise_covariance,
-                                  9.0 * np.eye(2))
+    np.testing.assert_array_equal(
+        PositionMeasurementModel.isotropic(3.0).noise_covariance, 9.0 * np.eye(2)
+    )
     np.testing.assert_array_equal(PositionMeasurementModel().noise_covariance, 10.0 * np.eye(2))
 
 
@@ -100,12 +102,15 @@ def test_sampled_measurements_have_the_full_noise_covariance():
     assert not np.allclose(factor.T @ factor, r, atol=0.15)
 
 
-@pytest.mark.parametrize(("noise", "match"), [
-    (np.array([[10.0, 1.0], [0.0, 10.0]]), "not symmetric"),
-    (np.array([[10.0, 11.0], [11.0, 10.0]]), "not positive definite"),
-    (np.array([[np.nan, 0.0], [0.0, 1.0]]), "finite 2x2"),
-    (np.eye(3), "finite 2x2"),
-])
+@pytest.mark.parametrize(
+    ("noise", "match"),
+    [
+        (np.array([[10.0, 1.0], [0.0, 10.0]]), "not symmetric"),
+        (np.array([[10.0, 11.0], [11.0, 10.0]]), "not positive definite"),
+        (np.array([[np.nan, 0.0], [0.0, 1.0]]), "finite 2x2"),
+        (np.eye(3), "finite 2x2"),
+    ],
+)
 def test_bad_noise_covariances_are_refused(noise, match):
     with pytest.raises(ValueError, match=match):
         check_noise_covariance(noise)
@@ -116,8 +121,13 @@ def test_bad_noise_covariances_are_refused(noise, match):
 def test_covariance_stays_spd_over_thousands_of_updates():
     rng = np.random.default_rng(1)
     cov, q = random_prior(rng)
-    beliefs = TargetBeliefs(np.zeros((1, 4)), cov[None], np.array([q]),
-                            ConstantVelocityModel(), PositionMeasurementModel())
+    beliefs = TargetBeliefs(
+        np.zeros((1, 4)),
+        cov[None],
+        np.array([q]),
+        ConstantVelocityModel(),
+        PositionMeasurementModel(),
+    )
     for k in range(5000):
         beliefs.predict(0.5)
         if k % 3:
@@ -132,15 +142,15 @@ def test_covariance_stays_spd_over_thousands_of_updates():
 def test_footprint_boundary_is_inclusive():
     sensor = PositionMeasurementModel(sensor_diameter=100.0)
     pos = np.array([[50.0, 0.0], [50.0 + 1e-9, 0.0], [30.0, 40.0], [0.0, -50.1]])
-    np.testing.assert_array_equal(sensor.in_footprint(np.zeros(2), pos),
-                                  [True, False, True, False])
+    np.testing.assert_array_equal(sensor.in_footprint(np.zeros(2), pos), [True, False, True, False])
 
 
 def test_uncertainty_is_sum_of_position_logdets():
     covs = np.array([np.diag([4.0, 9.0, 1.0, 1.0]), np.diag([1.0, 1.0, 5.0, 5.0])])
     covs[0, 0, 1] = covs[0, 1, 0] = 2.0
-    beliefs = TargetBeliefs(np.zeros((2, 4)), covs, np.zeros(2), ConstantVelocityModel(),
-                            PositionMeasurementModel())
+    beliefs = TargetBeliefs(
+        np.zeros((2, 4)), covs, np.zeros(2), ConstantVelocityModel(), PositionMeasurementModel()
+    )
     assert beliefs.uncertainty() == np.log(36.0 - 4.0) + np.log(1.0)
     np.testing.assert_allclose(position_logdet(covs), [np.log(32.0), 0.0])
 
@@ -151,8 +161,9 @@ def test_logdet_kernel_and_belief_prediction_over_a_gap():
     assert sign > 0
     assert logdet_xy(cov[0, 0], cov[0, 1], cov[1, 1]) == pytest.approx(expected, rel=1e-13)
     motion = ConstantVelocityModel()
-    beliefs = TargetBeliefs(np.ones((1, 4)), cov[None], np.array([3e-4]), motion,
-                            PositionMeasurementModel())
+    beliefs = TargetBeliefs(
+        np.ones((1, 4)), cov[None], np.array([3e-4]), motion, PositionMeasurementModel()
+    )
     beliefs.predict(7.3)  # not a whole number of steps
     means, covs = motion.predict(np.ones((1, 4)), cov[None], 3e-4, 7.3)
     np.testing.assert_array_equal(beliefs.covariances, covs)

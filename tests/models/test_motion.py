@@ -33,8 +33,9 @@ def step_by_step(model, cov, q, k):
 def close(got, expected, rtol=1e-12):
     """Entry-wise relative agreement, with an absolute floor at ``rtol`` times the largest
     entry (cross terms may cancel to near zero)."""
-    np.testing.assert_allclose(got, expected, rtol=rtol,
-                               atol=rtol * float(np.max(np.abs(expected))))
+    np.testing.assert_allclose(
+        got, expected, rtol=rtol, atol=rtol * float(np.max(np.abs(expected)))
+    )
 
 
 @pytest.mark.parametrize("form", ["continuous", "paper_text"])
@@ -60,8 +61,11 @@ def test_paper_text_form_matches_notes_formula():
     q, tau, k = 2e-4, 0.5, 13
     s1, s2 = k * (k - 1) / 2, k * (k - 1) * (2 * k - 1) / 6
     got = noise_blocks(q, float(k), tau, 1.0)
-    expected = [q * (k * tau**3 / 3 + tau**3 * s1 + tau**2 * s2), q * (k * tau**2 / 2 + tau * s1),
-                q * k]
+    expected = [
+        q * (k * tau**3 / 3 + tau**3 * s1 + tau**2 * s2),
+        q * (k * tau**2 / 2 + tau * s1),
+        q * k,
+    ]
     np.testing.assert_allclose(got, expected, rtol=1e-12)
     np.testing.assert_allclose(ConstantVelocityModel(tau, "paper_text").process_noise(q)[2, 2], q)
 
@@ -78,8 +82,9 @@ def test_per_target_durations(seed, steps):
     got_m, got_c = model.predict(means, covs, qs, 0.5 * np.array(steps, dtype=float))
     for i, k in enumerate(steps):
         np.testing.assert_allclose(got_c[i], step_by_step(model, covs[i], qs[i], k), rtol=1e-9)
-        np.testing.assert_allclose(got_m[i], np.linalg.matrix_power(model.transition(), k)
-                                   @ means[i], rtol=1e-12)
+        np.testing.assert_allclose(
+            got_m[i], np.linalg.matrix_power(model.transition(), k) @ means[i], rtol=1e-12
+        )
 
 
 def test_sampled_motion_has_model_covariance():
@@ -90,6 +95,7 @@ def test_sampled_motion_has_model_covariance():
 
 
 # --- kernels against the textbook (tests/models/textbook.py) ------------------------------
+
 
 @pytest.mark.parametrize("steps", [0.0, 0.37, 1.0, 2.5, 7.0, 13.8, 240.25, 1800.0])
 def test_predict_covariance_is_exact_for_any_duration_in_the_continuous_form(steps):
@@ -154,8 +160,10 @@ def test_position_covariance_and_its_polynomials_agree_with_the_textbook(form):
             expected = (transition(t) @ cov @ transition(t).T + continuous_noise(q, t))[:2, :2]
         sxx, sxy, syy = position_covariance_after(cov, q, float(k), TAU, c)
         close([[sxx, sxy], [sxy, syy]], expected, rtol=1e-11)
-        poly = [[x0 + k * (x1 + k * (x2 + k * x3)), c0 + k * (c1 + k * c2)],
-                [c0 + k * (c1 + k * c2), y0 + k * (y1 + k * (y2 + k * x3))]]
+        poly = [
+            [x0 + k * (x1 + k * (x2 + k * x3)), c0 + k * (c1 + k * c2)],
+            [c0 + k * (c1 + k * c2), y0 + k * (y1 + k * (y2 + k * x3))],
+        ]
         close(poly, expected, rtol=1e-11)
 
 
@@ -176,8 +184,9 @@ def test_fill_transition_and_process_noise(form):
 def test_mean_position_is_the_constant_velocity_prediction():
     mean = np.array([120.0, -40.0, -2.5, 1.25])
     for t in (0.0, 0.5, 3.7, 900.0):
-        np.testing.assert_allclose(mean_position_at(mean, t), (transition(t) @ mean)[:2],
-                                   rtol=1e-15)
+        np.testing.assert_allclose(
+            mean_position_at(mean, t), (transition(t) @ mean)[:2], rtol=1e-15
+        )
     means = np.random.default_rng(2).normal(size=(3, 4))
     times = np.array([0.0, 1.5, 7.25])
     got = predicted_positions(means[None, :, :], times[:, None])
@@ -195,8 +204,7 @@ def test_true_state_step_is_f_x_plus_cholesky_of_q_times_z(form):
     q = rng.uniform(1e-4, 5e-4, 5)
     l11, l21, l22 = motion_noise_factors(TAU, C_PER_STEP[form])
     unit = np.linalg.cholesky(step_noise(1.0, TAU, form))
-    np.testing.assert_allclose([l11, l21, l22], [unit[0, 0], unit[2, 0], unit[2, 2]],
-                               rtol=1e-14)
+    np.testing.assert_allclose([l11, l21, l22], [unit[0, 0], unit[2, 0], unit[2, 2]], rtol=1e-14)
     got = states.copy()
     for i in range(5):
         advance_true_state(got, i, z[i], np.sqrt(q[i]), l11, l21, l22, TAU)

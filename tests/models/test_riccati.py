@@ -31,8 +31,10 @@ def composed(table, j, predicted, noise):
     return out
 
 
-@pytest.mark.parametrize(("form", "q"), [("continuous", 5e-4), ("paper_text", 5e-4),
-                                         ("continuous", 0.05), ("paper_text", 0.05)])
+@pytest.mark.parametrize(
+    ("form", "q"),
+    [("continuous", 5e-4), ("paper_text", 5e-4), ("continuous", 0.05), ("paper_text", 0.05)],
+)
 def test_measured_covariance_follows_the_filter_also_past_the_converged_table(form, q):
     max_steps = 600
     table = riccati_table(q, TAU, C_PER_STEP[form], FULL_R, max_steps)
@@ -43,8 +45,9 @@ def test_measured_covariance_follows_the_filter_also_past_the_converged_table(fo
     expected = measured_step_by_step(predicted, q, form, FULL_R, js)
     for j in js:
         got = composed(table, j, predicted, FULL_R)
-        np.testing.assert_allclose(got, expected[j], rtol=1e-11,
-                                   atol=1e-11 * np.max(np.abs(expected[j])), err_msg=f"j={j}")
+        np.testing.assert_allclose(
+            got, expected[j], rtol=1e-11, atol=1e-11 * np.max(np.abs(expected[j])), err_msg=f"j={j}"
+        )
 
 
 def test_unconverged_table_is_exact_up_to_its_cap():
@@ -56,6 +59,6 @@ def test_unconverged_table_is_exact_up_to_its_cap():
     expected = measured_step_by_step(predicted, q, "continuous", FULL_R, js)
     for j in js:
         got = composed(table, j, predicted, FULL_R)
-        np.testing.assert_allclose(got, expected[j], rtol=1e-11,
-                                   atol=1e-11 * np.max(np.abs(expected[j])), err_msg=f"j={j}")
-
+        np.testing.assert_allclose(
+            got, expected[j], rtol=1e-11, atol=1e-11 * np.max(np.abs(expected[j])), err_msg=f"j={j}"
+        )

@@ -6,9 +6,24 @@ from pathlib import Path
 
 import hptrack
 
-LAYERS = ["models", "interface", "settings", "scenario", "coverage", "planning", "baselines",
-          "sim", "viz", "envs", "learning", "registry", "runtime", "integrations",
-          "experiments", "cli"]
+LAYERS = [
+    "models",
+    "interface",
+    "settings",
+    "scenario",
+    "coverage",
+    "planning",
+    "baselines",
+    "sim",
+    "viz",
+    "envs",
+    "learning",
+    "registry",
+    "runtime",
+    "integrations",
+    "experiments",
+    "cli",
+]
 """Bottom to top."""
 ROOT = Path(hptrack.__file__).parent
 

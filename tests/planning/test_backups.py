@@ -32,8 +32,9 @@ def test_expected_backup_weights_the_outcomes_by_their_known_probability(p):
     env = Bandit(np.array([p]), np.array([1.0]), np.array([0.0]))
     root = (np.array([-1, 0], dtype=np.int64),)
     for sims in (3, 4, 50):
-        result = search_mdp(env, root, 1, 2, np.zeros(1), iterations=sims, seed=2,
-                            backup="expected")
+        result = search_mdp(
+            env, root, 1, 2, np.zeros(1), iterations=sims, seed=2, backup="expected"
+        )
         assert result.root.values[0] == pytest.approx(p, abs=1e-15)
     sampled = search_mdp(env, root, 1, 2, np.zeros(1), iterations=50, seed=2)
     assert sampled.root.values[0] != pytest.approx(p, abs=1e-3)
@@ -48,8 +49,7 @@ def test_max_backup_gives_the_exact_expectimax_values_of_the_gamble():
     found = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5, backup="max")
     np.testing.assert_allclose(found.root.values, exact, rtol=1e-12)
     for backup in ("sampled", "expected"):
-        mean = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5,
-                          backup=backup)
+        mean = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5, backup=backup)
         assert np.all(mean.root.values < np.array(exact) - 0.05)
 
 
@@ -59,8 +59,9 @@ def test_max_backup_matches_expectimax_on_the_subtask_mdp():
     np.testing.assert_allclose(result.root.values, [exact[0], exact[1]], rtol=1e-9)
     after = search(two_targets(current_action=0), iterations=30000, seed=1, backup="max")
     exact_after = expectimax(two_targets(), first=(0, True))
-    np.testing.assert_allclose(after.after_find.values,
-                               [exact_after[a] for a in after.after_find.actions], rtol=1e-9)
+    np.testing.assert_allclose(
+        after.after_find.values, [exact_after[a] for a in after.after_find.actions], rtol=1e-9
+    )
 
 
 def test_unknown_backup_is_refused():
@@ -79,9 +80,14 @@ def _greedy_cases():
         state[0][0], state[0][2] = step, last
         available = [a for a in range(6) if is_available(env, state, a)]
         steps = {a: intercept_of(env.model, state[1], a, step) for a in available if a != last}
-        uncertainty = {a: logdet_xy(*position_covariance_after(
-            problem.covariances[a], problem.process_noise[a], float(step + k), 0.5, 0.5))
-            for a, k in steps.items()}
+        uncertainty = {
+            a: logdet_xy(
+                *position_covariance_after(
+                    problem.covariances[a], problem.process_noise[a], float(step + k), 0.5, 0.5
+                )
+            )
+            for a, k in steps.items()
+        }
         assert len(steps) >= 3
         yield env, state, available, steps, uncertainty
 
@@ -95,8 +101,11 @@ def test_greedy_rollouts_pick_their_best_target_other_than_the_one_just_found(po
     candidates = np.empty(6, dtype=np.int64)
     rng = np.array([7], dtype=np.uint64)
     for env, state, available, steps, uncertainty in _greedy_cases():
-        expected = (max(uncertainty, key=uncertainty.get) if policy is MostUncertain
-                    else min(steps, key=steps.get))
+        expected = (
+            max(uncertainty, key=uncertainty.get)
+            if policy is MostUncertain
+            else min(steps, key=steps.get)
+        )
         assert kernel(policy(0.0), env, state, rng, candidates) == expected
         draws = {kernel(policy(1.0), env, state, rng, candidates) for _ in range(300)}
         assert draws == set(available)
@@ -108,8 +117,9 @@ def test_most_uncertain_rollout_follows_only_when_nothing_else_is_left():
     state = problem.root_state()
     state[0][1] = 0b01  # target 1 missed: only target 0, just found, is left
     state[0][2] = 0
-    out = most_uncertain(MostUncertain(0.0), env, state, np.array([1], dtype=np.uint64),
-                         np.empty(2, dtype=np.int64))
+    out = most_uncertain(
+        MostUncertain(0.0), env, state, np.array([1], dtype=np.uint64), np.empty(2, dtype=np.int64)
+    )
     assert out == 0
 
 
@@ -132,8 +142,9 @@ def test_root_parallel_trees_merge_their_statistics():
             visits[a] += n
             weighted[a] += n * v
     assert merged.root.visits.tolist() == [visits[a] for a in merged.root.actions]
-    np.testing.assert_allclose(merged.root.values,
-                               [weighted[a] / visits[a] for a in merged.root.actions])
+    np.testing.assert_allclose(
+        merged.root.values, [weighted[a] / visits[a] for a in merged.root.actions]
+    )
     assert merged.best_action == merged.root.best
     assert merge_stats([None, None]) is None
     plan = search(six_targets(current_action=2), iterations=1000, seed=1, threads=2)
@@ -145,10 +156,8 @@ def test_robust_backup_finds_the_gamble_optimum_with_values_between_mean_and_max
     and its root values lie between the mean backup's (pessimistic) and the exact ones."""
     exact = np.array([gamble_q_exact(0, 0, a) for a in range(3)])
     root = (np.zeros(2, dtype=np.int64),)
-    robust = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5,
-                        backup="robust")
-    mean = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5,
-                      backup="expected")
+    robust = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5, backup="robust")
+    mean = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5, backup="expected")
     assert robust.best_action == int(np.argmax(exact))
     assert np.all(robust.root.values <= exact + 1e-9)
     assert np.all(robust.root.values >= mean.root.values - 1e-9)
@@ -177,15 +186,16 @@ def test_no_follow_rollout_draws_uniformly_among_the_targets_not_just_found():
     state = problem.root_state()
     state[0][2] = 3  # target 3 was just found
     rng = np.array([7], dtype=np.uint64)
-    draws = [uniform_no_follow(UniformNoFollow(), env, state, rng, np.empty(6, dtype=np.int64))
-             for _ in range(3000)]
+    draws = [
+        uniform_no_follow(UniformNoFollow(), env, state, rng, np.empty(6, dtype=np.int64))
+        for _ in range(3000)
+    ]
     counts = np.bincount(draws, minlength=6)
     assert counts[3] == 0
     others = counts[[0, 1, 2, 4, 5]]
     assert np.all(np.abs(others - 600) < 4 * np.sqrt(600 * 0.8))  # binomial(3000, 1/5)
     state[0][1] = 0b001000  # only the followed target is left: it follows
-    assert uniform_no_follow(UniformNoFollow(), env, state, rng,
-                             np.empty(6, dtype=np.int64)) == 3
+    assert uniform_no_follow(UniformNoFollow(), env, state, rng, np.empty(6, dtype=np.int64)) == 3
 
 
 def test_even_root_split_alternates_and_the_weighted_split_follows_the_probability():
@@ -206,10 +216,12 @@ def test_weighted_root_split_gives_the_likely_outcome_more_simulations():
     weighted = search(problem, iterations=4000, seed=1, backup="max", weighted_root=True)
     p = even.root.p_find[0]
     assert 0.5 < p < 1.0
-    share = weighted.after_find.visits.sum() / (weighted.after_find.visits.sum()
-                                                + weighted.after_miss.visits.sum())
-    even_share = even.after_find.visits.sum() / (even.after_find.visits.sum()
-                                                 + even.after_miss.visits.sum())
+    share = weighted.after_find.visits.sum() / (
+        weighted.after_find.visits.sum() + weighted.after_miss.visits.sum()
+    )
+    even_share = even.after_find.visits.sum() / (
+        even.after_find.visits.sum() + even.after_miss.visits.sum()
+    )
     f = p ** (2 / 3) / (p ** (2 / 3) + (1 - p) ** (2 / 3))
     assert abs(even_share - 0.5) < 0.01 and abs(share - f) < 0.01
 
@@ -226,11 +238,22 @@ def test_common_rollouts_value_siblings_with_the_same_random_decisions():
     increments = {int(a + b) for a in rewards for b in rewards}
 
     def one_increment(values):
-        return any(np.allclose(values, -(rewards + inc - 5.0) ** 2) for inc in increments)
+        return any(np.allclose(values, -((rewards + inc - 5.0) ** 2)) for inc in increments)
 
     for common, expect in ((True, 20), (False, None)):
-        hits = sum(one_increment(search_mdp(sure, (np.zeros(2, dtype=np.int64),), 3, 4,
-                                            np.zeros(1), iterations=4, seed=seed,
-                                            common_rollouts=common).root.values)
-                   for seed in range(20))
+        hits = sum(
+            one_increment(
+                search_mdp(
+                    sure,
+                    (np.zeros(2, dtype=np.int64),),
+                    3,
+                    4,
+                    np.zeros(1),
+                    iterations=4,
+                    seed=seed,
+                    common_rollouts=common,
+                ).root.values
+            )
+            for seed in range(20)
+        )
         assert hits == expect if expect else hits < 10

@@ -18,13 +18,14 @@ def mcts(**options):
 
 
 def test_conditional_plan_is_followed_and_misses_leave_the_list():
-    record = run_episode(random_scenario(3, seed=2, homogeneous=True),
-                         mcts(iterations=2000))
+    record = run_episode(random_scenario(3, seed=2, homogeneous=True), mcts(iterations=2000))
     log = record.info["subtasks"]
     assert len(log) >= 3
     assert len(record.info["searches"]) >= len(log)
-    assert all(s["stopped_by"] == "iterations" and s["simulations"] == 2000
-               for s in record.info["searches"])
+    assert all(
+        s["stopped_by"] == "iterations" and s["simulations"] == 2000
+        for s in record.info["searches"]
+    )
     for done, nxt in zip(log, log[1:], strict=False):
         if "outcome" not in done:
             break
@@ -57,17 +58,24 @@ def test_mcts_beats_greedy_on_twenty_three_target_scenarios():
     assert np.mean(u_mcts) < np.mean(u_greedy) - 10.0
 
 
-@pytest.mark.parametrize("option, value, message", [
-    ("iterations", 0, "planner 'mcts': option iterations must be >= 1, got 0"),
-    ("iterations", "abc", "planner 'mcts': option iterations must be an integer, got 'abc'"),
-    ("time_limit", -1.0, "planner 'mcts': option time_limit must be > 0, got -1.0"),
-    ("exploration", -1, "planner 'mcts': option exploration must be > 0, got -1"),
-    ("exploration", "nan", "planner 'mcts': option exploration must be a finite number, got 'nan'"),
-    ("exploration", float("inf"), "option exploration must be a finite number"),
-    ("max_weight", 1.5, "planner 'mcts': option max_weight must be <= 1, got 1.5"),
-    ("root_split", "uneven", "option root_split must be 'even' or 'weighted', got 'uneven'"),
-    ("dwell", -5, "planner 'mcts': option dwell must be >= 0, got -5"),
-])
+@pytest.mark.parametrize(
+    "option, value, message",
+    [
+        ("iterations", 0, "planner 'mcts': option iterations must be >= 1, got 0"),
+        ("iterations", "abc", "planner 'mcts': option iterations must be an integer, got 'abc'"),
+        ("time_limit", -1.0, "planner 'mcts': option time_limit must be > 0, got -1.0"),
+        ("exploration", -1, "planner 'mcts': option exploration must be > 0, got -1"),
+        (
+            "exploration",
+            "nan",
+            "planner 'mcts': option exploration must be a finite number, got 'nan'",
+        ),
+        ("exploration", float("inf"), "option exploration must be a finite number"),
+        ("max_weight", 1.5, "planner 'mcts': option max_weight must be <= 1, got 1.5"),
+        ("root_split", "uneven", "option root_split must be 'even' or 'weighted', got 'uneven'"),
+        ("dwell", -5, "planner 'mcts': option dwell must be >= 0, got -5"),
+    ],
+)
 def test_invalid_settings_are_refused_naming_planner_option_and_value(option, value, message):
     with pytest.raises(InputError) as err:
         MctsSettings.from_options("mcts", {option: value})
@@ -75,8 +83,11 @@ def test_invalid_settings_are_refused_naming_planner_option_and_value(option, va
 
 
 def test_max_weight_without_the_max_backup_is_refused():
-    with pytest.raises(InputError, match="planner 'mcts': option max_weight=0.5 applies only "
-                                         "to backup=max, got backup=sampled"):
+    with pytest.raises(
+        InputError,
+        match="planner 'mcts': option max_weight=0.5 applies only "
+        "to backup=max, got backup=sampled",
+    ):
         MctsSettings.from_options("mcts", {"preset": "paper", "max_weight": 0.5})
     assert MctsSettings.from_options("mcts", {"max_weight": 0.5}).max_weight == 0.5
 
@@ -88,8 +99,10 @@ def test_settings_default_effort_and_identity():
     timed = MctsSettings(time_limit=1.0)
     assert (timed.iterations, timed.time_limit) == (None, 1.0)
     assert default.preset == "improved"  # the default since the quality-against-time benchmark
-    assert default.canonical() == \
-        '{"backup":"max","exploration":0.5,"iterations":100000,"time_limit":null}'
+    assert (
+        default.canonical()
+        == '{"backup":"max","exploration":0.5,"iterations":100000,"time_limit":null}'
+    )
     assert default.digest() != timed.digest()
     assert MctsSettings.from_options("mcts", default.as_json()) == default
 
@@ -100,8 +113,9 @@ def test_timed_runs_warm_the_kernels_before_the_first_search(monkeypatch):
     calls = []
     monkeypatch.setattr(hierarchical, "_warmed", set())
     real = hierarchical.search
-    monkeypatch.setattr(hierarchical, "search",
-                        lambda *a, **k: calls.append(k.get("iterations")) or real(*a, **k))
+    monkeypatch.setattr(
+        hierarchical, "search", lambda *a, **k: calls.append(k.get("iterations")) or real(*a, **k)
+    )
     scenario = random_scenario(2, seed=0).model_copy(update={"budget": 20.0})
     run_episode(scenario, mcts(time_limit=0.05))
     assert calls[:2] == [64, 64]  # the warm-up's two searches (first plan, re-plan)
@@ -112,9 +126,21 @@ def test_timed_runs_warm_the_kernels_before_the_first_search(monkeypatch):
 
 
 def test_simulate_command_with_mcts(tmp_path):
-    result = CliRunner().invoke(app, ["simulate", "--random", "--targets", "2", "--planner",
-                                      "mcts", "--iterations", "500", "--json",
-                                      str(tmp_path / "m.json")])
+    result = CliRunner().invoke(
+        app,
+        [
+            "simulate",
+            "--random",
+            "--targets",
+            "2",
+            "--planner",
+            "mcts",
+            "--iterations",
+            "500",
+            "--json",
+            str(tmp_path / "m.json"),
+        ],
+    )
     assert result.exit_code == 0, result.output
     assert "mcts mission" in result.output
 
@@ -124,18 +150,22 @@ def test_presets_resolve_to_their_options_and_the_paper_keeps_its_identity():
     assert (paper.backup, paper.rollout) == ("sampled", "uniform")
     assert paper.canonical() == '{"exploration":0.5,"iterations":100000,"time_limit":null}'
     improved = MctsSettings.from_options("mcts", {"preset": "improved"})
-    assert {k: getattr(improved, k) for k in hierarchical.PRESETS["improved"]} == \
-        hierarchical.PRESETS["improved"]
+    assert {
+        k: getattr(improved, k) for k in hierarchical.PRESETS["improved"]
+    } == hierarchical.PRESETS["improved"]
     # an option given explicitly wins over the preset; the identity names the resolved options
     mixed = MctsSettings.from_options("mcts", {"preset": "improved", "backup": "expected"})
     assert mixed.backup == "expected"
     assert '"backup":"expected"' in mixed.canonical()
-    same = MctsSettings.from_options("mcts", {"preset": "improved", "backup": "sampled",
-                                              "rollout": "uniform"})
+    same = MctsSettings.from_options(
+        "mcts", {"preset": "improved", "backup": "sampled", "rollout": "uniform"}
+    )
     assert same.canonical() == paper.canonical()  # the same search, the same results
     assert "rollout_epsilon" not in MctsSettings(backup="max").canonical()
-    assert MctsSettings(rollout="most_uncertain", rollout_epsilon=0.2).canonical() != \
-        MctsSettings(rollout="most_uncertain").canonical()
+    assert (
+        MctsSettings(rollout="most_uncertain", rollout_epsilon=0.2).canonical()
+        != MctsSettings(rollout="most_uncertain").canonical()
+    )
     with pytest.raises(InputError, match="option preset must be 'paper' or 'improved'"):
         MctsSettings.from_options("mcts", {"preset": "fast"})
 
@@ -145,12 +175,14 @@ def test_paper_search_follows_the_first_find_at_low_effort_and_the_max_backup_do
     planner often follows the first target it finds for the rest of the mission; the mean of
     random rollouts makes every other continuation look worse than the exactly known follow.
     The max backup values each continuation by its best plan and keeps switching."""
+
     def early_follows(options):
         count = 0
         for seed in range(10):
             scenario = random_scenario(6, seed=seed, homogeneous=True)
-            record = run_episode(scenario, mcts(iterations=2000, **options),
-                                 belief_stride=scenario.n_steps)
+            record = run_episode(
+                scenario, mcts(iterations=2000, **options), belief_stride=scenario.n_steps
+            )
             follows = [e for e in record.info["subtasks"] if "follow" in e]
             count += bool(follows and follows[0]["start_step"] < 0.6 * scenario.n_steps)
         return count
@@ -168,8 +200,11 @@ def test_a_stored_identity_means_the_same_search_whatever_the_default_preset(mon
         monkeypatch.setattr(hierarchical, "DEFAULT_PRESET", default)
         for settings in (paper, improved):
             again = MctsSettings.from_canonical(settings.canonical())
-            assert (again.backup, again.rollout, again.canonical()) == \
-                (settings.backup, settings.rollout, settings.canonical())
+            assert (again.backup, again.rollout, again.canonical()) == (
+                settings.backup,
+                settings.rollout,
+                settings.canonical(),
+            )
 
 
 def test_dwell_follows_the_target_just_found_for_its_length_then_flies_the_plan():

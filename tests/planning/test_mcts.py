@@ -34,18 +34,38 @@ def two_targets(budget=400.0, **kw):
     """Target 0 near the agent, target 1 5 km away on the other side: pursuing the near one
     first wins (found after a short flight, then the long trip) by more than 3 in E[U]."""
     means = np.array([[300.0, 0.0, 0.0, 0.5], [-5000.0, 0.0, 0.0, -0.5]])
-    return PlanningProblem(np.zeros(2), means, np.array([prior(), prior(900.0, 2000.0, -0.5)]),
-                           np.array([3e-4, 2e-4]), budget, TAU, TAU, 30.0, 100.0,
-                           10.0 * np.eye(2), **kw)
+    return PlanningProblem(
+        np.zeros(2),
+        means,
+        np.array([prior(), prior(900.0, 2000.0, -0.5)]),
+        np.array([3e-4, 2e-4]),
+        budget,
+        TAU,
+        TAU,
+        30.0,
+        100.0,
+        10.0 * np.eye(2),
+        **kw,
+    )
 
 
 def six_targets(seed=0, **kw):
     rng = np.random.default_rng(seed)
     means = np.hstack([rng.uniform(-1000, 1000, (6, 2)), rng.uniform(-3, 3, (6, 2))])
-    covs = np.array([prior(*rng.uniform(500, 2000, 2), rng.uniform(-0.8, 0.8))
-                     for _ in range(6)])
-    return PlanningProblem(np.zeros(2), means, covs, rng.uniform(1e-4, 5e-4, 6), 900.0, TAU,
-                           TAU, 30.0, 100.0, 10.0 * np.eye(2), **kw)
+    covs = np.array([prior(*rng.uniform(500, 2000, 2), rng.uniform(-0.8, 0.8)) for _ in range(6)])
+    return PlanningProblem(
+        np.zeros(2),
+        means,
+        covs,
+        rng.uniform(1e-4, 5e-4, 6),
+        900.0,
+        TAU,
+        TAU,
+        30.0,
+        100.0,
+        10.0 * np.eye(2),
+        **kw,
+    )
 
 
 def expectimax(problem, first=None):
@@ -74,8 +94,7 @@ def expectimax(problem, first=None):
     state = problem.root_state()
     if first is not None:
         _, find_steps, miss_steps = expand_action(env, state, first[0], work)
-        apply_outcome(env, state, first[0], first[1], find_steps if first[1] else miss_steps,
-                      work)
+        apply_outcome(env, state, first[0], first[1], find_steps if first[1] else miss_steps, work)
     return value(state)[1]
 
 
@@ -125,8 +144,10 @@ def test_same_seed_and_iterations_give_the_same_plan():
     assert (a.state_nodes, a.action_nodes) == (b.state_nodes, b.action_nodes)
     assert not np.array_equal(a.root.visits, c.root.visits)
     gen = search(six_targets(), iterations=200, seed=np.random.default_rng(4))
-    assert gen.root.visits.tolist() == search(six_targets(), iterations=200,
-                                              seed=np.random.default_rng(4)).root.visits.tolist()
+    assert (
+        gen.root.visits.tolist()
+        == search(six_targets(), iterations=200, seed=np.random.default_rng(4)).root.visits.tolist()
+    )
 
 
 def test_tree_is_independent_of_chunking_and_initial_capacity():
@@ -140,9 +161,19 @@ def test_tree_is_independent_of_chunking_and_initial_capacity():
         state = tuple(a.copy() for a in root)
         for n in chunks:
             while n:
-                n -= run_simulations(tree, env, root, state, new_work(), UniformRandom(), 6,
-                                     problem.n_steps + 2, -1,
-                                     SearchOptions(0.5, 0, 1.0, False, False), n)
+                n -= run_simulations(
+                    tree,
+                    env,
+                    root,
+                    state,
+                    new_work(),
+                    UniformRandom(),
+                    6,
+                    problem.n_steps + 2,
+                    -1,
+                    SearchOptions(0.5, 0, 1.0, False, False),
+                    n,
+                )
                 if n:
                     tree = grow_tree(tree, 6)
         return tree

@@ -36,8 +36,19 @@ def prior(var_x=1500.0, var_y=900.0, rho=0.4, var_v=(0.3, 0.45)):
 def make_problem(means, covs, budget=900.0, c_per_step=TAU, q=3e-4, **kw):
     means = np.asarray(means, dtype=float)
     n = len(means)
-    return PlanningProblem(np.zeros(2), means, np.asarray(covs, dtype=float), np.full(n, q),
-                           budget, TAU, c_per_step, SPEED, W, R, **kw)
+    return PlanningProblem(
+        np.zeros(2),
+        means,
+        np.asarray(covs, dtype=float),
+        np.full(n, q),
+        budget,
+        TAU,
+        c_per_step,
+        SPEED,
+        W,
+        R,
+        **kw,
+    )
 
 
 def predict(cov, q, k, c_per_step=TAU):
@@ -58,10 +69,11 @@ def kalman(cov):
 def hand_estimate(cov, q, max_steps):
     """Sec. IV-B by hand: ``P_cdf(k)`` from the step-by-step covariance, the first step after
     which it stops rising, and ``E[T_find]``."""
+
     def p_cdf(k):
         c = predict(cov, q, k)
         area = SPEED * W * k * TAU + math.pi * W * W / 4.0
-        return 1.0 - math.exp(-area / (2.0 * math.pi * math.sqrt(c[0, 0] * c[1, 1] - c[0, 1]**2)))
+        return 1.0 - math.exp(-area / (2.0 * math.pi * math.sqrt(c[0, 0] * c[1, 1] - c[0, 1] ** 2)))
 
     ps = [p_cdf(0)]
     while len(ps) - 1 < max_steps:
@@ -100,8 +112,12 @@ def test_interception_and_budget_truncation_by_hand():
 
 
 def test_unavailable_actions():
-    problem = make_problem([[3000, 0, 0, 0], [100, 0, 31, 0], [100, 0, 0, 0]],
-                           [prior()] * 3, budget=100.0, available=[True, True, False])
+    problem = make_problem(
+        [[3000, 0, 0, 0], [100, 0, 31, 0], [100, 0, 0, 0]],
+        [prior()] * 3,
+        budget=100.0,
+        available=[True, True, False],
+    )
     env, state, *_ = setup(problem)
     # 3000 m takes exactly 200 steps: no coverage step left; faster than the agent; missed
     assert [is_available(env, state, a) for a in range(3)] == [False, False, False]
@@ -131,10 +147,9 @@ def test_find_miss_and_terminal_transitions_by_hand():
     k, p_hand, expected = hand_estimate(predict(covs[1], q, t_start), q, model.n_steps - t_start)
     d, v = means[1, :2] + means[1, 2:] * t1 * TAU - sf, means[1, 2:]
     closing = SPEED**2 - v @ v
-    t_hand = (d @ v + math.sqrt((d @ v)**2 + closing * (d @ d))) / closing  # |d + v t| = v_a t
+    t_hand = (d @ v + math.sqrt((d @ v) ** 2 + closing * (d @ d))) / closing  # |d + v t| = v_a t
     assert ic1 == math.ceil(t_hand / TAU)
-    assert (p1, find1, miss1) == (pytest.approx(p_hand, rel=1e-12), ic1 + round(expected),
-                                  ic1 + k)
+    assert (p1, find1, miss1) == (pytest.approx(p_hand, rel=1e-12), ic1 + round(expected), ic1 + k)
     # miss target 1: it leaves the action list, nothing found
     apply_outcome(env, state, 1, False, miss1, work)
     t2 = t1 + miss1
@@ -142,8 +157,10 @@ def test_find_miss_and_terminal_transitions_by_hand():
     np.testing.assert_allclose(sf, means[1, :2] + means[1, 2:] * t2 * TAU, rtol=1e-12)
     np.testing.assert_array_equal(cov[1], covs[1])
     # -U at the end of the budget: every belief grown from its base
-    expected_u = sum(np.linalg.slogdet(predict(c, q, model.n_steps - s)[:2, :2])[1]
-                     for c, s in ((kalman(predict(covs[0], q, t1)), t1), (covs[1], 0)))
+    expected_u = sum(
+        np.linalg.slogdet(predict(c, q, model.n_steps - s)[:2, :2])[1]
+        for c, s in ((kalman(predict(covs[0], q, t1)), t1), (covs[1], 0))
+    )
     assert terminal_value(env, state) == pytest.approx(-expected_u, rel=1e-12)
 
 
@@ -195,19 +212,30 @@ def test_memo_gives_the_same_expansion():
     assert first == again == fresh
 
 
-@pytest.mark.parametrize("change, message", [
-    (dict(means=np.zeros((2, 3))), "shape"),
-    (dict(covariances=np.zeros((1, 4, 4))), "covariances"),
-    (dict(remaining_budget=0.0), "remaining_budget"),
-    (dict(measurement_noise=-np.eye(2)), "positive definite"),
-    (dict(available=[True, False], current_action=1), "current_action"),
-    (dict(last_found=2), "last_found"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (dict(means=np.zeros((2, 3))), "shape"),
+        (dict(covariances=np.zeros((1, 4, 4))), "covariances"),
+        (dict(remaining_budget=0.0), "remaining_budget"),
+        (dict(measurement_noise=-np.eye(2)), "positive definite"),
+        (dict(available=[True, False], current_action=1), "current_action"),
+        (dict(last_found=2), "last_found"),
+    ],
+)
 def test_problem_validation(change, message):
-    base = dict(agent_position=np.zeros(2), means=np.zeros((2, 4)),
-                covariances=np.array([prior()] * 2), process_noise=np.full(2, 3e-4),
-                remaining_budget=900.0, time_step=TAU, c_per_step=TAU, agent_speed=SPEED,
-                sensor_diameter=W, measurement_noise=R)
+    base = dict(
+        agent_position=np.zeros(2),
+        means=np.zeros((2, 4)),
+        covariances=np.array([prior()] * 2),
+        process_noise=np.full(2, 3e-4),
+        remaining_budget=900.0,
+        time_step=TAU,
+        c_per_step=TAU,
+        agent_speed=SPEED,
+        sensor_diameter=W,
+        measurement_noise=R,
+    )
     with pytest.raises(ValueError, match=message):
         PlanningProblem(**(base | change))
 
@@ -258,8 +286,9 @@ def test_dwell_measures_the_target_just_found_at_every_step_and_keeps_it_last():
 
 
 def test_dwell_is_available_only_after_a_find_and_before_the_budget_ends():
-    problem = make_problem([[0, 0, 0, 0]], [prior()], budget=30.0, last_found=0,
-                           dwell_time=14.75)  # 29.5 steps: the nearest whole step, 30
+    problem = make_problem(
+        [[0, 0, 0, 0]], [prior()], budget=30.0, last_found=0, dwell_time=14.75
+    )  # 29.5 steps: the nearest whole step, 30
     assert problem.dwell_steps == 30
     env, state, *_ = setup(problem)
     assert is_available(env, state, 1)  # 30 < 60 steps left

@@ -72,8 +72,9 @@ def bandit_value(env, state):
     return env.win[a] if state[0][1] == 1 else env.lose[a]
 
 
-register_mdp(Bandit, MdpKernels(bandit_copy, bandit_available, bandit_expand, bandit_apply,
-                                bandit_value))
+register_mdp(
+    Bandit, MdpKernels(bandit_copy, bandit_available, bandit_expand, bandit_apply, bandit_value)
+)
 
 
 def bandit_search(p, win, lose, iterations, seed):
@@ -92,8 +93,12 @@ def test_running_mean_after_one_two_and_three_simulations():
     stream.uniform()  # ... and its outcome
     returns = [1.0 if stream.uniform() < 0.5 else 0.0 for _ in range(3)]
     assert 0.0 < sum(returns) < 3.0  # the seed gives both outcomes, so the mean is informative
-    for sims, expected in ((1, None), (2, returns[0]), (3, np.mean(returns[:2])),
-                           (4, np.mean(returns))):
+    for sims, expected in (
+        (1, None),
+        (2, returns[0]),
+        (3, np.mean(returns[:2])),
+        (4, np.mean(returns)),
+    ):
         result = bandit_search([0.5], [1.0], [0.0], sims, seed)
         if expected is None:
             assert result.root.actions.size == 0  # the root is a leaf: no action slots yet
@@ -118,8 +123,10 @@ def reference_ucb1(p, win, lose, iterations, seed, c=DEFAULT_EXPLORATION):
             arm = unvisited[0]
         else:
             scale = 1.0 / (high - low) if high > low else 0.0
-            scores = [(values[a] - low) * scale + c * math.sqrt(math.log(n) / visits[a])
-                      for a in range(arms)]
+            scores = [
+                (values[a] - low) * scale + c * math.sqrt(math.log(n) / visits[a])
+                for a in range(arms)
+            ]
             arm = int(np.argmax(scores))
         ret = win[arm] if stream.uniform() < p[arm] else lose[arm]
         visits[arm] += 1
@@ -171,11 +178,12 @@ def gamble_apply(env, state, a, found, payload, work):
 
 @numba.njit
 def gamble_value(env, state):
-    return -(state[0][1] - env.goal) ** 2
+    return -((state[0][1] - env.goal) ** 2)
 
 
-register_mdp(Gamble, MdpKernels(gamble_copy, gamble_available, gamble_expand, gamble_apply,
-                                gamble_value))
+register_mdp(
+    Gamble, MdpKernels(gamble_copy, gamble_available, gamble_expand, gamble_apply, gamble_value)
+)
 
 GAMBLE = Gamble(np.array([0.9, 0.5, 0.25]), np.array([1, 2, 4]), 3, 5.0)
 
@@ -184,7 +192,7 @@ GAMBLE = Gamble(np.array([0.9, 0.5, 0.25]), np.array([1, 2, 4]), 3, 5.0)
 def gamble_value_exact(t: int, score: int) -> float:
     """Expectimax: the optimal expected value of a state."""
     if t == GAMBLE.steps:
-        return -(score - GAMBLE.goal) ** 2
+        return -((score - GAMBLE.goal) ** 2)
     return max(gamble_q_exact(t, score, a) for a in range(3))
 
 
@@ -199,8 +207,9 @@ def test_search_finds_the_expectimax_optimum_and_its_values():
     assert sorted(exact)[-1] - sorted(exact)[-2] > 0.3  # a clear optimum
     errors = []
     for sims in (1000, 10000, 100000):
-        result = search_mdp(GAMBLE, (np.zeros(2, dtype=np.int64),), 3, 4, np.zeros(1),
-                            iterations=sims, seed=5)
+        result = search_mdp(
+            GAMBLE, (np.zeros(2, dtype=np.int64),), 3, 4, np.zeros(1), iterations=sims, seed=5
+        )
         assert result.best_action == optimum
         most = int(np.argmax(result.root.visits))
         assert result.root.actions[most] == optimum
@@ -213,13 +222,21 @@ def test_a_toy_search_leaves_the_disk_cache_usable_by_another_process():
     """A process that searched a toy MDP (as this module does) must not leave in the kernels'
     disk cache anything that a process without the toy cannot load."""
     here = Path(__file__).parent
-    toy = ("import test_search_toys as t; "
-           "t.bandit_search(np.array([0.5, 0.5]), np.zeros(2), np.ones(2), 50, 0)")
-    subprocess.run([sys.executable, "-c", f"import numpy as np; {toy}"], check=True,
-                   env={**os.environ, "PYTHONPATH": str(here)}, cwd=here)
-    plan = ("from hptrack.registry import make_planner; "
-            "from hptrack.scenario.random import random_scenario; "
-            "from hptrack.sim.episode import run_episode; "
-            "run_episode(random_scenario(2, seed=0, homogeneous=True), "
-            "make_planner('mcts', {'iterations': 200}))")
+    toy = (
+        "import test_search_toys as t; "
+        "t.bandit_search(np.array([0.5, 0.5]), np.zeros(2), np.ones(2), 50, 0)"
+    )
+    subprocess.run(
+        [sys.executable, "-c", f"import numpy as np; {toy}"],
+        check=True,
+        env={**os.environ, "PYTHONPATH": str(here)},
+        cwd=here,
+    )
+    plan = (
+        "from hptrack.registry import make_planner; "
+        "from hptrack.scenario.random import random_scenario; "
+        "from hptrack.sim.episode import run_episode; "
+        "run_episode(random_scenario(2, seed=0, homogeneous=True), "
+        "make_planner('mcts', {'iterations': 200}))"
+    )
     subprocess.run([sys.executable, "-c", plan], check=True, cwd=here.parent.parent)

@@ -26,8 +26,12 @@ def _sequential(measurements, until):
     return MOTION.predict(means, covs, q, until - t)
 
 
-MEASUREMENTS = [(0.3, 0, (0.5, 0.2)), (1.7, 1, (48.0, 0.3)), (2.2, 0, (2.1, 1.0)),
-                (2.9, 0, (2.8, 1.4))]
+MEASUREMENTS = [
+    (0.3, 0, (0.5, 0.2)),
+    (1.7, 1, (48.0, 0.3)),
+    (2.2, 0, (2.1, 1.0)),
+    (2.9, 0, (2.8, 1.4)),
+]
 
 
 @pytest.mark.parametrize("order", [[0, 1, 2, 3], [0, 2, 3, 1], [3, 2, 1, 0]])
@@ -59,8 +63,7 @@ def test_settled_history_gives_the_same_beliefs():
     for seq, (t, i, z) in enumerate(MEASUREMENTS):
         timeline.add(i, t, np.asarray(z), R, seq)
     assert timeline.horizon_s == pytest.approx(2.8)
-    np.testing.assert_allclose(timeline.at(10.0)[1], _sequential(MEASUREMENTS, 10.0)[1],
-                               rtol=1e-12)
+    np.testing.assert_allclose(timeline.at(10.0)[1], _sequential(MEASUREMENTS, 10.0)[1], rtol=1e-12)
 
 
 def test_duplicates_are_recognised():

@@ -25,8 +25,13 @@ def flight_cli(cli):
 def test_replay_writes_the_figure_and_the_summary(flight_cli, flight_scenario, tmp_path):
     path = tmp_path / "m.jsonl"
     log = MissionLog(path)
-    run = run_simulated(flight_scenario, make_planner("greedy"), seed=1, log=log,
-                        faults=SimulatedFaults(detection_latency_s=0.2, bad_input_rate_hz=1.0))
+    run = run_simulated(
+        flight_scenario,
+        make_planner("greedy"),
+        seed=1,
+        log=log,
+        faults=SimulatedFaults(detection_latency_s=0.2, bad_input_rate_hz=1.0),
+    )
     log.close()
     result = flight_cli("replay", path)
     assert result.code == 0, result.err
@@ -38,18 +43,20 @@ def test_replay_writes_the_figure_and_the_summary(flight_cli, flight_scenario, t
     assert path.with_suffix(".png").read_bytes()[:4] == b"\x89PNG"
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["replay", "{scenario}"], "not a mission log"),
-    (["vehicle-sim", "{scenario}", "--mavlink", "udpout://10.1.2.3:14540"], "loopback"),
-    (["vehicle-sim", "{scenario}", "--detections", "udp://127.0.0.1:99999"], "1-65535"),
-    (["fly", "{scenario}", "--altitude", "-5"], "--altitude"),
-    (["fly", "{scenario}", "--rate", "5"], "--rate"),
-    (["fly", "{scenario}", "--deadline", "0"], "--deadline"),
-    (["fly", "{scenario}", "--planner", "nope"], "unknown planner"),
-    (["fly", "{scenario}", "--detections", "tcp://x:1"], "--detections"),
-])
-def test_bad_input_is_one_line_and_exit_code_2(flight_cli, example_path, tmp_path, args,
-                                               message):
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["replay", "{scenario}"], "not a mission log"),
+        (["vehicle-sim", "{scenario}", "--mavlink", "udpout://10.1.2.3:14540"], "loopback"),
+        (["vehicle-sim", "{scenario}", "--detections", "udp://127.0.0.1:99999"], "1-65535"),
+        (["fly", "{scenario}", "--altitude", "-5"], "--altitude"),
+        (["fly", "{scenario}", "--rate", "5"], "--rate"),
+        (["fly", "{scenario}", "--deadline", "0"], "--deadline"),
+        (["fly", "{scenario}", "--planner", "nope"], "unknown planner"),
+        (["fly", "{scenario}", "--detections", "tcp://x:1"], "--detections"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_code_2(flight_cli, example_path, tmp_path, args, message):
     args = [a.format(scenario=example_path) for a in args]
     result = flight_cli(*args, *(["--log", tmp_path / "l.jsonl"] if args[0] == "fly" else []))
     assert result.code == 2, result.out + result.err
@@ -60,8 +67,18 @@ def test_fly_without_a_vehicle_gives_up_with_exit_code_3(flight_cli, example_pat
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    result = flight_cli("fly", example_path, "--connection", f"udpin://127.0.0.1:{port}",
-                        "--detections", f"udp://127.0.0.1:{port}", "--connect-timeout", "1",
-                        "--log", tmp_path / "l.jsonl", "--no-live")
+    result = flight_cli(
+        "fly",
+        example_path,
+        "--connection",
+        f"udpin://127.0.0.1:{port}",
+        "--detections",
+        f"udp://127.0.0.1:{port}",
+        "--connect-timeout",
+        "1",
+        "--log",
+        tmp_path / "l.jsonl",
+        "--no-live",
+    )
     assert result.code == 3, result.out + result.err
     assert "no autopilot found" in result.err

@@ -36,8 +36,9 @@ class Recorder:
 
 def _controller(scenario, planner=None, delay=None, **settings):
     planner = planner or Recorder()
-    return MissionController(scenario, planner, settings=ControllerSettings(**settings),
-                             runner=InlineRunner(delay)), planner
+    return MissionController(
+        scenario, planner, settings=ControllerSettings(**settings), runner=InlineRunner(delay)
+    ), planner
 
 
 def _textbook(mean, cov, q, duration, z=None, noise=None):
@@ -68,16 +69,17 @@ def test_beliefs_are_predicted_in_closed_form_over_any_gap(flight_scenario, cust
     ctrl.setpoint(5.0)
     obs = planner.observations[-1]
     assert obs.step == 10 and obs.time == 5.0 and obs.detected.tolist() == [True, False]
-    noise = flight_scenario.agent.noise_covariance() if custom_noise is None else \
-        np.array(custom_noise)
+    noise = (
+        flight_scenario.agent.noise_covariance() if custom_noise is None else np.array(custom_noise)
+    )
     q = flight_scenario.process_noise()
-    mean, cov = _textbook(flight_scenario.means()[0], flight_scenario.covariances()[0], q[0],
-                          3.3, z, noise)
+    mean, cov = _textbook(
+        flight_scenario.means()[0], flight_scenario.covariances()[0], q[0], 3.3, z, noise
+    )
     mean, cov = _textbook(mean, cov, q[0], 1.7)
     np.testing.assert_allclose(obs.means[0], mean, rtol=1e-10)
     np.testing.assert_allclose(obs.covariances[0], cov, rtol=1e-10, atol=1e-12)
-    mean, cov = _textbook(flight_scenario.means()[1], flight_scenario.covariances()[1], q[1],
-                          5.0)
+    mean, cov = _textbook(flight_scenario.means()[1], flight_scenario.covariances()[1], q[1], 5.0)
     np.testing.assert_allclose(obs.covariances[1], cov, rtol=1e-10, atol=1e-12)
 
 
@@ -93,27 +95,35 @@ BAD = {
     "odometry non-finite": (lambda c: c.odometry(0.45, [math.nan, 0.0]), "odometry: non-finite"),
     "odometry malformed": (lambda c: c.odometry(0.45, [1.0, 2.0, 3.0]), "odometry: malformed"),
     "odometry jump": (lambda c: c.odometry(0.45, [500.0, 0.0]), "odometry: jump"),
-    "odometry out of order": (lambda c: c.odometry(0.3, [1.0, 0.0]),
-                              "odometry: out of order"),
+    "odometry out of order": (lambda c: c.odometry(0.3, [1.0, 0.0]), "odometry: out of order"),
     "odometry duplicate": (lambda c: c.odometry(0.4, [2.0, 0.0]), "odometry: duplicate"),
-    "unknown target": (lambda c: c.detection(0.45, "p9", [1.0, 1.0]),
-                       "detection: unknown target"),
-    "target id not text": (lambda c: c.detection(0.45, 7, [1.0, 1.0]),
-                           "detection: unknown target"),
-    "detection non-finite": (lambda c: c.detection(0.45, "p2", [math.inf, 1.0]),
-                             "detection: non-finite"),
-    "detection time NaN": (lambda c: c.detection(math.nan, "p2", [1.0, 1.0]),
-                           "detection: non-finite"),
-    "detection before start": (lambda c: c.detection(-1.0, "p2", [1.0, 1.0]),
-                               "detection: before the start"),
-    "detection future": (lambda c: c.detection(2.0, "p2", [30.0, -10.0]),
-                         "detection: in the future"),
-    "detection duplicate": (lambda c: c.detection(0.4, "p1", [31.0, 10.0]),
-                            "detection: duplicate"),
-    "bad covariance": (lambda c: c.detection(0.45, "p2", [30.0, -10.0], [[1, 2], [2, 1]]),
-                       "detection: bad covariance"),
-    "malformed covariance": (lambda c: c.detection(0.45, "p2", [30.0, -10.0], [1.0, 2.0]),
-                             "detection: malformed"),
+    "unknown target": (lambda c: c.detection(0.45, "p9", [1.0, 1.0]), "detection: unknown target"),
+    "target id not text": (lambda c: c.detection(0.45, 7, [1.0, 1.0]), "detection: unknown target"),
+    "detection non-finite": (
+        lambda c: c.detection(0.45, "p2", [math.inf, 1.0]),
+        "detection: non-finite",
+    ),
+    "detection time NaN": (
+        lambda c: c.detection(math.nan, "p2", [1.0, 1.0]),
+        "detection: non-finite",
+    ),
+    "detection before start": (
+        lambda c: c.detection(-1.0, "p2", [1.0, 1.0]),
+        "detection: before the start",
+    ),
+    "detection future": (
+        lambda c: c.detection(2.0, "p2", [30.0, -10.0]),
+        "detection: in the future",
+    ),
+    "detection duplicate": (lambda c: c.detection(0.4, "p1", [31.0, 10.0]), "detection: duplicate"),
+    "bad covariance": (
+        lambda c: c.detection(0.45, "p2", [30.0, -10.0], [[1, 2], [2, 1]]),
+        "detection: bad covariance",
+    ),
+    "malformed covariance": (
+        lambda c: c.detection(0.45, "p2", [30.0, -10.0], [1.0, 2.0]),
+        "detection: malformed",
+    ),
 }
 
 
@@ -164,8 +174,9 @@ def test_a_late_detection_counts_at_the_next_tick(flight_scenario):
 
 
 def test_a_find_while_the_planner_is_busy_is_not_lost(flight_scenario):
-    ctrl, planner = _controller(flight_scenario, delay=lambda tick: 1.2 if tick == 0 else 0.0,
-                                planner_deadline_s=5.0)
+    ctrl, planner = _controller(
+        flight_scenario, delay=lambda tick: 1.2 if tick == 0 else 0.0, planner_deadline_s=5.0
+    )
     t = 0.0
     while t <= 2.0:
         ctrl.odometry(t, [0.0, 0.0])
@@ -198,8 +209,9 @@ def test_stale_odometry_holds_and_says_so_then_resumes(flight_scenario):
 
 
 def test_a_late_plan_keeps_the_current_waypoint_and_is_logged(flight_scenario):
-    ctrl, _ = _controller(flight_scenario, delay=lambda tick: 2.0 if tick == 2 else 0.0,
-                          planner_deadline_s=1.0)
+    ctrl, _ = _controller(
+        flight_scenario, delay=lambda tick: 2.0 if tick == 2 else 0.0, planner_deadline_s=1.0
+    )
     waypoints = {}
     t = 0.0
     while t <= 3.5:
@@ -276,7 +288,8 @@ def test_the_mission_ends_at_the_budget(flight_scenario):
     q = flight_scenario.process_noise()
     _, cov = _textbook(flight_scenario.means()[1], flight_scenario.covariances()[1], q[1], 60.0)
     assert end["per_target_logdet"]["p2"] == pytest.approx(
-        math.log(np.linalg.det(cov[:2, :2])), rel=1e-10)
+        math.log(np.linalg.det(cov[:2, :2])), rel=1e-10
+    )
     assert not ctrl.detection(60.1, "p1", [30.0, 10.0])
     assert ctrl.rejected["detection: after the end"] == 1
 

@@ -40,14 +40,45 @@ def dry_run(tmp_path, example_path):
     mav, det = _free_udp_port(), _free_udp_port()
     stats = tmp_path / "vehicle.json"
     stub = subprocess.Popen(
-        [*CLI, "vehicle-sim", str(scenario), "--mavlink", f"udpout://127.0.0.1:{mav}",
-         "--detections", f"udp://127.0.0.1:{det}", "--duration", "120", "--stats", str(stats)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    fly = [*CLI, "fly", str(scenario), "--connection", f"udpin://127.0.0.1:{mav}",
-           "--detections", f"udp://127.0.0.1:{det}", "--altitude", "5", "--takeoff",
-           "--no-live", "--connect-timeout", "20"]
-    run = {"scenario": scenario, "fly": fly, "stub": stub, "stats": stats,
-           "log": tmp_path / "flight.jsonl"}
+        [
+            *CLI,
+            "vehicle-sim",
+            str(scenario),
+            "--mavlink",
+            f"udpout://127.0.0.1:{mav}",
+            "--detections",
+            f"udp://127.0.0.1:{det}",
+            "--duration",
+            "120",
+            "--stats",
+            str(stats),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    fly = [
+        *CLI,
+        "fly",
+        str(scenario),
+        "--connection",
+        f"udpin://127.0.0.1:{mav}",
+        "--detections",
+        f"udp://127.0.0.1:{det}",
+        "--altitude",
+        "5",
+        "--takeoff",
+        "--no-live",
+        "--connect-timeout",
+        "20",
+    ]
+    run = {
+        "scenario": scenario,
+        "fly": fly,
+        "stub": stub,
+        "stats": stats,
+        "log": tmp_path / "flight.jsonl",
+    }
     yield run
     if stub.poll() is None:
         stub.send_signal(signal.SIGINT)
@@ -71,8 +102,9 @@ def _records(path, kind):
 
 def test_a_dry_run_flies_offboard_detects_ends_in_hold_and_replays(dry_run, tmp_path):
     start = time.monotonic()
-    fly = subprocess.run([*dry_run["fly"], "--log", str(dry_run["log"])], capture_output=True,
-                         text=True, timeout=60)
+    fly = subprocess.run(
+        [*dry_run["fly"], "--log", str(dry_run["log"])], capture_output=True, text=True, timeout=60
+    )
     elapsed = time.monotonic() - start
     assert fly.returncode == 0, fly.stdout + fly.stderr
     assert "ended by budget" in fly.stdout
@@ -93,8 +125,9 @@ def test_a_dry_run_flies_offboard_detects_ends_in_hold_and_replays(dry_run, tmp_
     assert end["reason"] == "budget" and end["time"] == BUDGET_S
     scenario = load_scenario(dry_run["scenario"])
     mission = scenario.mission_spec()
-    _, unseen = mission.motion.predict(scenario.means(), scenario.covariances(),
-                                       mission.process_noise, BUDGET_S)
+    _, unseen = mission.motion.predict(
+        scenario.means(), scenario.covariances(), mission.process_noise, BUDGET_S
+    )
     seen = {r["target"] for r in accepted}
     for i, tid in enumerate(scenario.target_ids):
         if tid in seen:
@@ -104,12 +137,17 @@ def test_a_dry_run_flies_offboard_detects_ends_in_hold_and_replays(dry_run, tmp_
     # the mission ended in hold, confirmed by telemetry
     safety = _records(log, "safety")
     assert [(s["reason"], s["action"], s["confirmed"]) for s in safety] == [
-        ("budget", "hold", "HOLD")]
+        ("budget", "hold", "HOLD")
+    ]
 
     # the log replays with the same beliefs and decisions
     summary_path, figure = tmp_path / "replay.json", tmp_path / "replay.png"
-    replay = subprocess.run([*CLI, "replay", str(log), "--json", str(summary_path), "--plot",
-                             str(figure)], capture_output=True, text=True, timeout=60)
+    replay = subprocess.run(
+        [*CLI, "replay", str(log), "--json", str(summary_path), "--plot", str(figure)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert replay.returncode == 0, replay.stderr
     summary = json.loads(summary_path.read_text())
     assert summary["mismatches"] == 0, summary["first_mismatches"]
@@ -130,10 +168,17 @@ def _wait_for_offboard(path, timeout_s=30.0):
 @pytest.mark.parametrize("end", ["interrupt", "geofence", "lost link"])
 def test_safe_ends_switch_to_hold_and_say_why(dry_run, end):
     log = dry_run["log"]
-    extra = {"interrupt": [], "geofence": ["--max-distance", "10"],
-             "lost link": ["--lost-link", "1"]}[end]
-    fly = subprocess.Popen([*dry_run["fly"], "--log", str(log), *extra],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    extra = {
+        "interrupt": [],
+        "geofence": ["--max-distance", "10"],
+        "lost link": ["--lost-link", "1"],
+    }[end]
+    fly = subprocess.Popen(
+        [*dry_run["fly"], "--log", str(log), *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         _wait_for_offboard(log)
         if end == "interrupt":
@@ -147,8 +192,11 @@ def test_safe_ends_switch_to_hold_and_say_why(dry_run, end):
         if fly.poll() is None:
             fly.kill()
             fly.wait()
-    expected = {"interrupt": ("interrupted", 130), "geofence": ("geofence", 3),
-                "lost link": ("lost link", 3)}[end]
+    expected = {
+        "interrupt": ("interrupted", 130),
+        "geofence": ("geofence", 3),
+        "lost link": ("lost link", 3),
+    }[end]
     assert fly.returncode == expected[1], out + err
     assert f"ended by {expected[0]}" in out
     safety = _records(log, "safety")

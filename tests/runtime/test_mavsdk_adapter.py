@@ -18,16 +18,21 @@ def test_detection_datagrams_feed_the_controller_and_bad_lines_are_refused(fligh
     flight.on_datagram(b'{"id": "p1", "x": 30.0, "y": 10.0}')  # before offboard started
     flight.mono0, flight.unix0 = time.monotonic() - 2.0, time.time() - 2.0
     ctrl.odometry(2.0, [0.0, 0.0])
-    good = json.dumps({"id": "p1", "x": 36.0, "y": 10.0, "t": flight.unix0 + 1.5,
-                       "cov": [[2.0, 0.0], [0.0, 2.0]]})
-    flight.on_datagram("\n".join([good, "not json", '{"x": 1, "y": 2}',
-                                  '{"id": "p2", "x": 30, "y": -10}']).encode())
+    good = json.dumps(
+        {"id": "p1", "x": 36.0, "y": 10.0, "t": flight.unix0 + 1.5, "cov": [[2.0, 0.0], [0.0, 2.0]]}
+    )
+    flight.on_datagram(
+        "\n".join(
+            [good, "not json", '{"x": 1, "y": 2}', '{"id": "p2", "x": 30, "y": -10}']
+        ).encode()
+    )
     flight.on_datagram(b"\xff\xfe")
     assert flight.error is None
     assert ctrl.accepted["detection"] == 2
     assert dict(ctrl.rejected) == {"detection: before the start": 1, "detection: malformed": 3}
-    stamps = {r["target"]: r["t"] for r in ctrl.log.records
-              if r["kind"] == "detection" and r["accepted"]}
+    stamps = {
+        r["target"]: r["t"] for r in ctrl.log.records if r["kind"] == "detection" and r["accepted"]
+    }
     assert stamps["p1"] == pytest.approx(1.5, abs=1e-6)  # the detector's own time stamp
     assert stamps["p2"] == pytest.approx(2.0, abs=0.5)  # no stamp: the time of arrival
 

@@ -13,25 +13,32 @@ from hptrack.runtime.replay import replay_log
 from hptrack.runtime.simulated import SimulatedFaults, run_simulated
 from hptrack.runtime.worker import ThreadedRunner
 
-FAULTS = SimulatedFaults(detection_rate_hz=4.0, detection_latency_s=0.2,
-                         detection_jitter_s=0.5, odometry_drop_probability=0.1,
-                         planner_slow_probability=0.3, planner_slow_delay_s=1.2,
-                         bad_input_rate_hz=2.0)
+FAULTS = SimulatedFaults(
+    detection_rate_hz=4.0,
+    detection_latency_s=0.2,
+    detection_jitter_s=0.5,
+    odometry_drop_probability=0.1,
+    planner_slow_probability=0.3,
+    planner_slow_delay_s=1.2,
+    bad_input_rate_hz=2.0,
+)
 
 
 @pytest.fixture
 def mission_log(flight_scenario, tmp_path):
     path = tmp_path / "m.jsonl"
     log = MissionLog(path)
-    run = run_simulated(flight_scenario, make_planner("mcts", {"iterations": 300}), seed=2,
-                        faults=FAULTS, log=log)
+    run = run_simulated(
+        flight_scenario, make_planner("mcts", {"iterations": 300}), seed=2, faults=FAULTS, log=log
+    )
     log.close()
     return path, run
 
 
 def _ticks(records):
-    return [(r["k"], r["submitted"], r["logdet"], r["means"]) for r in records
-            if r["kind"] == "tick"]
+    return [
+        (r["k"], r["submitted"], r["logdet"], r["means"]) for r in records if r["kind"] == "tick"
+    ]
 
 
 def test_replay_reproduces_beliefs_and_decisions(mission_log):
@@ -43,11 +50,15 @@ def test_replay_reproduces_beliefs_and_decisions(mission_log):
     assert summary["ended_by"] == "budget" and not summary["truncated"]
     original, replayed = run.controller.log.records, result.controller.log.records
     assert _ticks(replayed) == _ticks(original)
-    plans = [[(r["k"], r["status"], r["waypoint"]) for r in records if r["kind"] == "plan"]
-             for records in (original, replayed)]
+    plans = [
+        [(r["k"], r["status"], r["waypoint"]) for r in records if r["kind"] == "plan"]
+        for records in (original, replayed)
+    ]
     assert plans[0] == plans[1] and len(plans[0]) > 50
-    assert result.controller.end["planner_info"]["subtasks"] == \
-        run.controller.end["planner_info"]["subtasks"]
+    assert (
+        result.controller.end["planner_info"]["subtasks"]
+        == run.controller.end["planner_info"]["subtasks"]
+    )
     np.testing.assert_array_equal(result.record.true_states, run.record.true_states)
     assert json.dumps(summary, allow_nan=False)
 
@@ -78,16 +89,18 @@ def test_a_tampered_log_is_reported(mission_log):
     path.write_text("\n".join(lines) + "\n")
     summary = replay_log(path).summary
     assert summary["mismatches"] > 0
-    assert any("tick logdet differs" in m or "means differs" in m
-               for m in summary["first_mismatches"])
+    assert any(
+        "tick logdet differs" in m or "means differs" in m for m in summary["first_mismatches"]
+    )
 
 
 def test_a_threaded_real_time_run_replays_exactly(flight_scenario, tmp_path):
     path = tmp_path / "rt.jsonl"
     log = MissionLog(path)
     scenario = flight_scenario.model_copy(update={"budget": 4.0})
-    ctrl = MissionController(scenario, make_planner("mcts", {"iterations": 300}), log=log,
-                             runner=ThreadedRunner())
+    ctrl = MissionController(
+        scenario, make_planner("mcts", {"iterations": 300}), log=log, runner=ThreadedRunner()
+    )
     start = time.perf_counter()
     position = np.zeros(2)
     while not ctrl.finished:

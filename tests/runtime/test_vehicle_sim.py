@@ -80,23 +80,32 @@ def test_loopback_addresses_only(flight_scenario):
 def test_the_stub_arms_takes_off_flies_offboard_and_detects(flight_scenario):
     gcs = GroundStation()
     detector = _udp_socket()
-    vehicle = VehicleSim(flight_scenario, f"udpout://127.0.0.1:{gcs.port}",
-                         f"udp://127.0.0.1:{detector.getsockname()[1]}", climb_rate_m_s=10.0)
+    vehicle = VehicleSim(
+        flight_scenario,
+        f"udpout://127.0.0.1:{gcs.port}",
+        f"udp://127.0.0.1:{detector.getsockname()[1]}",
+        climb_rate_m_s=10.0,
+    )
     stop = threading.Event()
     result = {}
     thread = threading.Thread(target=lambda: result.update(vehicle.run(20.0, stop)))
     thread.start()
     try:
         beat = _heartbeat(gcs)
-        assert (beat.type, beat.autopilot) == (mavlink.MAV_TYPE_QUADROTOR,
-                                               mavlink.MAV_AUTOPILOT_PX4)
+        assert (beat.type, beat.autopilot) == (
+            mavlink.MAV_TYPE_QUADROTOR,
+            mavlink.MAV_AUTOPILOT_PX4,
+        )
         assert not beat.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         assert gcs.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
         assert _heartbeat(gcs).base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         assert gcs.command(mavlink.MAV_CMD_NAV_TAKEOFF) == mavlink.MAV_RESULT_ACCEPTED
         gcs.wait(lambda m: m.get_type() == "LOCAL_POSITION_NED" and m.z < -2.4)
-        offboard = (mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                    PX4_MAIN_MODE["offboard"])
+        offboard = (
+            mavlink.MAV_CMD_DO_SET_MODE,
+            mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            PX4_MAIN_MODE["offboard"],
+        )
         assert gcs.command(*offboard) == mavlink.MAV_RESULT_DENIED  # no setpoints yet
         start = time.monotonic()
 
@@ -106,8 +115,23 @@ def test_the_stub_arms_takes_off_flies_offboard_and_detects(flight_scenario):
             while time.monotonic() < end:
                 east = 30.0 + 3.0 * (time.monotonic() - start)
                 gcs.mav.set_position_target_local_ned_send(
-                    0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b110111111000, 10.0, east, -2.5,
-                    0, 0, 0, 0, 0, 0, 0, 0)
+                    0,
+                    1,
+                    1,
+                    mavlink.MAV_FRAME_LOCAL_NED,
+                    0b110111111000,
+                    10.0,
+                    east,
+                    -2.5,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                )
                 gcs.pump(0.05)
 
         stream(0.3)
@@ -131,8 +155,12 @@ def test_the_stub_arms_takes_off_flies_offboard_and_detects(flight_scenario):
         seen = [json.loads(line) for line in lines]
         assert seen and {d["id"] for d in seen} == {"p1"}
         assert all(abs(d["t"] - time.time()) < 10 for d in seen)
-        hold = (mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                PX4_MAIN_MODE["auto"], PX4_AUTO_SUB_MODE["hold"])
+        hold = (
+            mavlink.MAV_CMD_DO_SET_MODE,
+            mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            PX4_MAIN_MODE["auto"],
+            PX4_AUTO_SUB_MODE["hold"],
+        )
         assert gcs.command(*hold) == mavlink.MAV_RESULT_ACCEPTED
     finally:
         stop.set()
@@ -140,6 +168,5 @@ def test_the_stub_arms_takes_off_flies_offboard_and_detects(flight_scenario):
         gcs.sock.close()
         detector.close()
     assert result["final_mode"] == "hold"
-    assert [m["mode"] for m in result["modes"]] == ["hold", "takeoff", "hold", "offboard",
-                                                    "hold"]
+    assert [m["mode"] for m in result["modes"]] == ["hold", "takeoff", "hold", "offboard", "hold"]
     assert result["offboard_setpoints"] > 50 and result["max_speed_m_s"] <= 8.0 + 1e-9

@@ -9,13 +9,24 @@ from hptrack.sim.episode import run_episode
 from hptrack.sim.record import EpisodeRecord
 from hptrack.sim.step import move_towards
 
-COV = ((900.0, 100.0, 0.0, 0.0), (100.0, 800.0, 0.0, 0.0), (0.0, 0.0, 0.3, 0.0),
-       (0.0, 0.0, 0.0, 0.4))
+COV = (
+    (900.0, 100.0, 0.0, 0.0),
+    (100.0, 800.0, 0.0, 0.0),
+    (0.0, 0.0, 0.3, 0.0),
+    (0.0, 0.0, 0.0, 0.4),
+)
 
 
 def far_scenario(form="continuous"):
-    targets = [TargetSpec(id=f"t{i}", mean=(5000.0 + 1000 * i, 0.0, 1.0, 0.5), covariance=COV,
-                          process_noise=2e-4 * (i + 1)) for i in range(3)]
+    targets = [
+        TargetSpec(
+            id=f"t{i}",
+            mean=(5000.0 + 1000 * i, 0.0, 1.0, 0.5),
+            covariance=COV,
+            process_noise=2e-4 * (i + 1),
+        )
+        for i in range(3)
+    ]
     return Scenario(seed=3, targets=targets, process_noise_form=form, budget=300.0)
 
 
@@ -26,8 +37,12 @@ def test_unseen_targets_score_exactly_the_closed_form(form):
     assert not record.detections.any()
     motion = scenario.motion_model()
     mission = scenario.mission_spec()
-    _, covs = motion.predict(scenario.means(), scenario.covariances(), scenario.process_noise(),
-                             mission.n_steps * mission.time_step)
+    _, covs = motion.predict(
+        scenario.means(),
+        scenario.covariances(),
+        scenario.process_noise(),
+        mission.n_steps * mission.time_step,
+    )
     np.testing.assert_allclose(record.per_target_logdet, position_logdet(covs), rtol=1e-10)
     assert record.uncertainty == pytest.approx(position_logdet(covs).sum(), rel=1e-10)
 
@@ -65,9 +80,16 @@ def test_same_seed_same_result_and_other_seed_differs():
 
 def test_given_truth_is_used():
     scenario = far_scenario()
-    record = run_episode(scenario.model_copy(update={"targets": [
-        t.model_copy(update={"truth": (1.0, 2.0, 0.0, 0.0)}) for t in scenario.targets]}),
-        StationaryPlanner())
+    record = run_episode(
+        scenario.model_copy(
+            update={
+                "targets": [
+                    t.model_copy(update={"truth": (1.0, 2.0, 0.0, 0.0)}) for t in scenario.targets
+                ]
+            }
+        ),
+        StationaryPlanner(),
+    )
     np.testing.assert_array_equal(record.true_states[0, :, :2], [[1.0, 2.0]] * 3)
 
 
@@ -117,8 +139,10 @@ def test_observation_is_read_only_and_has_no_truth():
             seen.append(observation)
             return super().act(observation)
 
-    run_episode(Scenario(budget=2.0, targets=far_scenario().targets,
-                         agent=AgentSpec(position=(1.0, 1.0))), Spy())
+    run_episode(
+        Scenario(budget=2.0, targets=far_scenario().targets, agent=AgentSpec(position=(1.0, 1.0))),
+        Spy(),
+    )
     obs = seen[0]
     assert not hasattr(obs, "true_states")
     with pytest.raises(ValueError):

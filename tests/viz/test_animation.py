@@ -36,7 +36,7 @@ def test_belief_is_the_stored_one_at_or_before_the_frame():
 
 def test_detection_flash_lights_the_frame_holding_it_then_fades():
     detections = np.zeros((11, 2), dtype=bool)
-    detections[3, 0] = True   # between frames at steps 2 and 4
+    detections[3, 0] = True  # between frames at steps 2 and 4
     detections[0, 1] = True
     strength = detection_flash(detections, np.arange(0, 11, 2), flash_frames=4)
     assert strength[:, 0].tolist() == [0.0, 0.0, 1.0, 0.75, 0.5, 0.25]
@@ -44,18 +44,32 @@ def test_detection_flash_lights_the_frame_holding_it_then_fades():
 
 
 def test_subtask_labels_follow_the_planner_log():
-    info = {"subtasks": [
-        {"target_index": 1, "start_step": 0, "end_step": 10, "outcome": "found"},
-        {"target_index": 0, "start_step": 10, "end_step": 30, "outcome": "missed"},
-        {"dwell": 1, "start_step": 30, "end_step": 35, "plan_after_dwell": 1},
-        {"follow": 1, "start_step": 35},
-    ]}
+    info = {
+        "subtasks": [
+            {"target_index": 1, "start_step": 0, "end_step": 10, "outcome": "found"},
+            {"target_index": 0, "start_step": 10, "end_step": 30, "outcome": "missed"},
+            {"dwell": 1, "start_step": 30, "end_step": 35, "plan_after_dwell": 1},
+            {"follow": 1, "start_step": 35},
+        ]
+    }
     labels, focus = subtask_at(info, ("a", "b"), np.array([0, 9, 10, 29, 30, 34, 35, 40]))
-    assert labels == ["pursuing b", "pursuing b", "pursuing a", "pursuing a", "dwelling on b",
-                      "dwelling on b", "following b", "following b"]
+    assert labels == [
+        "pursuing b",
+        "pursuing b",
+        "pursuing a",
+        "pursuing a",
+        "dwelling on b",
+        "dwelling on b",
+        "following b",
+        "following b",
+    ]
     assert focus.tolist() == [1, 1, 0, 0, 1, 1, 1, 1]
-    ended = {"subtasks": [{"target_index": 0, "start_step": 0, "end_step": 5,
-                           "outcome": "missed"}, {"follow": None, "start_step": 8}]}
+    ended = {
+        "subtasks": [
+            {"target_index": 0, "start_step": 0, "end_step": 5, "outcome": "missed"},
+            {"follow": None, "start_step": 8},
+        ]
+    }
     labels, focus = subtask_at(ended, ("a",), np.array([4, 5, 8]))
     assert labels == ["pursuing a", "pursued a: missed", "hover"]
     assert focus.tolist() == [0, 0, -1]
@@ -67,8 +81,9 @@ def test_gif_has_one_frame_per_stride_and_the_figure_size(short_mission, tmp_pat
     _, record = short_mission
     path = tmp_path / "mission.gif"
     calls = []
-    frames = animate_mission(record, path, stride=7, fps=10,
-                             progress=lambda done, total: calls.append((done, total)))
+    frames = animate_mission(
+        record, path, stride=7, fps=10, progress=lambda done, total: calls.append((done, total))
+    )
     assert frames == 19  # steps 0, 7, ..., 119, then 120
     assert calls == [(i, 19) for i in range(1, 20)]
     with Image.open(path) as gif:
@@ -100,19 +115,21 @@ def test_frame_height_fits_the_square_map_and_one_legend_row_per_eight_targets()
     assert frame_size_in(6.0, 9)[1] == pytest.approx(height + 0.2)
 
 
-@pytest.mark.parametrize(("kwargs", "words"), [
-    ({"stride": 0}, ["stride", "0"]),
-    ({"fps": 0}, ["fps", "0"]),
-    ({"trail_s": -1.0}, ["trail_s", "-1"]),
-])
+@pytest.mark.parametrize(
+    ("kwargs", "words"),
+    [
+        ({"stride": 0}, ["stride", "0"]),
+        ({"fps": 0}, ["fps", "0"]),
+        ({"trail_s": -1.0}, ["trail_s", "-1"]),
+    ],
+)
 def test_bad_settings_are_input_errors(short_mission, tmp_path, kwargs, words):
     with pytest.raises(InputError) as err:
         animate_mission(short_mission[1], tmp_path / "m.gif", **kwargs)
     assert all(w in str(err.value) for w in words) and "\n" not in str(err.value)
 
 
-def test_unknown_format_and_missing_ffmpeg_are_input_errors(short_mission, tmp_path,
-                                                            monkeypatch):
+def test_unknown_format_and_missing_ffmpeg_are_input_errors(short_mission, tmp_path, monkeypatch):
     with pytest.raises(InputError, match=r"unknown animation format '\.avi'"):
         animate_mission(short_mission[1], tmp_path / "m.avi")
     monkeypatch.setattr(writers, "is_available", lambda name: False)

@@ -20,7 +20,7 @@ from hptrack.viz.mission import (
 
 def test_95_percent_scale_holds_95_percent_of_a_gaussian():
     # P(chi^2_2 <= s^2) = 1 - exp(-s^2 / 2)
-    assert 1.0 - np.exp(-CONFIDENCE_SCALE_95**2 / 2.0) == pytest.approx(0.95)
+    assert 1.0 - np.exp(-(CONFIDENCE_SCALE_95**2) / 2.0) == pytest.approx(0.95)
 
 
 def test_ellipse_axes_of_a_rotated_covariance():
@@ -50,17 +50,24 @@ def test_mission_figure_says_what_it_shows(short_mission, tmp_path):
     ax = fig.add_subplot()
     artists = plot_mission(ax, record)
     labels = [t.get_text() for t in artists["legend"].get_texts()]
-    assert labels == [*record.target_ids, "95 % belief ellipse (t = 0, 20, 40, 60 s)",
-                      "agent start", "agent end", "target start", "target end",
-                      "target measured"]
+    assert labels == [
+        *record.target_ids,
+        "95 % belief ellipse (t = 0, 20, 40, 60 s)",
+        "agent start",
+        "agent end",
+        "target start",
+        "target end",
+        "target measured",
+    ]
     assert ax.get_aspect() == 1.0
     assert len(artists["ellipses"]) == 4 * len(record.target_ids)
     assert all(e.get_linestyle() == "--" for e in artists["ellipses"])
     measured = np.flatnonzero(record.detections.any(axis=0))
     assert len(artists["detections"]) == measured.size
     for scatter, i in zip(artists["detections"], measured, strict=True):
-        np.testing.assert_allclose(scatter.get_offsets(),
-                                   record.true_states[record.detections[:, i], i, :2])
+        np.testing.assert_allclose(
+            scatter.get_offsets(), record.true_states[record.detections[:, i], i, :2]
+        )
     path = tmp_path / "mission.png"
     save_mission_figure(record, str(path))
     assert path.read_bytes()[:4] == b"\x89PNG"

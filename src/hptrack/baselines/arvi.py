@@ -72,8 +72,7 @@ class ArviSettings(PrimitiveSettings):
     """
 
     horizon: Annotated[int, Field(ge=1, le=1000)] = 12
-    delta_schedule_m: Schedule = (
-        math.inf, 150.0, 100.0, 75.0, 50.0)
+    delta_schedule_m: Schedule = (math.inf, 150.0, 100.0, 75.0, 50.0)
     epsilon_schedule: Schedule = (math.inf,)
     max_nodes_per_level: Annotated[int, Field(ge=1)] = 2000
     time_limit_s: Annotated[float | None, Field(gt=0.0)] = None
@@ -84,8 +83,10 @@ class ArviSettings(PrimitiveSettings):
     @model_validator(mode="after")
     def _schedules(self) -> Self:
         if len(self.epsilon_schedule) not in (1, len(self.delta_schedule_m)):
-            raise ValueError("option epsilon_schedule needs one value or one per "
-                             f"delta_schedule_m entry, got {list(self.epsilon_schedule)}")
+            raise ValueError(
+                "option epsilon_schedule needs one value or one per "
+                f"delta_schedule_m entry, got {list(self.epsilon_schedule)}"
+            )
         return self
 
     def passes(self) -> list[tuple[float, float]]:
@@ -145,8 +146,8 @@ def _prune(positions, covariances, order, delta, epsilon, max_keep):
                     dx = positions[k, 0] - positions[j, 0]
                     dy = positions[k, 1] - positions[j, 1]
                     if dx * dx + dy * dy < delta2 and (
-                            epsilon == np.inf or _dominated(covariances[k], covariances[j],
-                                                            epsilon)):
+                        epsilon == np.inf or _dominated(covariances[k], covariances[j], epsilon)
+                    ):
                         redundant = True
                     k = nxt[k]
         if not redundant:
@@ -157,8 +158,14 @@ def _prune(positions, covariances, order, delta, epsilon, max_keep):
     return kept[:n_kept], False
 
 
-def prune(positions: np.ndarray, costs: np.ndarray, covariances: np.ndarray | None, delta_m: float,
-          epsilon: float, max_keep: int) -> tuple[np.ndarray, bool]:
+def prune(
+    positions: np.ndarray,
+    costs: np.ndarray,
+    covariances: np.ndarray | None,
+    delta_m: float,
+    epsilon: float,
+    max_keep: int,
+) -> tuple[np.ndarray, bool]:
     """Reduced-value-iteration pruning of one level (Atanasov et al. 2014, Alg. 2).
 
     Nodes are visited by increasing cost (stable, so earlier nodes win ties); a node is kept
@@ -184,8 +191,14 @@ def prune(positions: np.ndarray, costs: np.ndarray, covariances: np.ndarray | No
         if not math.isinf(epsilon):
             raise ValueError("a finite epsilon needs the covariances")
         covariances = np.empty((0, 0, 4, 4))
-    return _prune(np.ascontiguousarray(positions), np.ascontiguousarray(covariances), order,
-                  float(delta_m), float(epsilon), int(max_keep))
+    return _prune(
+        np.ascontiguousarray(positions),
+        np.ascontiguousarray(covariances),
+        order,
+        float(delta_m),
+        float(epsilon),
+        int(max_keep),
+    )
 
 
 @dataclass(frozen=True)
@@ -209,8 +222,11 @@ class ArviPlanner(PrimitivePlanner):
         """Run the anytime schedule from ``observation``; the best plan over all passes."""
         start = time.perf_counter()
         horizon = self.horizon_primitives(observation, self.settings.horizon)
-        means = mean_positions(np.asarray(observation.means, dtype=float), self.mission.time_step,
-                               horizon * self.settings.control_steps)
+        means = mean_positions(
+            np.asarray(observation.means, dtype=float),
+            self.mission.time_step,
+            horizon * self.settings.control_steps,
+        )
         best: PassResult | None = None
         expanded, passes, capped = 0, 0, False
         for delta, epsilon in self.settings.passes():
@@ -224,11 +240,16 @@ class ArviPlanner(PrimitivePlanner):
             if best is None or result.cost < best.cost:
                 best = result
         assert best is not None
-        return best.plan, DecisionStats(observation.step, 0.0, expanded, passes, capped,
-                                        best.cost)
+        return best.plan, DecisionStats(observation.step, 0.0, expanded, passes, capped, best.cost)
 
-    def run_pass(self, observation: Observation, means: np.ndarray, horizon: int,
-                 delta_m: float, epsilon: float) -> PassResult:
+    def run_pass(
+        self,
+        observation: Observation,
+        means: np.ndarray,
+        horizon: int,
+        delta_m: float,
+        epsilon: float,
+    ) -> PassResult:
         """One reduced value iteration pass with pruning ``(delta_m, epsilon)``.
 
         ``means`` are the predicted mean positions of every sub-step of the ``horizon``
@@ -244,26 +265,44 @@ class ArviPlanner(PrimitivePlanner):
         controls: list[np.ndarray] = []
         expanded, capped = 0, False
         for level in range(horizon):
-            level_means = means[level * k:(level + 1) * k + 1]
+            level_means = means[level * k : (level + 1) * k + 1]
             if math.isinf(epsilon):
                 child_pos, child_unc = expand_uncertainty(
-                    self.mission, self.step_displacements, level_means, positions, covariances)
+                    self.mission, self.step_displacements, level_means, positions, covariances
+                )
                 child_covs = None
             else:
                 child_pos, child_covs, child_unc = expand(
-                    self.mission, self.step_displacements, level_means, positions, covariances)
+                    self.mission, self.step_displacements, level_means, positions, covariances
+                )
             expanded += positions.shape[0]
             child_costs = np.repeat(costs, n_controls) + step_costs(
-                np.repeat(uncertainty, n_controls), child_unc, self.settings.cost)
+                np.repeat(uncertainty, n_controls), child_unc, self.settings.cost
+            )
             if level == horizon - 1:
                 keep = np.array([int(np.argmin(child_costs))])
             else:
-                keep, level_capped = prune(child_pos, child_costs, child_covs, delta_m, epsilon,
-                                           self.settings.max_nodes_per_level)
+                keep, level_capped = prune(
+                    child_pos,
+                    child_costs,
+                    child_covs,
+                    delta_m,
+                    epsilon,
+                    self.settings.max_nodes_per_level,
+                )
                 capped |= level_capped
-                covariances = (child_covs[keep] if child_covs is not None else child_covariances(
-                    self.mission, self.step_displacements, level_means, positions, covariances,
-                    keep))
+                covariances = (
+                    child_covs[keep]
+                    if child_covs is not None
+                    else child_covariances(
+                        self.mission,
+                        self.step_displacements,
+                        level_means,
+                        positions,
+                        covariances,
+                        keep,
+                    )
+                )
             parents.append(keep // n_controls)
             controls.append(keep % n_controls)
             positions, costs, uncertainty = child_pos[keep], child_costs[keep], child_unc[keep]

@@ -73,19 +73,53 @@ class AStarSettings(PrimitiveSettings):
 
 
 @numba.njit(cache=True)
-def _expand_node(node, first, positions, covariances, uncertainty, g, levels, parents, controls,
-                 f, step_displacements, all_means, n_steps, horizon, difference, weight,
-                 process_noise, tau, c_per_step, noise, radius, step_length, maps_a,
-                 maps_g, maps_h, maps_len):
+def _expand_node(
+    node,
+    first,
+    positions,
+    covariances,
+    uncertainty,
+    g,
+    levels,
+    parents,
+    controls,
+    f,
+    step_displacements,
+    all_means,
+    n_steps,
+    horizon,
+    difference,
+    weight,
+    process_noise,
+    tau,
+    c_per_step,
+    noise,
+    radius,
+    step_length,
+    maps_a,
+    maps_g,
+    maps_h,
+    maps_len,
+):
     """Expand ``node`` into the node slots ``first .. first + C - 1`` and write their ``f``."""
     n_controls = step_displacements.shape[0]
     level = levels[node]
     last = first + n_controls
-    rollout_children(positions[node:node + 1], covariances[node:node + 1],
-                     np.arange(n_controls), step_displacements,
-                     all_means[level * n_steps:(level + 1) * n_steps + 1], process_noise, tau,
-                     c_per_step, noise, radius, True, covariances[first:last],
-                     uncertainty[first:last])
+    rollout_children(
+        positions[node : node + 1],
+        covariances[node : node + 1],
+        np.arange(n_controls),
+        step_displacements,
+        all_means[level * n_steps : (level + 1) * n_steps + 1],
+        process_noise,
+        tau,
+        c_per_step,
+        noise,
+        radius,
+        True,
+        covariances[first:last],
+        uncertainty[first:last],
+    )
     for c in range(n_controls):
         j = first + c
         positions[j, 0] = positions[node, 0] + n_steps * step_displacements[c, 0]
@@ -103,9 +137,24 @@ def _expand_node(node, first, positions, covariances, uncertainty, g, levels, pa
     else:
         boundaries = np.arange(level + 2, horizon + 1) * n_steps
     bounds = np.zeros((n_controls, boundaries.shape[0]))
-    bound_children(positions[first:last], covariances[first:last], (level + 1) * n_steps,
-                   boundaries, all_means, process_noise, tau, c_per_step, noise, step_length,
-                   radius, maps_a, maps_g, maps_h, maps_len, bounds)
+    bound_children(
+        positions[first:last],
+        covariances[first:last],
+        (level + 1) * n_steps,
+        boundaries,
+        all_means,
+        process_noise,
+        tau,
+        c_per_step,
+        noise,
+        step_length,
+        radius,
+        maps_a,
+        maps_g,
+        maps_h,
+        maps_len,
+        bounds,
+    )
     for c in range(n_controls):
         h = bounds[c, 0] - uncertainty[first + c] if difference else np.sum(bounds[c])
         f[c] += weight * h
@@ -118,8 +167,9 @@ class AStarPlanner(PrimitivePlanner):
     settings_type = AStarSettings
     settings: AStarSettings
 
-    def reset(self, mission: MissionSpec, observation: Observation,
-              rng: np.random.Generator) -> None:
+    def reset(
+        self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
+    ) -> None:
         """Start a mission: precompute the heuristic's Riccati maps for the horizon."""
         super().reset(mission, observation, rng)
         self.bound = RiccatiBound(mission, self.settings.horizon * self.settings.control_steps)
@@ -131,8 +181,9 @@ class AStarPlanner(PrimitivePlanner):
         horizon = self.horizon_primitives(observation, params.horizon)
         k = params.control_steps
         n_controls = self.step_displacements.shape[0]
-        means = mean_positions(np.asarray(observation.means, dtype=float), mission.time_step,
-                               horizon * k)
+        means = mean_positions(
+            np.asarray(observation.means, dtype=float), mission.time_step, horizon * k
+        )
         difference = params.cost == "difference"
         capacity = 1 + n_controls * params.max_expansions
         n_targets = observation.covariances.shape[0]
@@ -145,8 +196,9 @@ class AStarPlanner(PrimitivePlanner):
         uncertainty[0] = float(np.sum(position_logdet(covariances[0])))
         g[0], levels[0], parents[0], controls[0] = 0.0, 0, -1, HOVER
         boundaries = np.array([horizon * k]) if difference else k * np.arange(1, horizon + 1)
-        root_bounds = self.bound.lower_bounds(positions[:1], covariances[:1], 0, boundaries,
-                                              means)[0]
+        root_bounds = self.bound.lower_bounds(positions[:1], covariances[:1], 0, boundaries, means)[
+            0
+        ]
         h = root_bounds[0] - uncertainty[0] if difference else root_bounds.sum()
         f = np.empty(n_controls)
         # Entries (f, sequence code, node): the code orders sequences lexicographically with
@@ -160,17 +212,40 @@ class AStarPlanner(PrimitivePlanner):
             if level == horizon:
                 break
             if expansions >= params.max_expansions or (
-                    params.time_limit_s is not None
-                    and time.perf_counter() - start >= params.time_limit_s):
+                params.time_limit_s is not None
+                and time.perf_counter() - start >= params.time_limit_s
+            ):
                 capped = True
                 break
             expansions += 1
-            _expand_node(node, n_nodes, positions, covariances, uncertainty, g, levels, parents,
-                         controls, f, self.step_displacements, means, k, horizon, difference,
-                         params.heuristic_weight, mission.process_noise, mission.time_step,
-                         mission.c_per_step, np.ascontiguousarray(mission.measurement_noise),
-                         mission.sensor_radius, mission.step_length, self.bound.maps_a,
-                         self.bound.maps_g, self.bound.maps_h, self.bound.maps_len)
+            _expand_node(
+                node,
+                n_nodes,
+                positions,
+                covariances,
+                uncertainty,
+                g,
+                levels,
+                parents,
+                controls,
+                f,
+                self.step_displacements,
+                means,
+                k,
+                horizon,
+                difference,
+                params.heuristic_weight,
+                mission.process_noise,
+                mission.time_step,
+                mission.c_per_step,
+                np.ascontiguousarray(mission.measurement_noise),
+                mission.sensor_radius,
+                mission.step_length,
+                self.bound.maps_a,
+                self.bound.maps_g,
+                self.bound.maps_h,
+                self.bound.maps_len,
+            )
             place = radix ** (horizon - 1 - level)
             for c, f_child in enumerate(f.tolist()):
                 heapq.heappush(heap, (f_child, code + (c + 1) * place, n_nodes + c))

@@ -49,8 +49,7 @@ def _schedule(value: Any) -> Any:
 
 
 NonNegativeOrInf = Annotated[float, Field(ge=0.0, allow_inf_nan=True)]
-Schedule = Annotated[tuple[NonNegativeOrInf, ...], BeforeValidator(_schedule),
-                     Field(min_length=1)]
+Schedule = Annotated[tuple[NonNegativeOrInf, ...], BeforeValidator(_schedule), Field(min_length=1)]
 """A tuple of non-negative numbers (``inf`` allowed, NaN refused by ``ge``); ``-o`` takes them
 comma-separated."""
 
@@ -109,8 +108,9 @@ class PrimitivePlanner(ABC):
         self._executed = 0
         self._sub_step = 0
 
-    def reset(self, mission: MissionSpec, observation: Observation,
-              rng: np.random.Generator) -> None:
+    def reset(
+        self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
+    ) -> None:
         """Start a mission (the searches are deterministic; ``rng`` is unused)."""
         self.mission = mission
         self.step_displacements = mission.step_length * step_directions(self.settings.n_headings)
@@ -130,25 +130,30 @@ class PrimitivePlanner(ABC):
 
     def episode_info(self) -> dict:
         """Planning effort over the mission so far (stored with the episode record)."""
-        info: dict[str, Any] = {"settings": self.settings.as_json(),
-                                "decisions": len(self.decisions)}
+        info: dict[str, Any] = {
+            "settings": self.settings.as_json(),
+            "decisions": len(self.decisions),
+        }
         if self.decisions:
             times = [d.planning_time_s for d in self.decisions]
-            info |= {"mean_decision_s": float(np.mean(times)),
-                     "max_decision_s": float(np.max(times)),
-                     "mean_nodes_expanded": float(np.mean([d.nodes_expanded
-                                                           for d in self.decisions])),
-                     "capped_fraction": float(np.mean([d.capped for d in self.decisions]))}
+            info |= {
+                "mean_decision_s": float(np.mean(times)),
+                "max_decision_s": float(np.max(times)),
+                "mean_nodes_expanded": float(np.mean([d.nodes_expanded for d in self.decisions])),
+                "capped_fraction": float(np.mean([d.capped for d in self.decisions])),
+            }
         return info
 
     def act(self, observation: Observation) -> np.ndarray:
         """Waypoint ``(2,)`` in m: one full-speed step along the current primitive."""
-        if self._sub_step == 0 and (self._executed >= min(len(self._plan),
-                                                           self.settings.replan_period)):
+        if self._sub_step == 0 and (
+            self._executed >= min(len(self._plan), self.settings.replan_period)
+        ):
             start = time.perf_counter()
             plan, stats = self.search(observation)
-            stats = dataclasses.replace(stats, step=observation.step,
-                                        planning_time_s=time.perf_counter() - start)
+            stats = dataclasses.replace(
+                stats, step=observation.step, planning_time_s=time.perf_counter() - start
+            )
             self.decisions.append(stats)
             self._plan = np.asarray(plan, dtype=np.int64)
             self._executed = 0

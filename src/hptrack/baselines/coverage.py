@@ -38,12 +38,15 @@ class CoveragePlanner:
     def __init__(self, settings: CoverageSettings) -> None:
         self.settings = settings
 
-    def reset(self, mission: MissionSpec, observation: Observation,
-              rng: np.random.Generator) -> None:
+    def reset(
+        self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
+    ) -> None:
         target = self.settings.target
         if target not in mission.target_ids:
-            raise InputError(f"planner 'coverage': option target {target!r} is not a target of "
-                             f"the scenario; targets are {list(mission.target_ids)}")
+            raise InputError(
+                f"planner 'coverage': option target {target!r} is not a target of "
+                f"the scenario; targets are {list(mission.target_ids)}"
+            )
         self._index = mission.target_ids.index(target)
         self._mission = mission
         self._subtask: CoverageSubtask | None = None

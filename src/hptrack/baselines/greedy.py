@@ -29,8 +29,9 @@ class GreedyPlanner:
     def __init__(self, settings: NoSettings | None = None) -> None:
         self.settings = settings or NoSettings()
 
-    def reset(self, mission: MissionSpec, observation: Observation,
-              rng: np.random.Generator) -> None:
+    def reset(
+        self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
+    ) -> None:
         self._mission = mission
         self._target: int | None = None
         self._given_up = np.zeros(mission.n_targets, dtype=bool)
@@ -49,8 +50,9 @@ class GreedyPlanner:
             candidates = reach <= obs.remaining_budget
         if not candidates.any():
             return int(np.argmin(reach))
-        predicted = self._mission.motion.predict(obs.means, obs.covariances,
-                                                 self._mission.process_noise, reach)[1]
+        predicted = self._mission.motion.predict(
+            obs.means, obs.covariances, self._mission.process_noise, reach
+        )[1]
         score = np.where(candidates, position_logdet(predicted), -np.inf)
         return int(np.argmax(score))
 

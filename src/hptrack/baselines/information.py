@@ -60,9 +60,21 @@ def mean_positions(means: np.ndarray, time_step: float, n_sub_steps: int) -> np.
 
 
 @numba.njit(cache=True)
-def rollout_children(positions, covariances, children, step_displacements, level_means,
-                     process_noise, tau, c_per_step, noise, radius, store,
-                     out_covariances, out_uncertainty):
+def rollout_children(
+    positions,
+    covariances,
+    children,
+    step_displacements,
+    level_means,
+    process_noise,
+    tau,
+    c_per_step,
+    noise,
+    radius,
+    store,
+    out_covariances,
+    out_uncertainty,
+):
     """Compiled kernel of :func:`expand`: children ``a C + c`` listed in ``children``.
 
     Writes each child's total ``log det Sigma^xy`` to ``out_uncertainty`` and, if ``store``, its
@@ -74,8 +86,7 @@ def rollout_children(positions, covariances, children, step_displacements, level
     radius2 = radius * radius
     reach = 0.0
     for c in range(n_controls):
-        reach = max(reach, n_steps * math.hypot(step_displacements[c, 0],
-                                                step_displacements[c, 1]))
+        reach = max(reach, n_steps * math.hypot(step_displacements[c, 0], step_displacements[c, 1]))
     p = np.empty((4, 4))
     # A target out of reach of every control of a node is only predicted; the prediction is
     # shared by that node's children, which are consecutive in ``children``.
@@ -92,15 +103,17 @@ def rollout_children(positions, covariances, children, step_displacements, level
         total = 0.0
         for i in range(n_targets):
             if far_node[i] != a:
-                drift = math.hypot(level_means[n_steps, i, 0] - level_means[0, i, 0],
-                                   level_means[n_steps, i, 1] - level_means[0, i, 1])
+                drift = math.hypot(
+                    level_means[n_steps, i, 0] - level_means[0, i, 0],
+                    level_means[n_steps, i, 1] - level_means[0, i, 1],
+                )
                 gap0 = math.hypot(level_means[0, i, 0] - px, level_means[0, i, 1] - py)
                 if gap0 > reach + drift + radius:
                     far_cov[i] = covariances[a, i]
-                    predict_covariance(far_cov[i], process_noise[i], n_steps, tau, c_per_step,
-                                       far_cov[i])
-                    far_logdet[i] = logdet_xy(far_cov[i, 0, 0], far_cov[i, 0, 1],
-                                              far_cov[i, 1, 1])
+                    predict_covariance(
+                        far_cov[i], process_noise[i], n_steps, tau, c_per_step, far_cov[i]
+                    )
+                    far_logdet[i] = logdet_xy(far_cov[i, 0, 0], far_cov[i, 0, 1], far_cov[i, 1, 1])
                     far_node[i] = a
             if far_node[i] == a:
                 total += far_logdet[i]
@@ -125,33 +138,51 @@ def rollout_children(positions, covariances, children, step_displacements, level
         out_uncertainty[j] = total
 
 
-def _run_rollout(mission: MissionSpec, step_displacements: np.ndarray, level_means: np.ndarray,
-                 positions: np.ndarray, covariances: np.ndarray, children: np.ndarray,
-                 store: bool) -> tuple[np.ndarray, np.ndarray]:
+def _run_rollout(
+    mission: MissionSpec,
+    step_displacements: np.ndarray,
+    level_means: np.ndarray,
+    positions: np.ndarray,
+    covariances: np.ndarray,
+    children: np.ndarray,
+    store: bool,
+) -> tuple[np.ndarray, np.ndarray]:
     n_targets = covariances.shape[1]
     out_covariances = np.empty((children.shape[0] if store else 0, n_targets, 4, 4))
     out_uncertainty = np.empty(children.shape[0])
-    rollout_children(np.ascontiguousarray(positions, dtype=float),
-                     np.ascontiguousarray(covariances, dtype=float),
-                     np.asarray(children, dtype=np.int64),
-                     np.ascontiguousarray(step_displacements, dtype=float),
-                     np.ascontiguousarray(level_means, dtype=float), mission.process_noise,
-                     mission.time_step, mission.c_per_step,
-                     np.ascontiguousarray(mission.measurement_noise), mission.sensor_radius,
-                     store, out_covariances, out_uncertainty)
+    rollout_children(
+        np.ascontiguousarray(positions, dtype=float),
+        np.ascontiguousarray(covariances, dtype=float),
+        np.asarray(children, dtype=np.int64),
+        np.ascontiguousarray(step_displacements, dtype=float),
+        np.ascontiguousarray(level_means, dtype=float),
+        mission.process_noise,
+        mission.time_step,
+        mission.c_per_step,
+        np.ascontiguousarray(mission.measurement_noise),
+        mission.sensor_radius,
+        store,
+        out_covariances,
+        out_uncertainty,
+    )
     return out_covariances, out_uncertainty
 
 
-def child_positions(step_displacements: np.ndarray, n_steps: int, positions: np.ndarray
-                    ) -> np.ndarray:
+def child_positions(
+    step_displacements: np.ndarray, n_steps: int, positions: np.ndarray
+) -> np.ndarray:
     """``(N C, 2)`` agent positions after each control of ``n_steps`` sub-steps from each node;
     child ``a C + c`` is node ``a`` after control ``c``."""
     return (positions[:, None, :] + n_steps * step_displacements[None, :, :]).reshape(-1, 2)
 
 
-def expand(mission: MissionSpec, step_displacements: np.ndarray, level_means: np.ndarray,
-           positions: np.ndarray, covariances: np.ndarray
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def expand(
+    mission: MissionSpec,
+    step_displacements: np.ndarray,
+    level_means: np.ndarray,
+    positions: np.ndarray,
+    covariances: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Expand every node with every control: one motion primitive of ``K`` sub-steps each.
 
     Args:
@@ -168,35 +199,54 @@ def expand(mission: MissionSpec, step_displacements: np.ndarray, level_means: np
         node ``a`` after control ``c``.
     """
     children = np.arange(positions.shape[0] * step_displacements.shape[0])
-    covs, uncertainty = _run_rollout(mission, step_displacements, level_means, positions,
-                                     covariances, children, store=True)
+    covs, uncertainty = _run_rollout(
+        mission, step_displacements, level_means, positions, covariances, children, store=True
+    )
     n_steps = level_means.shape[0] - 1
     return child_positions(step_displacements, n_steps, positions), covs, uncertainty
 
 
-def expand_uncertainty(mission: MissionSpec, step_displacements: np.ndarray,
-                       level_means: np.ndarray, positions: np.ndarray, covariances: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
+def expand_uncertainty(
+    mission: MissionSpec,
+    step_displacements: np.ndarray,
+    level_means: np.ndarray,
+    positions: np.ndarray,
+    covariances: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """:func:`expand` without the child covariances: ``(N C, 2)`` positions, ``(N C,)``
     total uncertainty (for searches that prune before storing covariances)."""
     children = np.arange(positions.shape[0] * step_displacements.shape[0])
-    _, uncertainty = _run_rollout(mission, step_displacements, level_means, positions,
-                                  covariances, children, store=False)
+    _, uncertainty = _run_rollout(
+        mission, step_displacements, level_means, positions, covariances, children, store=False
+    )
     n_steps = level_means.shape[0] - 1
     return child_positions(step_displacements, n_steps, positions), uncertainty
 
 
-def child_covariances(mission: MissionSpec, step_displacements: np.ndarray,
-                      level_means: np.ndarray, positions: np.ndarray, covariances: np.ndarray,
-                      children: np.ndarray) -> np.ndarray:
+def child_covariances(
+    mission: MissionSpec,
+    step_displacements: np.ndarray,
+    level_means: np.ndarray,
+    positions: np.ndarray,
+    covariances: np.ndarray,
+    children: np.ndarray,
+) -> np.ndarray:
     """Covariances ``(M, n, 4, 4)`` of the children ``a C + c`` listed in ``children``."""
-    covs, _ = _run_rollout(mission, step_displacements, level_means, positions, covariances,
-                           np.asarray(children, dtype=np.int64), store=True)
+    covs, _ = _run_rollout(
+        mission,
+        step_displacements,
+        level_means,
+        positions,
+        covariances,
+        np.asarray(children, dtype=np.int64),
+        store=True,
+    )
     return covs
 
 
-def step_costs(parent_uncertainty: np.ndarray, child_uncertainty: np.ndarray,
-               kind: CostKind) -> np.ndarray:
+def step_costs(
+    parent_uncertainty: np.ndarray, child_uncertainty: np.ndarray, kind: CostKind
+) -> np.ndarray:
     """Cost of one step from the total uncertainty ``sum_i log det Sigma_i^xy`` before and after.
 
     ``"difference"`` (seed paper, Sec. V-B): ``after - before``; ``"sum"`` (original papers):
@@ -210,9 +260,24 @@ def step_costs(parent_uncertainty: np.ndarray, child_uncertainty: np.ndarray,
 
 
 @numba.njit(cache=True)
-def bound_children(positions, covariances, start, boundaries, all_means, process_noise, tau,
-                   c_per_step, noise, step_length, radius, maps_a, maps_g, maps_h, maps_len,
-                   out):
+def bound_children(
+    positions,
+    covariances,
+    start,
+    boundaries,
+    all_means,
+    process_noise,
+    tau,
+    c_per_step,
+    noise,
+    step_length,
+    radius,
+    maps_a,
+    maps_g,
+    maps_h,
+    maps_len,
+    out,
+):
     """Compiled kernel of :meth:`RiccatiBound.lower_bounds`; adds the bounds to ``out``."""
     n_nodes, n_targets = covariances.shape[:2]
     n_total = all_means.shape[0] - 1
@@ -237,8 +302,17 @@ def bound_children(positions, covariances, start, boundaries, all_means, process
                     out[j, b] += logdet_xy(p[0, 0], p[0, 1], p[1, 1])
                 else:
                     predict_covariance(p, process_noise[i], first, tau, c_per_step, p)
-                    measured_covariance(maps_a[i], maps_g[i], maps_h[i], maps_len[i],
-                                        length - first, p, noise, measured, work)
+                    measured_covariance(
+                        maps_a[i],
+                        maps_g[i],
+                        maps_h[i],
+                        maps_len[i],
+                        length - first,
+                        p,
+                        noise,
+                        measured,
+                        work,
+                    )
                     out[j, b] += logdet_xy(measured[0, 0], measured[0, 1], measured[1, 1])
 
 
@@ -261,14 +335,23 @@ class RiccatiBound:
     def __init__(self, mission: MissionSpec, max_sub_steps: int) -> None:
         self.mission = mission
         noise = np.ascontiguousarray(mission.measurement_noise)
-        tables = [riccati_table(float(q), mission.time_step, mission.c_per_step, noise,
-                                max(max_sub_steps, 1)) for q in mission.process_noise]
-        self.maps_a, self.maps_g, self.maps_h = (np.stack([t[k] for t in tables])
-                                                 for k in range(3))
+        tables = [
+            riccati_table(
+                float(q), mission.time_step, mission.c_per_step, noise, max(max_sub_steps, 1)
+            )
+            for q in mission.process_noise
+        ]
+        self.maps_a, self.maps_g, self.maps_h = (np.stack([t[k] for t in tables]) for k in range(3))
         self.maps_len = np.array([t[3] for t in tables], dtype=np.int64)
 
-    def lower_bounds(self, positions: np.ndarray, covariances: np.ndarray, start: int,
-                     boundaries: np.ndarray, all_means: np.ndarray) -> np.ndarray:
+    def lower_bounds(
+        self,
+        positions: np.ndarray,
+        covariances: np.ndarray,
+        start: int,
+        boundaries: np.ndarray,
+        all_means: np.ndarray,
+    ) -> np.ndarray:
         """Lower bounds ``(N, B)`` on ``sum_i log det Sigma_i^xy`` at each of ``boundaries``.
 
         Args:
@@ -280,11 +363,22 @@ class RiccatiBound:
         """
         out = np.zeros((positions.shape[0], len(boundaries)))
         m = self.mission
-        bound_children(np.ascontiguousarray(positions, dtype=float),
-                       np.ascontiguousarray(covariances, dtype=float), int(start),
-                       np.asarray(boundaries, dtype=np.int64), np.ascontiguousarray(all_means),
-                       m.process_noise, m.time_step, m.c_per_step,
-                       np.ascontiguousarray(m.measurement_noise), m.step_length,
-                       m.sensor_radius, self.maps_a, self.maps_g, self.maps_h, self.maps_len,
-                       out)
+        bound_children(
+            np.ascontiguousarray(positions, dtype=float),
+            np.ascontiguousarray(covariances, dtype=float),
+            int(start),
+            np.asarray(boundaries, dtype=np.int64),
+            np.ascontiguousarray(all_means),
+            m.process_noise,
+            m.time_step,
+            m.c_per_step,
+            np.ascontiguousarray(m.measurement_noise),
+            m.step_length,
+            m.sensor_radius,
+            self.maps_a,
+            self.maps_g,
+            self.maps_h,
+            self.maps_len,
+            out,
+        )
         return out

@@ -16,8 +16,9 @@ class StationaryPlanner:
     def __init__(self, settings: NoSettings | None = None) -> None:
         self.settings = settings or NoSettings()
 
-    def reset(self, mission: MissionSpec, observation: Observation,
-              rng: np.random.Generator) -> None:
+    def reset(
+        self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
+    ) -> None:
         self._home = observation.agent_position.copy()
 
     def act(self, observation: Observation) -> np.ndarray:

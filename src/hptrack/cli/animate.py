@@ -26,8 +26,10 @@ def load_record(path: Path) -> EpisodeRecord:
         return EpisodeRecord.load(path)
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as err:
         reason = " ".join(str(err).split()) or type(err).__name__
-        raise InputError(f"RECORD {str(path)!r} is not an hptrack episode record (.npz, "
-                         f"written by simulate --record): {reason}") from None
+        raise InputError(
+            f"RECORD {str(path)!r} is not an hptrack episode record (.npz, "
+            f"written by simulate --record): {reason}"
+        ) from None
 
 
 def check_animation_output(path: Path, option: str = "--output") -> None:
@@ -44,26 +46,39 @@ def write_animation(record: EpisodeRecord, path: Path, stride: int = 5, fps: int
     from hptrack.viz.animation import animate_mission
 
     path = Path(path)
-    with Progress(TextColumn("[bold]animation"), BarColumn(), MofNCompleteColumn(),
-                  TextColumn("frames"), TimeRemainingColumn(), console=console,
-                  transient=True) as progress:
+    with Progress(
+        TextColumn("[bold]animation"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("frames"),
+        TimeRemainingColumn(),
+        console=console,
+        transient=True,
+    ) as progress:
         task = progress.add_task("", total=None)
         frames = animate_mission(
-            record, path, stride=stride, fps=fps,
-            progress=lambda done, total: progress.update(task, completed=done, total=total))
-    console.print(f"animation written to {escape(str(path))} ({frames} frames, "
-                  f"{frames / fps:.1f} s at {fps} fps)", soft_wrap=True)
+            record,
+            path,
+            stride=stride,
+            fps=fps,
+            progress=lambda done, total: progress.update(task, completed=done, total=total),
+        )
+    console.print(
+        f"animation written to {escape(str(path))} ({frames} frames, "
+        f"{frames / fps:.1f} s at {fps} fps)",
+        soft_wrap=True,
+    )
     return frames
 
 
 def animate(
-    record_path: Annotated[Path, typer.Argument(metavar="RECORD",
-                                                help="Episode record (.npz, simulate --record).")],
-    output: Annotated[Path, typer.Option("--output", "-o",
-                                         help="Animation file: .gif, or .mp4 (needs ffmpeg).")
-                      ] = Path("mission.gif"),
-    stride: Annotated[int, typer.Option(help="Steps between frames (the last step is drawn).")
-                      ] = 5,
+    record_path: Annotated[
+        Path, typer.Argument(metavar="RECORD", help="Episode record (.npz, simulate --record).")
+    ],
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="Animation file: .gif, or .mp4 (needs ffmpeg).")
+    ] = Path("mission.gif"),
+    stride: Annotated[int, typer.Option(help="Steps between frames (the last step is drawn).")] = 5,
     fps: Annotated[int, typer.Option(help="Frames per second.")] = 20,
 ) -> None:
     """Animate a recorded mission: agent, targets, 95 % belief ellipses, detections, sub-task."""

@@ -45,8 +45,11 @@ from hptrack.sim.episode import record_bytes, run_episode
 
 matplotlib.use("Agg")
 
-app = typer.Typer(help="Hierarchical planning for long-horizon multi-target tracking with one UAV.",
-                  no_args_is_help=True, add_completion=False)
+app = typer.Typer(
+    help="Hierarchical planning for long-horizon multi-target tracking with one UAV.",
+    no_args_is_help=True,
+    add_completion=False,
+)
 scenario_app = typer.Typer(help="Create and check scenario files.", no_args_is_help=True)
 app.add_typer(scenario_app, name="scenario")
 
@@ -62,9 +65,14 @@ def _version(value: bool) -> None:
 
 
 @app.callback()
-def _root(version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
-                                                help="Print the version and exit.")] = False
-          ) -> None:
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_version, is_eager=True, help="Print the version and exit."
+        ),
+    ] = False,
+) -> None:
     """Hierarchical planning for long-horizon multi-target tracking with one UAV."""
 
 
@@ -73,8 +81,9 @@ def draw_seed() -> int:
     return int(np.random.SeedSequence().generate_state(1, np.uint32)[0])
 
 
-def _load_or_random(path: Path | None, random: bool, targets: int, seed: int | None,
-                    homogeneous: bool) -> Scenario:
+def _load_or_random(
+    path: Path | None, random: bool, targets: int, seed: int | None, homogeneous: bool
+) -> Scenario:
     if (path is None) == (not random):
         raise InputError("give either a SCENARIO file or --random")
     if random:
@@ -87,33 +96,46 @@ def _load_or_random(path: Path | None, random: bool, targets: int, seed: int | N
 
 @app.command()
 def simulate(
-    scenario_path: Annotated[Path | None, typer.Argument(metavar="[SCENARIO]",
-                                                         help="Scenario YAML file.")] = None,
+    scenario_path: Annotated[
+        Path | None, typer.Argument(metavar="[SCENARIO]", help="Scenario YAML file.")
+    ] = None,
     random: Annotated[bool, typer.Option("--random", help="Use a random scenario.")] = False,
     targets: Annotated[int, typer.Option(help="Targets in a --random scenario.")] = 4,
-    homogeneous: Annotated[bool, typer.Option("--homogeneous/--heterogeneous",
-                                              help=SETTING_HELP)] = False,
+    homogeneous: Annotated[
+        bool, typer.Option("--homogeneous/--heterogeneous", help=SETTING_HELP)
+    ] = False,
     planner: Annotated[str, typer.Option(help=f"One of: {', '.join(PLANNERS)}.")] = (
-        DEFAULT_PLANNER),
-    seed: Annotated[int | None, typer.Option(
-        help="Seed (overrides the file's); with --random and no seed one is drawn and printed.")
-                    ] = None,
-    iterations: Annotated[int | None, typer.Option(help="Tree-search iterations per decision.")
-                          ] = None,
-    time_limit: Annotated[float | None, typer.Option(help="Planning seconds per decision.")
-                          ] = None,
-    option: Annotated[list[str] | None, typer.Option(
-        "--option", "-o", help="Planner option KEY=VALUE (or PLANNER.KEY=VALUE).")] = None,
-    json_path: Annotated[Path | None, typer.Option("--json", help="Write a JSON summary.")
-                         ] = None,
+        DEFAULT_PLANNER
+    ),
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            help="Seed (overrides the file's); with --random and no seed one is drawn and printed."
+        ),
+    ] = None,
+    iterations: Annotated[
+        int | None, typer.Option(help="Tree-search iterations per decision.")
+    ] = None,
+    time_limit: Annotated[float | None, typer.Option(help="Planning seconds per decision.")] = None,
+    option: Annotated[
+        list[str] | None,
+        typer.Option("--option", "-o", help="Planner option KEY=VALUE (or PLANNER.KEY=VALUE)."),
+    ] = None,
+    json_path: Annotated[Path | None, typer.Option("--json", help="Write a JSON summary.")] = None,
     plot: Annotated[Path | None, typer.Option(help="Write the mission figure (PNG).")] = None,
-    record_path: Annotated[Path | None, typer.Option("--record",
-                                                     help="Save the episode (.npz).")] = None,
-    belief_stride: Annotated[int, typer.Option(
-        help="Store the beliefs every this many steps (the last is always stored).")] = 1,
-    animate_path: Annotated[Path | None, typer.Option(
-        "--animate", help="Also write an animation of the mission (.gif, or .mp4 with ffmpeg).")
-                            ] = None,
+    record_path: Annotated[
+        Path | None, typer.Option("--record", help="Save the episode (.npz).")
+    ] = None,
+    belief_stride: Annotated[
+        int,
+        typer.Option(help="Store the beliefs every this many steps (the last is always stored)."),
+    ] = 1,
+    animate_path: Annotated[
+        Path | None,
+        typer.Option(
+            "--animate", help="Also write an animation of the mission (.gif, or .mp4 with ffmpeg)."
+        ),
+    ] = None,
 ) -> None:
     """Plan and simulate one mission; print the per-target summary and U."""
     check_seed(seed)
@@ -133,24 +155,39 @@ def simulate(
     need = record_bytes(len(scenario.targets), scenario.n_steps, belief_stride)
     if need > MAX_RECORD_BYTES:
         stride = math.ceil(belief_stride * need / MAX_RECORD_BYTES)
-        raise InputError(f"the mission of {scenario.n_steps:,} steps needs about "
-                         f"{need / 2**30:.1f} GiB for its record; use --belief-stride {stride} "
-                         f"or more, or a shorter budget (at most {MAX_STEPS:,} steps)")
+        raise InputError(
+            f"the mission of {scenario.n_steps:,} steps needs about "
+            f"{need / 2**30:.1f} GiB for its record; use --belief-stride {stride} "
+            f"or more, or a shorter budget (at most {MAX_STEPS:,} steps)"
+        )
     if drawn:
         console.print(f"seed {seed} (drawn; pass --seed {seed} to repeat this mission)")
     agent = make_planner(planner, settings)
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  TextColumn("steps"), TimeElapsedColumn(), TextColumn("left"),
-                  TimeRemainingColumn(), console=console, transient=True) as progress:
+    with Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("steps"),
+        TimeElapsedColumn(),
+        TextColumn("left"),
+        TimeRemainingColumn(),
+        console=console,
+        transient=True,
+    ) as progress:
         task = progress.add_task(escape(f"{planner} mission"), total=scenario.n_steps)
-        record = run_episode(scenario, agent, belief_stride=belief_stride,
-                             on_step=lambda k, n: progress.update(task, completed=k))
+        record = run_episode(
+            scenario,
+            agent,
+            belief_stride=belief_stride,
+            on_step=lambda k, n: progress.update(task, completed=k),
+        )
     if not math.isfinite(record.uncertainty):
         raise RuntimeError(f"the mission ended with a non-finite U ({record.uncertainty})")
     _print_summary(record)
     if json_path:
-        write_json(json_path, {**record.summary(), "scenario_seed": scenario.seed,
-                               "seed_drawn": drawn})
+        write_json(
+            json_path, {**record.summary(), "scenario_seed": scenario.seed, "seed_drawn": drawn}
+        )
     if record_path:
         record.save(record_path)
     if plot:
@@ -165,13 +202,15 @@ def simulate(
 
 
 def _print_summary(record) -> None:
-    table = Table(title=escape(f"{record.planner} mission, seed {record.seed}, "
-                               f"{record.times[-1]:.0f} s"))
+    table = Table(
+        title=escape(f"{record.planner} mission, seed {record.seed}, {record.times[-1]:.0f} s")
+    )
     table.add_column("target")
     table.add_column("final log det Σxy", justify="right")
     table.add_column("detections (steps)", justify="right")
-    for tid, logdet, count in zip(record.target_ids, record.per_target_logdet,
-                                  record.detection_counts(), strict=True):
+    for tid, logdet, count in zip(
+        record.target_ids, record.per_target_logdet, record.detection_counts(), strict=True
+    ):
         table.add_row(escape(tid), f"{logdet:.3f}", str(int(count)))
     table.add_section()
     table.add_row("U", f"{record.uncertainty:.3f}", str(int(record.detections.sum())))
@@ -182,10 +221,12 @@ def _print_summary(record) -> None:
 def scenario_random(
     targets: Annotated[int, typer.Option(help="Number of targets.")],
     seed: Annotated[int, typer.Option(help="Seed; fixes every drawn value.")] = 0,
-    homogeneous: Annotated[bool, typer.Option("--homogeneous/--heterogeneous",
-                                              help=SETTING_HELP)] = False,
+    homogeneous: Annotated[
+        bool, typer.Option("--homogeneous/--heterogeneous", help=SETTING_HELP)
+    ] = False,
     output: Annotated[Path, typer.Option("--output", "-o", help="YAML file to write.")] = Path(
-        "scenario.yaml"),
+        "scenario.yaml"
+    ),
 ) -> None:
     """Write the paper's random scenario (Sec. V) to a YAML file."""
     check_seed(seed)
@@ -200,16 +241,19 @@ def scenario_random(
 def scenario_check(path: Annotated[Path, typer.Argument(help="Scenario YAML file.")]) -> None:
     """Validate a scenario file."""
     scenario = load_scenario(path)
-    console.print(f"{escape(str(path))}: valid, {len(scenario.targets)} targets, "
-                  f"{scenario.budget:g} s budget")
+    console.print(
+        f"{escape(str(path))}: valid, {len(scenario.targets)} targets, {scenario.budget:g} s budget"
+    )
 
 
 @app.command("planners")
 def list_planners() -> None:
     """List the registered planners."""
     for name, entry in PLANNERS.items():
-        console.print(f"{name}: {entry.summary}; options: "
-                      f"{', '.join(entry.settings_type.model_fields) or 'none'}")
+        console.print(
+            f"{name}: {entry.summary}; options: "
+            f"{', '.join(entry.settings_type.model_fields) or 'none'}"
+        )
 
 
 def _register_commands() -> None:
@@ -239,14 +283,13 @@ def _given(err: Exception, argv: list[str]) -> str:
             if token == opt and i + 1 < len(argv):
                 return f" (got {argv[i + 1]!r})"
             if token.startswith(opt + "="):
-                return f" (got {token[len(opt) + 1:]!r})"
+                return f" (got {token[len(opt) + 1 :]!r})"
     return ""
 
 
 def _refuse(message: str) -> None:
     message = " ".join(message.split())
-    error_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False,
-                        soft_wrap=True)
+    error_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
     sys.exit(2)
 
 
@@ -268,8 +311,11 @@ def main(argv: list[str] | None = None) -> None:
         if _is(err, "UsageError"):
             _refuse(err.format_message() + _given(err, sys.argv[1:] if argv is None else argv))
         traceback.print_exc()
-        error_console.print("[bold red]This is a bug in hptrack, not a problem with your input: "
-                            "please report it with the traceback above.[/]", highlight=False)
+        error_console.print(
+            "[bold red]This is a bug in hptrack, not a problem with your input: "
+            "please report it with the traceback above.[/]",
+            highlight=False,
+        )
         sys.exit(1)
     sys.exit(code if isinstance(code, int) else 0)
 

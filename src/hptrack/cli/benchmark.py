@@ -35,45 +35,69 @@ def _int_list(text: str, option: str) -> tuple[int, ...]:
 
 
 def benchmark(
-    targets: Annotated[str, typer.Option(help="Numbers of targets, comma-separated.")
-                       ] = "2,3,4,5,6",
-    scenarios: Annotated[int, typer.Option(min=1, help="Scenarios per number of targets.")
-                         ] = 100,
-    planners: Annotated[str, typer.Option(help="Planner names, comma-separated.")
-                        ] = "mcts,greedy,stationary",
-    homogeneous: Annotated[bool, typer.Option("--homogeneous/--heterogeneous",
-                                              help=SETTING_HELP)] = False,
+    targets: Annotated[
+        str, typer.Option(help="Numbers of targets, comma-separated.")
+    ] = "2,3,4,5,6",
+    scenarios: Annotated[int, typer.Option(min=1, help="Scenarios per number of targets.")] = 100,
+    planners: Annotated[
+        str, typer.Option(help="Planner names, comma-separated.")
+    ] = "mcts,greedy,stationary",
+    homogeneous: Annotated[
+        bool, typer.Option("--homogeneous/--heterogeneous", help=SETTING_HELP)
+    ] = False,
     first_seed: Annotated[int, typer.Option(help="First scenario seed.")] = 0,
-    process_noise_form: Annotated[ProcessNoiseForm, typer.Option(
-        help="Per-step Q: 'continuous' (velocity block q tau I, the default) or 'paper_text' "
-             "(q I, as printed in the paper).")] = "continuous",
-    iterations: Annotated[int | None, typer.Option(help="Tree-search iterations per decision.")
-                          ] = None,
-    time_limit: Annotated[float | None, typer.Option(help="Planning seconds per decision.")
-                          ] = None,
-    option: Annotated[list[str] | None, typer.Option(
-        "--option", "-o", help="Planner option PLANNER.KEY=VALUE (KEY=VALUE with one planner).")
-                      ] = None,
-    workers: Annotated[int | None, typer.Option(
-        help="Episodes in flight: worker processes (default 1), or with Dask tasks submitted at "
-             "once (default: the cluster's worker threads).")] = None,
-    scheduler: Annotated[str | None, typer.Option(
-        help="Run episodes on the Dask scheduler at this address (e.g. tcp://host:8786).")
-                         ] = None,
-    dask_local: Annotated[int | None, typer.Option(
-        help="Run episodes on a local Dask cluster of this many worker processes.")] = None,
-    scheduler_timeout: Annotated[float, typer.Option(
-        help="Seconds to wait for the --scheduler to answer.")] = 10.0,
-    db: Annotated[Path, typer.Option(help="SQLite results file (resumable).")
-                  ] = Path("results/benchmark.db"),
-    out: Annotated[Path, typer.Option(help="Folder for tables and figures.")
-                   ] = Path("results/benchmark"),
-    json_path: Annotated[Path | None, typer.Option("--json", help="Write a JSON summary.")
-                         ] = None,
-    figure_planners: Annotated[str | None, typer.Option(
-        help="Planners drawn side by side on the first scenario (default: all).")] = None,
-    figure_targets: Annotated[int | None, typer.Option(
-        help="Number of targets of the figure's scenario (default: the largest).")] = None,
+    process_noise_form: Annotated[
+        ProcessNoiseForm,
+        typer.Option(
+            help="Per-step Q: 'continuous' (velocity block q tau I, the default) or 'paper_text' "
+            "(q I, as printed in the paper)."
+        ),
+    ] = "continuous",
+    iterations: Annotated[
+        int | None, typer.Option(help="Tree-search iterations per decision.")
+    ] = None,
+    time_limit: Annotated[float | None, typer.Option(help="Planning seconds per decision.")] = None,
+    option: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--option", "-o", help="Planner option PLANNER.KEY=VALUE (KEY=VALUE with one planner)."
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            help="Episodes in flight: worker processes (default 1), or with Dask tasks submitted "
+            "at once (default: the cluster's worker threads)."
+        ),
+    ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help="Run episodes on the Dask scheduler at this address (e.g. tcp://host:8786)."
+        ),
+    ] = None,
+    dask_local: Annotated[
+        int | None,
+        typer.Option(help="Run episodes on a local Dask cluster of this many worker processes."),
+    ] = None,
+    scheduler_timeout: Annotated[
+        float, typer.Option(help="Seconds to wait for the --scheduler to answer.")
+    ] = 10.0,
+    db: Annotated[Path, typer.Option(help="SQLite results file (resumable).")] = Path(
+        "results/benchmark.db"
+    ),
+    out: Annotated[Path, typer.Option(help="Folder for tables and figures.")] = Path(
+        "results/benchmark"
+    ),
+    json_path: Annotated[Path | None, typer.Option("--json", help="Write a JSON summary.")] = None,
+    figure_planners: Annotated[
+        str | None,
+        typer.Option(help="Planners drawn side by side on the first scenario (default: all)."),
+    ] = None,
+    figure_targets: Annotated[
+        int | None,
+        typer.Option(help="Number of targets of the figure's scenario (default: the largest)."),
+    ] = None,
 ) -> None:
     """Run the multi-target benchmark (paper Tables II-III); results are stored as they finish."""
     from hptrack.experiments.benchmark import BenchmarkConfig, run_benchmark, summarise
@@ -106,9 +130,15 @@ def benchmark(
         raise InputError(f"--figure-targets {figure_targets} is not among --targets {targets}")
     check_output_dir(out, "--out")
     check_output_path(json_path, "--json")
-    config = BenchmarkConfig(planners=names, settings=settings, target_counts=counts,
-                             scenarios=scenarios, homogeneous=homogeneous, first_seed=first_seed,
-                             process_noise_form=process_noise_form)
+    config = BenchmarkConfig(
+        planners=names,
+        settings=settings,
+        target_counts=counts,
+        scenarios=scenarios,
+        homogeneous=homogeneous,
+        first_seed=first_seed,
+        process_noise_form=process_noise_form,
+    )
     with ExitStack() as stack:
         store = ResultStore(db)
         stack.callback(store.close)
@@ -118,35 +148,51 @@ def benchmark(
 
             pool = stack.enter_context(dask_executor(scheduler, dask_local, scheduler_timeout))
             if workers is None and pool.threads == 0:
-                raise InputError(f"--scheduler {scheduler}: the cluster has no workers yet; "
-                                 "give --workers N (episodes in flight)")
+                raise InputError(
+                    f"--scheduler {scheduler}: the cluster has no workers yet; "
+                    "give --workers N (episodes in flight)"
+                )
             executor, in_flight = pool.executor, workers or pool.threads
-            console.print(f"Dask scheduler {escape(pool.address)}: {pool.threads} worker "
-                          f"threads, {in_flight} episodes in flight")
-        with Progress(TextColumn("[bold]benchmark"), BarColumn(), MofNCompleteColumn(),
-                      TimeElapsedColumn(), TextColumn("{task.description}"),
-                      console=console) as progress:
+            console.print(
+                f"Dask scheduler {escape(pool.address)}: {pool.threads} worker "
+                f"threads, {in_flight} episodes in flight"
+            )
+        with Progress(
+            TextColumn("[bold]benchmark"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("{task.description}"),
+            console=console,
+        ) as progress:
             task = progress.add_task("", total=None)
 
             def on_done(row, finished, total):
-                progress.update(task, completed=finished, total=total,
-                                description=f"{row.key.planner} n={row.key.n_targets} "
-                                            f"seed={row.key.seed}: U={row.uncertainty:.2f}")
+                progress.update(
+                    task,
+                    completed=finished,
+                    total=total,
+                    description=f"{row.key.planner} n={row.key.n_targets} "
+                    f"seed={row.key.seed}: U={row.uncertainty:.2f}",
+                )
 
-            ran = run_benchmark(config, store, workers=in_flight, on_done=on_done,
-                                executor=executor)
+            ran = run_benchmark(
+                config, store, workers=in_flight, on_done=on_done, executor=executor
+            )
         keys = set(config.keys())
         rows = [r for r in store.rows() if r.key in keys]
     console.print(f"{ran} episodes run now, {len(rows)} of {len(keys)} in the table ({db})")
     _write_report(config, rows, out, figure_planners, figure_targets)
     if json_path:
         summary = summarise(rows)
-        write_json(json_path, {p: {str(n): c for n, c in by_n.items()}
-                               for p, by_n in summary.items()})
+        write_json(
+            json_path, {p: {str(n): c for n, c in by_n.items()} for p, by_n in summary.items()}
+        )
 
 
-def _write_report(config, rows, out: Path, figure_planners: str | None,
-                  figure_targets: int | None) -> None:
+def _write_report(
+    config, rows, out: Path, figure_planners: str | None, figure_targets: int | None
+) -> None:
     from matplotlib.figure import Figure
     from rich.markdown import Markdown
 
@@ -157,13 +203,17 @@ def _write_report(config, rows, out: Path, figure_planners: str | None,
     from hptrack.viz.benchmark import plot_trajectories, plot_uncertainty_boxes
 
     out.mkdir(parents=True, exist_ok=True)
-    paper = (("ARVI (paper)", "A* with heuristic (paper)", "hierarchical, homogeneous (paper)")
-             if config.homogeneous else
-             ("ADFQ (paper)", "hierarchical, heterogeneous (paper)"))
+    paper = (
+        ("ARVI (paper)", "A* with heuristic (paper)", "hierarchical, homogeneous (paper)")
+        if config.homogeneous
+        else ("ADFQ (paper)", "hierarchical, heterogeneous (paper)")
+    )
     efforts = "; ".join(f"{p}: {config.settings[p].effort_label()}" for p in config.planners)
-    text = (f"Setting: {config.setting}; planning effort: {efforts}; "
-            f"{config.scenarios} scenarios per n from seed {config.first_seed}.\n\n"
-            + markdown_tables(rows, paper))
+    text = (
+        f"Setting: {config.setting}; planning effort: {efforts}; "
+        f"{config.scenarios} scenarios per n from seed {config.first_seed}.\n\n"
+        + markdown_tables(rows, paper)
+    )
     (out / "table.md").write_text(text)
     write_csv(rows, out / "episodes.csv")
     console.print(Markdown(text))
@@ -174,17 +224,27 @@ def _write_report(config, rows, out: Path, figure_planners: str | None,
             plot_uncertainty_boxes(fig.add_subplot(1, len(counts), i + 1), rows, n)
         fig.tight_layout()
         fig.savefig(out / "uncertainty_boxes.png", dpi=120)
-    names = ([p.strip() for p in figure_planners.split(",")] if figure_planners
-             else list(config.planners))
+    names = (
+        [p.strip() for p in figure_planners.split(",")]
+        if figure_planners
+        else list(config.planners)
+    )
     n_figure = figure_targets or max(config.target_counts)
     records = []
     for name in names:
-        key = EpisodeKey(name, n_figure, config.first_seed, config.setting,
-                         config.settings[name].canonical())
+        key = EpisodeKey(
+            name, n_figure, config.first_seed, config.setting, config.settings[name].canonical()
+        )
         records.append(run_episode(scenario_for(key), planner_for(key)))
     fig = Figure(figsize=(6.0 * len(names) + 1.0, 6.5))
-    plot_trajectories(fig, records, [f"{r.planner}, n = {n_figure}, seed {config.first_seed}: "
-                                     f"U = {r.uncertainty:.2f}" for r in records])
+    plot_trajectories(
+        fig,
+        records,
+        [
+            f"{r.planner}, n = {n_figure}, seed {config.first_seed}: U = {r.uncertainty:.2f}"
+            for r in records
+        ],
+    )
     fig.savefig(out / "trajectories.png", dpi=110)
     console.print(f"tables and figures written to {out}")
 

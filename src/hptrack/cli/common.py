@@ -22,8 +22,10 @@ from hptrack.settings import PlannerSettings
 console = Console()
 error_console = Console(stderr=True)
 
-SETTING_HELP = ("Shared q and prior for all targets (the paper's ARVI/A* setting) or drawn per "
-                "target; default heterogeneous.")
+SETTING_HELP = (
+    "Shared q and prior for all targets (the paper's ARVI/A* setting) or drawn per "
+    "target; default heterogeneous."
+)
 
 
 def check_seed(seed: int | None, option: str = "--seed") -> None:
@@ -65,11 +67,15 @@ def planner_options(pairs: list[str] | None, planners: tuple[str, ...]) -> dict[
         prefix, dot, name = key.partition(".")
         if dot:
             if prefix not in PLANNERS:
-                raise InputError(f"--option {pair!r}: unknown planner {prefix!r}; choose from "
-                                 f"{', '.join(sorted(PLANNERS))}")
+                raise InputError(
+                    f"--option {pair!r}: unknown planner {prefix!r}; choose from "
+                    f"{', '.join(sorted(PLANNERS))}"
+                )
             if prefix not in out:
-                raise InputError(f"--option {pair!r}: planner {prefix!r} is not running "
-                                 f"(running: {', '.join(planners)})")
+                raise InputError(
+                    f"--option {pair!r}: planner {prefix!r} is not running "
+                    f"(running: {', '.join(planners)})"
+                )
             out[prefix][name] = parse_value(value)
         elif len(planners) == 1:
             out[planners[0]][key] = parse_value(value)
@@ -79,9 +85,12 @@ def planner_options(pairs: list[str] | None, planners: tuple[str, ...]) -> dict[
     return out
 
 
-def planner_settings_for(planners: tuple[str, ...], pairs: list[str] | None,
-                         iterations: int | None, time_limit: float | None
-                         ) -> dict[str, PlannerSettings]:
+def planner_settings_for(
+    planners: tuple[str, ...],
+    pairs: list[str] | None,
+    iterations: int | None,
+    time_limit: float | None,
+) -> dict[str, PlannerSettings]:
     """Validated settings of each planner from ``-o`` options and the effort flags (which only
     set the planners that have such a notion; an explicit ``-o`` wins)."""
     if iterations is not None and iterations < 1:

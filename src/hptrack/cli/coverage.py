@@ -36,8 +36,9 @@ def _whole_steps(seconds: float, time_step: float, name: str) -> int:
         raise InputError(f"{name} must be a finite number of seconds, got {seconds}")
     steps = round(seconds / time_step)
     if seconds < 0 or abs(seconds / time_step - steps) > 1e-9:
-        raise InputError(f"{name} {seconds:g} s is not a non-negative whole number of "
-                         f"{time_step:g} s steps")
+        raise InputError(
+            f"{name} {seconds:g} s is not a non-negative whole number of {time_step:g} s steps"
+        )
     return steps
 
 
@@ -54,10 +55,11 @@ def _parse_delays(text: str) -> tuple[float, ...]:
 def coverage(
     scenario_path: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario YAML file.")],
     target: Annotated[str, typer.Option(help="Id of the target to search for.")],
-    delay: Annotated[float, typer.Option(help="Seconds the agent waits at its start first.")
-                     ] = 0.0,
-    json_path: Annotated[Path | None, typer.Option(
-        "--json", help="Write the plan: estimate, CDF per step, planned positions.")] = None,
+    delay: Annotated[float, typer.Option(help="Seconds the agent waits at its start first.")] = 0.0,
+    json_path: Annotated[
+        Path | None,
+        typer.Option("--json", help="Write the plan: estimate, CDF per step, planned positions."),
+    ] = None,
     plot: Annotated[Path | None, typer.Option(help="Write the plan figure (PNG).")] = None,
 ) -> None:
     """Plan one coverage sub-task (intercept + shifting spiral) and print its estimate."""
@@ -66,75 +68,116 @@ def coverage(
     scenario = load_scenario(scenario_path)
     mission = scenario.mission_spec()
     if target not in mission.target_ids:
-        raise InputError(f"--target {target!r} is not a target of {scenario_path}; targets are "
-                         f"{list(mission.target_ids)}")
+        raise InputError(
+            f"--target {target!r} is not a target of {scenario_path}; targets are "
+            f"{list(mission.target_ids)}"
+        )
     i = mission.target_ids.index(target)
     d = _whole_steps(delay, mission.time_step, "--delay")
     if delay >= mission.budget:
         raise InputError(f"--delay {delay:g} s leaves no budget (budget {mission.budget:g} s)")
     q = float(mission.process_noise[i])
-    means, covs = mission.motion.predict(scenario.means()[i:i + 1],
-                                         scenario.covariances()[i:i + 1], q, d * mission.time_step)
-    subtask = CoverageSubtask(np.asarray(scenario.agent.position), means[0], covs[0], q,
-                              mission, mission.budget - delay, i, d)
+    means, covs = mission.motion.predict(
+        scenario.means()[i : i + 1], scenario.covariances()[i : i + 1], q, d * mission.time_step
+    )
+    subtask = CoverageSubtask(
+        np.asarray(scenario.agent.position),
+        means[0],
+        covs[0],
+        q,
+        mission,
+        mission.budget - delay,
+        i,
+        d,
+    )
     est, sharp = subtask.estimate, subtask.sharp_estimate
     table = Table(title=escape(f"coverage of {target} after waiting {delay:g} s"))
     table.add_column("quantity")
     table.add_column("value", justify="right")
-    for name, value in (("intercept flight", f"{subtask.intercept_time:.1f} s"),
-                        ("t_cutoff (from coverage start)", f"{est.cutoff_time:.1f} s"),
-                        ("p_find", f"{est.p_find:.4f}"),
-                        ("E[T_find] (from coverage start)", f"{est.expected_time:.2f} s"),
-                        ("cut by the budget", "yes" if est.budget_limited else "no"),
-                        ("sharp p_find (flight included)", f"{sharp.p_find:.4f}"),
-                        ("sharp E[duration | find] (from departure)",
-                         f"{sharp.expected_time:.2f} s")):
+    for name, value in (
+        ("intercept flight", f"{subtask.intercept_time:.1f} s"),
+        ("t_cutoff (from coverage start)", f"{est.cutoff_time:.1f} s"),
+        ("p_find", f"{est.p_find:.4f}"),
+        ("E[T_find] (from coverage start)", f"{est.expected_time:.2f} s"),
+        ("cut by the budget", "yes" if est.budget_limited else "no"),
+        ("sharp p_find (flight included)", f"{sharp.p_find:.4f}"),
+        ("sharp E[duration | find] (from departure)", f"{sharp.expected_time:.2f} s"),
+    ):
         table.add_row(name, value)
     console.print(table)
     positions = subtask.planned_positions()
     if json_path:
-        write_json(json_path, {
-            "target": target, "delay": delay, "time_step": mission.time_step,
-            "agent_speed": mission.agent_speed,
-            "sensor_diameter": mission.sensor.sensor_diameter,
-            "process_noise_form": mission.motion.process_noise_form,
-            "belief_at_departure": {"mean": means[0].tolist(), "covariance": covs[0].tolist(),
-                                    "process_noise": q},
-            "intercept_time": subtask.intercept_time, "intercept_steps":
-                subtask.intercept.steps, "t_cutoff": est.cutoff_time,
-            "cutoff_steps": est.cutoff_steps, "p_find": est.p_find,
-            "expected_time": est.expected_time, "budget_limited": est.budget_limited,
-            "cdf": est.cdf.tolist(), "positions": positions.tolist(),
-            "sharp_p_find": sharp.p_find, "sharp_expected_time": sharp.expected_time,
-        })
+        write_json(
+            json_path,
+            {
+                "target": target,
+                "delay": delay,
+                "time_step": mission.time_step,
+                "agent_speed": mission.agent_speed,
+                "sensor_diameter": mission.sensor.sensor_diameter,
+                "process_noise_form": mission.motion.process_noise_form,
+                "belief_at_departure": {
+                    "mean": means[0].tolist(),
+                    "covariance": covs[0].tolist(),
+                    "process_noise": q,
+                },
+                "intercept_time": subtask.intercept_time,
+                "intercept_steps": subtask.intercept.steps,
+                "t_cutoff": est.cutoff_time,
+                "cutoff_steps": est.cutoff_steps,
+                "p_find": est.p_find,
+                "expected_time": est.expected_time,
+                "budget_limited": est.budget_limited,
+                "cdf": est.cdf.tolist(),
+                "positions": positions.tolist(),
+                "sharp_p_find": sharp.p_find,
+                "sharp_expected_time": sharp.expected_time,
+            },
+        )
     if plot:
         from hptrack.viz.coverage import save_plan_figure
 
         n = subtask.intercept.steps
         start_mean = subtask.intercept.start
         end_mean, end_cov = mission.motion.predict(
-            np.concatenate([start_mean, means[0, 2:]])[None], subtask.start_covariance[None],
-            q, est.cutoff_time)
+            np.concatenate([start_mean, means[0, 2:]])[None],
+            subtask.start_covariance[None],
+            q,
+            est.cutoff_time,
+        )
         plot.parent.mkdir(parents=True, exist_ok=True)
-        save_plan_figure(str(plot), positions, n, start_mean,
-                         subtask.start_covariance[:2, :2], end_mean[0, :2],
-                         end_cov[0, :2, :2], est.cdf, mission.time_step)
+        save_plan_figure(
+            str(plot),
+            positions,
+            n,
+            start_mean,
+            subtask.start_covariance[:2, :2],
+            end_mean[0, :2],
+            end_cov[0, :2, :2],
+            est.cdf,
+            mission.time_step,
+        )
         console.print(f"figure written to {plot}")
 
 
 def validate_coverage(
     cases: Annotated[int, typer.Option(help="Random single-target cases.")] = 1000,
     runs: Annotated[int, typer.Option(help="Sampled trajectories per case and delay.")] = 10000,
-    delays: Annotated[str, typer.Option(help="Departure delays t_d, s, comma-separated.")
-                      ] = "0,100,200",
+    delays: Annotated[
+        str, typer.Option(help="Departure delays t_d, s, comma-separated.")
+    ] = "0,100,200",
     seed: Annotated[int, typer.Option(help="Root seed.")] = 0,
-    out: Annotated[Path, typer.Option(help="Results folder (resumed if it holds cases.csv).")
-                   ] = Path("results/coverage-validation"),
+    out: Annotated[
+        Path, typer.Option(help="Results folder (resumed if it holds cases.csv).")
+    ] = Path("results/coverage-validation"),
     workers: Annotated[int, typer.Option(help="Worker processes.")] = 1,
-    json_path: Annotated[Path | None, typer.Option(
-        "--json", help="Write {delay: {mape_p_find, mape_expected_time}} (percent).")] = None,
-    process_noise_form: Annotated[ProcessNoiseForm, typer.Option(
-        help="Q form: continuous (default) or paper_text.")] = "continuous",
+    json_path: Annotated[
+        Path | None,
+        typer.Option("--json", help="Write {delay: {mape_p_find, mape_expected_time}} (percent)."),
+    ] = None,
+    process_noise_form: Annotated[
+        ProcessNoiseForm, typer.Option(help="Q form: continuous (default) or paper_text.")
+    ] = "continuous",
     sample_case: Annotated[int, typer.Option(help="Case drawn in the CDF figure.")] = 0,
 ) -> None:
     """Estimator-accuracy experiment (paper Sec. V-A): MAPE of P_find and E[T_find] per delay,
@@ -147,18 +190,31 @@ def validate_coverage(
         _whole_steps(delay, MissionSpec().time_step, "--delays")
     check_output_dir(out, "--out")
     check_output_path(json_path, "--json")
-    config = ValidationConfig(cases=cases, runs=runs, delays=_parse_delays(delays), seed=seed,
-                              mission=MissionSpec(process_noise_form=process_noise_form))
+    config = ValidationConfig(
+        cases=cases,
+        runs=runs,
+        delays=_parse_delays(delays),
+        seed=seed,
+        mission=MissionSpec(process_noise_form=process_noise_form),
+    )
     if not 0 <= sample_case < cases:
         raise InputError(f"--sample-case {sample_case} is not among the {cases} cases")
-    console.print(f"Q form: {process_noise_form}; {cases} cases x {len(config.delays)} delays "
-                  f"x {runs} runs; {workers} worker(s); results in {out}")
+    console.print(
+        f"Q form: {process_noise_form}; {cases} cases x {len(config.delays)} delays "
+        f"x {runs} runs; {workers} worker(s); results in {out}"
+    )
     start = time.perf_counter()
-    with Progress(TextColumn("[bold]cases"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), console=console) as progress:
+    with Progress(
+        TextColumn("[bold]cases"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+    ) as progress:
         task = progress.add_task("cases", total=cases)
-        rows = run_validation(config, out, workers,
-                              on_case=lambda done, total: progress.update(task, completed=done))
+        rows = run_validation(
+            config, out, workers, on_case=lambda done, total: progress.update(task, completed=done)
+        )
     wall = time.perf_counter() - start
     summary = summarise(rows, config.delays)
     write_reports(summary, out, wall)
@@ -167,27 +223,37 @@ def validate_coverage(
 
     _, panels = case_rows(draw_case(sample_case, seed), config, keep_times=True)
     figure = out / f"cdf-case-{sample_case}.png"
-    save_cdf_figure(panels, str(figure), title=f"case {sample_case}: estimated against "
-                                               f"simulated ({runs} runs)")
-    console.print(f"tables in {out}/mape.md, mape.csv and mape-both.json, per-case rows in "
-                  f"{out}/cases.csv, figure {figure}")
+    save_cdf_figure(
+        panels, str(figure), title=f"case {sample_case}: estimated against simulated ({runs} runs)"
+    )
+    console.print(
+        f"tables in {out}/mape.md, mape.csv and mape-both.json, per-case rows in "
+        f"{out}/cases.csv, figure {figure}"
+    )
     if json_path:
         write_json(json_path, mape_json(summary))
 
 
 def _print_table(summary: dict, wall: float) -> None:
-    table = Table(title=f"coverage estimator accuracy (MAPE, %), {wall:.0f} s",
-                  caption="E[T_find]: paper's estimator from the coverage start; sharp: "
-                          "sub-task duration from departure")
-    for name in ("t_d (s)", "cases", "P_find", "sharp", "paper", "E[T_find]", "sharp",
-                 "paper"):
+    table = Table(
+        title=f"coverage estimator accuracy (MAPE, %), {wall:.0f} s",
+        caption="E[T_find]: paper's estimator from the coverage start; sharp: "
+        "sub-task duration from departure",
+    )
+    for name in ("t_d (s)", "cases", "P_find", "sharp", "paper", "E[T_find]", "sharp", "paper"):
         table.add_column(name, justify="right")
     for delay, s in summary.items():
         paper = PAPER_MAPE.get(delay, (float("nan"), float("nan")))
-        table.add_row(delay, str(s["cases"]), f"{s['mape_p_find']:.2f}",
-                      f"{s['sharp_mape_p_find']:.2f}", f"{paper[0]:.2f}",
-                      f"{s['mape_expected_time']:.2f}", f"{s['sharp_mape_expected_time']:.2f}",
-                      f"{paper[1]:.2f}")
+        table.add_row(
+            delay,
+            str(s["cases"]),
+            f"{s['mape_p_find']:.2f}",
+            f"{s['sharp_mape_p_find']:.2f}",
+            f"{paper[0]:.2f}",
+            f"{s['mape_expected_time']:.2f}",
+            f"{s['sharp_mape_expected_time']:.2f}",
+            f"{paper[1]:.2f}",
+        )
     console.print(table)
 
 

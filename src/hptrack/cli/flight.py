@@ -76,18 +76,31 @@ def _live_view(status: dict) -> Group:
     head.add_column(style="bold")
     head.add_column()
     head.add_row("mission time", f"{status['t']:.1f} / {status['budget']:g} s")
-    head.add_row("setpoint", escape(f"{status.get('mode')}  (vehicle "
-                                    f"{status.get('flight_mode')}, "
-                                    f"{status.get('setpoint_rate_hz', 0):.1f} Hz)"))
+    head.add_row(
+        "setpoint",
+        escape(
+            f"{status.get('mode')}  (vehicle "
+            f"{status.get('flight_mode')}, "
+            f"{status.get('setpoint_rate_hz', 0):.1f} Hz)"
+        ),
+    )
     head.add_row("sub-task", escape(_subtask_text(status.get("subtask"))))
     last = status.get("last_detection")
-    head.add_row("last detection", "-" if not last else escape(
-        f"{last['target']} at {last['t']:.1f} s ({status['t'] - last['t']:.1f} s ago)"))
-    head.add_row("from home", f"{status.get('distance_from_home_m', 0):.0f} m at "
-                              f"{status.get('altitude_m', 0):.0f} m altitude")
+    head.add_row(
+        "last detection",
+        "-"
+        if not last
+        else escape(f"{last['target']} at {last['t']:.1f} s ({status['t'] - last['t']:.1f} s ago)"),
+    )
+    head.add_row(
+        "from home",
+        f"{status.get('distance_from_home_m', 0):.0f} m at "
+        f"{status.get('altitude_m', 0):.0f} m altitude",
+    )
     rejected = status.get("rejected") or {}
-    head.add_row("refused inputs", escape(", ".join(f"{k} {v}" for k, v in rejected.items())
-                                          or "none"))
+    head.add_row(
+        "refused inputs", escape(", ".join(f"{k} {v}" for k, v in rejected.items()) or "none")
+    )
     targets = Table(show_edge=False)
     targets.add_column("target")
     targets.add_column("log det Σxy", justify="right")
@@ -99,39 +112,57 @@ def _live_view(status: dict) -> Group:
 def fly(
     scenario_path: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario YAML file.")],
     connection: Annotated[str, typer.Option(help="MAVSDK connection URL of the vehicle.")] = (
-        "udpin://0.0.0.0:14540"),
-    detections: Annotated[str, typer.Option(
-        help="UDP address where detections arrive as JSON lines.")] = "udp://127.0.0.1:5005",
-    altitude: Annotated[float, typer.Option(help="Mission altitude above the local origin, m."
-                                            )] = 30.0,
-    log_path: Annotated[Path | None, typer.Option(
-        "--log", help="Mission log (JSON lines); default hptrack-flight-TIME.jsonl.")] = None,
-    max_distance: Annotated[float, typer.Option(
-        help="A setpoint farther than this from home ends the mission, m.")] = 1000.0,
+        "udpin://0.0.0.0:14540"
+    ),
+    detections: Annotated[
+        str, typer.Option(help="UDP address where detections arrive as JSON lines.")
+    ] = "udp://127.0.0.1:5005",
+    altitude: Annotated[
+        float, typer.Option(help="Mission altitude above the local origin, m.")
+    ] = 30.0,
+    log_path: Annotated[
+        Path | None,
+        typer.Option("--log", help="Mission log (JSON lines); default hptrack-flight-TIME.jsonl."),
+    ] = None,
+    max_distance: Annotated[
+        float, typer.Option(help="A setpoint farther than this from home ends the mission, m.")
+    ] = 1000.0,
     planner: Annotated[str, typer.Option(help=f"One of: {', '.join(PLANNERS)}.")] = "mcts",
-    iterations: Annotated[int | None, typer.Option(
-        help=f"Tree-search iterations per decision (default {FLY_ITERATIONS}).")] = None,
-    time_limit: Annotated[float | None, typer.Option(
-        help="Planning seconds per decision (a replay may then decide differently).")] = None,
-    option: Annotated[list[str] | None, typer.Option(
-        "--option", "-o", help="Planner option KEY=VALUE.")] = None,
-    seed: Annotated[int | None, typer.Option(help="Planner seed (default the scenario's).")
-                    ] = None,
-    takeoff: Annotated[bool, typer.Option("--takeoff/--no-takeoff",
-                                          help="Arm and take off to --altitude first.")] = False,
-    return_to_launch: Annotated[bool, typer.Option(
-        "--return-to-launch", help="End in return-to-launch instead of hold.")] = False,
+    iterations: Annotated[
+        int | None,
+        typer.Option(help=f"Tree-search iterations per decision (default {FLY_ITERATIONS})."),
+    ] = None,
+    time_limit: Annotated[
+        float | None,
+        typer.Option(help="Planning seconds per decision (a replay may then decide differently)."),
+    ] = None,
+    option: Annotated[
+        list[str] | None, typer.Option("--option", "-o", help="Planner option KEY=VALUE.")
+    ] = None,
+    seed: Annotated[int | None, typer.Option(help="Planner seed (default the scenario's).")] = None,
+    takeoff: Annotated[
+        bool, typer.Option("--takeoff/--no-takeoff", help="Arm and take off to --altitude first.")
+    ] = False,
+    return_to_launch: Annotated[
+        bool, typer.Option("--return-to-launch", help="End in return-to-launch instead of hold.")
+    ] = False,
     rate: Annotated[float, typer.Option(help="Offboard setpoints per second.")] = 20.0,
     deadline: Annotated[float, typer.Option(help="Planner deadline per decision, s.")] = 1.0,
-    stale_after: Annotated[float, typer.Option(
-        help="Hold when odometry is older than this, s.")] = 1.0,
-    lost_link: Annotated[float, typer.Option(
-        help="End the mission after this long without telemetry, s.")] = 3.0,
-    connect_timeout: Annotated[float, typer.Option(
-        help="Wait this long for the autopilot and its position, s.")] = 30.0,
-    live: Annotated[bool | None, typer.Option(
-        "--live/--no-live", help="Live view (default: when the console is a terminal).")
-                    ] = None,
+    stale_after: Annotated[
+        float, typer.Option(help="Hold when odometry is older than this, s.")
+    ] = 1.0,
+    lost_link: Annotated[
+        float, typer.Option(help="End the mission after this long without telemetry, s.")
+    ] = 3.0,
+    connect_timeout: Annotated[
+        float, typer.Option(help="Wait this long for the autopilot and its position, s.")
+    ] = 30.0,
+    live: Annotated[
+        bool | None,
+        typer.Option(
+            "--live/--no-live", help="Live view (default: when the console is a terminal)."
+        ),
+    ] = None,
 ) -> None:
     """Fly SCENARIO on a PX4 vehicle: offboard position setpoints from the mission
     controller, detections as JSON lines over UDP, a safe end in hold (or return)."""
@@ -157,14 +188,26 @@ def fly(
     from hptrack.runtime.network import udp_address
 
     udp_address(detections, "--detections")
-    options = FlightOptions(connection=connection, detections=detections, altitude_m=altitude,
-                            max_distance_m=max_distance, takeoff=takeoff,
-                            return_to_launch=return_to_launch, setpoint_rate_hz=rate,
-                            lost_link_s=lost_link, connect_timeout_s=connect_timeout)
+    options = FlightOptions(
+        connection=connection,
+        detections=detections,
+        altitude_m=altitude,
+        max_distance_m=max_distance,
+        takeoff=takeoff,
+        return_to_launch=return_to_launch,
+        setpoint_rate_hz=rate,
+        lost_link_s=lost_link,
+        connect_timeout_s=connect_timeout,
+    )
     log = MissionLog(log_path)
     controller = MissionController(
-        scenario, make_planner(planner, planner_settings), seed=seed, settings=settings,
-        log=log, header={"source": "fly", "flight": options.__dict__})
+        scenario,
+        make_planner(planner, planner_settings),
+        seed=seed,
+        settings=settings,
+        log=log,
+        header={"source": "fly", "flight": options.__dict__},
+    )
     use_live = console.is_terminal if live is None else live
     view = Live(console=console, refresh_per_second=4, transient=False) if use_live else None
 
@@ -188,11 +231,15 @@ def fly(
             view.stop()
         log.close()
     end = result.end
-    console.print(escape(
-        f"ended by {result.reason} ({result.detail}); vehicle {result.action}: "
-        f"{result.confirmed or 'not confirmed'}; U = {end.get('U', math.nan):.3f} at "
-        f"{end.get('time', 0.0):.1f} s; {result.setpoints_sent} setpoints "
-        f"({result.setpoint_rate_hz:.1f} Hz)"), highlight=False)
+    console.print(
+        escape(
+            f"ended by {result.reason} ({result.detail}); vehicle {result.action}: "
+            f"{result.confirmed or 'not confirmed'}; U = {end.get('U', math.nan):.3f} at "
+            f"{end.get('time', 0.0):.1f} s; {result.setpoints_sent} setpoints "
+            f"({result.setpoint_rate_hz:.1f} Hz)"
+        ),
+        highlight=False,
+    )
     if result.error:
         error_console.print(escape(result.error), highlight=False)
         sys.exit(1)
@@ -205,18 +252,27 @@ def fly(
 def vehicle_sim(
     scenario_path: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario YAML file.")],
     mavlink: Annotated[str, typer.Option(help="Where MAVSDK listens (loopback).")] = (
-        "udpout://127.0.0.1:14540"),
-    detections: Annotated[str, typer.Option(
-        help="Where to send detections (loopback).")] = "udp://127.0.0.1:5005",
-    seed: Annotated[int | None, typer.Option(
-        help="Seed of the true targets and the noise (default the scenario's).")] = None,
-    duration: Annotated[float | None, typer.Option(
-        help="Stop after this many seconds (default budget + 300 s).")] = None,
-    detection_rate: Annotated[float | None, typer.Option(
-        help="Sensing per second (default one per time step).")] = None,
-    stats: Annotated[Path | None, typer.Option(
-        help="Write what the vehicle saw (setpoints, modes, detections) as JSON at exit.")
-                     ] = None,
+        "udpout://127.0.0.1:14540"
+    ),
+    detections: Annotated[
+        str, typer.Option(help="Where to send detections (loopback).")
+    ] = "udp://127.0.0.1:5005",
+    seed: Annotated[
+        int | None,
+        typer.Option(help="Seed of the true targets and the noise (default the scenario's)."),
+    ] = None,
+    duration: Annotated[
+        float | None, typer.Option(help="Stop after this many seconds (default budget + 300 s).")
+    ] = None,
+    detection_rate: Annotated[
+        float | None, typer.Option(help="Sensing per second (default one per time step).")
+    ] = None,
+    stats: Annotated[
+        Path | None,
+        typer.Option(
+            help="Write what the vehicle saw (setpoints, modes, detections) as JSON at exit."
+        ),
+    ] = None,
 ) -> None:
     """A MAVLink vehicle stub for dry runs: a PX4-like quadrotor that flies the offboard
     setpoints and sends detections of the scenario's simulated targets."""
@@ -229,13 +285,18 @@ def vehicle_sim(
     check_output_path(stats, "--stats")
     from hptrack.runtime.vehicle_sim import VehicleSim
 
-    vehicle = VehicleSim(scenario, mavlink, detections, seed=seed,
-                         detection_rate_hz=detection_rate)
+    vehicle = VehicleSim(scenario, mavlink, detections, seed=seed, detection_rate_hz=detection_rate)
     stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set())
-                for sig in (signal.SIGINT, signal.SIGTERM)}
-    console.print(escape(f"vehicle stub: MAVLink to {mavlink}, detections to {detections}; "
-                         f"running for at most {duration:g} s (Ctrl-C stops)"), highlight=False)
+    previous = {
+        sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)
+    }
+    console.print(
+        escape(
+            f"vehicle stub: MAVLink to {mavlink}, detections to {detections}; "
+            f"running for at most {duration:g} s (Ctrl-C stops)"
+        ),
+        highlight=False,
+    )
     try:
         summary = vehicle.run(duration, stop)
     finally:
@@ -243,18 +304,24 @@ def vehicle_sim(
             signal.signal(sig, handler)
     if stats is not None:
         write_json(stats, summary)
-    console.print(escape(
-        f"vehicle stub stopped in {summary['final_mode']}: {summary['setpoints']} setpoints "
-        f"({summary['offboard_setpoint_rate_hz']:.1f} Hz in offboard), detections sent "
-        f"{json.dumps(summary['detections_sent'])}"), highlight=False)
+    console.print(
+        escape(
+            f"vehicle stub stopped in {summary['final_mode']}: {summary['setpoints']} setpoints "
+            f"({summary['offboard_setpoint_rate_hz']:.1f} Hz in offboard), detections sent "
+            f"{json.dumps(summary['detections_sent'])}"
+        ),
+        highlight=False,
+    )
 
 
 def replay(
     log_path: Annotated[Path, typer.Argument(metavar="LOG", help="Mission log (JSON lines).")],
-    plot: Annotated[Path | None, typer.Option(
-        help="Mission figure (PNG); default LOG with .png.")] = None,
-    json_path: Annotated[Path | None, typer.Option(
-        "--json", help="JSON summary; default LOG with .summary.json.")] = None,
+    plot: Annotated[
+        Path | None, typer.Option(help="Mission figure (PNG); default LOG with .png.")
+    ] = None,
+    json_path: Annotated[
+        Path | None, typer.Option("--json", help="JSON summary; default LOG with .summary.json.")
+    ] = None,
 ) -> None:
     """Re-run the controller on a mission log: the same events give the same beliefs and
     decisions; writes the mission figure and a JSON summary."""
@@ -269,8 +336,12 @@ def replay(
     summary = result.summary
     write_json(json_path, summary)
     save_mission_figure(result.record, str(plot))
-    table = Table(title=escape(f"replay of {log_path} ({summary['source']}, "
-                               f"{summary['planner']}, seed {summary['seed']})"))
+    table = Table(
+        title=escape(
+            f"replay of {log_path} ({summary['source']}, "
+            f"{summary['planner']}, seed {summary['seed']})"
+        )
+    )
     table.add_column("target")
     table.add_column("final log det Σxy", justify="right")
     table.add_column("detections (ticks)", justify="right")
@@ -280,12 +351,17 @@ def replay(
     table.add_row("U", f"{summary['U']:.3f}", "")
     console.print(table)
     logged = summary["logged_U"]
-    console.print(escape(
-        f"{summary['records']} records{' (last line truncated)' if summary['truncated'] else ''}"
-        f", {summary['ticks']} ticks, {summary['plans']} plans; ended by "
-        f"{summary['ended_by']} at {summary['time']:.1f} s; logged U "
-        f"{'-' if logged is None else format(logged, '.3f')}; "
-        f"{summary['mismatches']} mismatches"), highlight=False)
+    console.print(
+        escape(
+            f"{summary['records']} records"
+            f"{' (last line truncated)' if summary['truncated'] else ''}"
+            f", {summary['ticks']} ticks, {summary['plans']} plans; ended by "
+            f"{summary['ended_by']} at {summary['time']:.1f} s; logged U "
+            f"{'-' if logged is None else format(logged, '.3f')}; "
+            f"{summary['mismatches']} mismatches"
+        ),
+        highlight=False,
+    )
     for line in summary["first_mismatches"]:
         console.print(escape(f"  {line}"), highlight=False)
     console.print(f"figure {escape(str(plot))}, summary {escape(str(json_path))}")

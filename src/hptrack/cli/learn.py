@@ -21,26 +21,37 @@ from rich.progress import (
 from hptrack.cli.common import check_output_dir, check_output_path, check_seed, console
 from hptrack.interface import InputError
 
-learn_app = typer.Typer(help="Train learning baselines on hptrack/Tracking-v0 (resumable).",
-                        no_args_is_help=True)
+learn_app = typer.Typer(
+    help="Train learning baselines on hptrack/Tracking-v0 (resumable).", no_args_is_help=True
+)
 
 PROGRESS_EVERY = 250
 """Steps between progress-bar refreshes."""
 
 Targets = Annotated[int, typer.Option(help="Number of targets (one model per number).")]
 Steps = Annotated[int, typer.Option(help="Environment steps to train in total.")]
-Out = Annotated[Path, typer.Option(help="Run folder (checkpoints, best model, curve); "
-                                        "rerunning the command resumes it.")]
+Out = Annotated[
+    Path,
+    typer.Option(
+        help="Run folder (checkpoints, best model, curve); rerunning the command resumes it."
+    ),
+]
 Seed = Annotated[int, typer.Option(help="Seed of the run.")]
-Homogeneous = Annotated[bool, typer.Option(
-    "--homogeneous/--heterogeneous",
-    help="Shared q and prior (homogeneous) or drawn per target (heterogeneous, the paper's "
-         "Table III); default heterogeneous.")]
-ValidationScenarios = Annotated[int, typer.Option(
-    help="Fixed validation scenarios (seeds 1e9 + i).")]
+Homogeneous = Annotated[
+    bool,
+    typer.Option(
+        "--homogeneous/--heterogeneous",
+        help="Shared q and prior (homogeneous) or drawn per target (heterogeneous, the paper's "
+        "Table III); default heterogeneous.",
+    ),
+]
+ValidationScenarios = Annotated[
+    int, typer.Option(help="Fixed validation scenarios (seeds 1e9 + i).")
+]
 ValidationInterval = Annotated[int, typer.Option(help="Steps between validations.")]
-CheckpointInterval = Annotated[int, typer.Option(
-    help="Least steps between checkpoints (taken at episode or rollout ends).")]
+CheckpointInterval = Annotated[
+    int, typer.Option(help="Least steps between checkpoints (taken at episode or rollout ends).")
+]
 
 
 def _require_learn_extra() -> None:
@@ -48,20 +59,31 @@ def _require_learn_extra() -> None:
         import gymnasium  # noqa: F401
         import torch  # noqa: F401
     except ModuleNotFoundError as err:
-        raise InputError(f"hptrack learn needs the learn extra ({err.name} is missing): "
-                         "pip install 'hptrack[learn]'") from None
+        raise InputError(
+            f"hptrack learn needs the learn extra ({err.name} is missing): "
+            "pip install 'hptrack[learn]'"
+        ) from None
 
 
-def _check_common(targets: int, steps: int, seed: int, out: Path, validation_scenarios: int,
-                  validation_interval: int, checkpoint_interval: int) -> None:
+def _check_common(
+    targets: int,
+    steps: int,
+    seed: int,
+    out: Path,
+    validation_scenarios: int,
+    validation_interval: int,
+    checkpoint_interval: int,
+) -> None:
     if targets < 1:
         raise InputError(f"--targets must be at least 1, got {targets}")
     if steps < 1:
         raise InputError(f"--steps must be at least 1, got {steps}")
     check_seed(seed)
-    for option, value in (("--validation-scenarios", validation_scenarios),
-                          ("--validation-interval", validation_interval),
-                          ("--checkpoint-interval", checkpoint_interval)):
+    for option, value in (
+        ("--validation-scenarios", validation_scenarios),
+        ("--validation-interval", validation_interval),
+        ("--checkpoint-interval", checkpoint_interval),
+    ):
         if value < 1:
             raise InputError(f"{option} must be at least 1, got {value}")
     check_output_dir(out, "--out")
@@ -69,23 +91,36 @@ def _check_common(targets: int, steps: int, seed: int, out: Path, validation_sce
 
 def _train(trainer: Any, name: str, out: Path) -> dict[str, Any]:
     total = trainer.config.steps
-    columns = (TextColumn(f"[bold]{escape(name)}"), BarColumn(), MofNCompleteColumn(),
-               TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.description}"))
+    columns = (
+        TextColumn(f"[bold]{escape(name)}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        TextColumn("{task.description}"),
+    )
     start = time.perf_counter()
     with Progress(*columns, console=console) as progress:
         task = progress.add_task("", total=total)
 
         def on_progress(p) -> None:
             if p.step % PROGRESS_EVERY == 0 or p.step >= total:
-                progress.update(task, completed=p.step, description=(
-                    f"episodes {p.episodes}  return(10) {p.recent_return:.3f}  "
-                    f"validation U {p.validation_u:.2f}  best {p.best_u:.2f}"))
+                progress.update(
+                    task,
+                    completed=p.step,
+                    description=(
+                        f"episodes {p.episodes}  return(10) {p.recent_return:.3f}  "
+                        f"validation U {p.validation_u:.2f}  best {p.best_u:.2f}"
+                    ),
+                )
 
         summary = trainer.run(on_progress)
-    console.print(f"{name}: {summary['steps']} steps, {summary['episodes']} episodes, "
-                  f"{time.perf_counter() - start:.0f} s this session; best validation U "
-                  f"{summary['best_U']:.3f} at step {summary['best_step']}; last "
-                  f"{summary['last_validation_U']:.3f}; model {escape(summary['best_model'])}")
+    console.print(
+        f"{name}: {summary['steps']} steps, {summary['episodes']} episodes, "
+        f"{time.perf_counter() - start:.0f} s this session; best validation U "
+        f"{summary['best_U']:.3f} at step {summary['best_step']}; last "
+        f"{summary['last_validation_U']:.3f}; model {escape(summary['best_model'])}"
+    )
     _write_figure(out, out / "curve.png", name)
     return summary
 
@@ -116,15 +151,16 @@ def learn_adfq(
     validation_scenarios: ValidationScenarios = 50,
     validation_interval: ValidationInterval = 25_000,
     checkpoint_interval: CheckpointInterval = 10_000,
-    warmup: Annotated[int, typer.Option(help="Steps of exploration before learning.")
-                      ] = 10_000,
+    warmup: Annotated[int, typer.Option(help="Steps of exploration before learning.")] = 10_000,
     buffer: Annotated[int, typer.Option(help="Replay capacity, transitions.")] = 200_000,
-    prioritized: Annotated[bool, typer.Option(
-        help="Prioritised replay (alpha 0.6, beta 0.4 -> 1) instead of uniform.")] = False,
+    prioritized: Annotated[
+        bool, typer.Option(help="Prioritised replay (alpha 0.6, beta 0.4 -> 1) instead of uniform.")
+    ] = False,
 ) -> None:
     """Train Deep ADFQ (Thompson sampling, ADFQ posterior targets) on Tracking-v0."""
-    _check_common(targets, steps, seed, out, validation_scenarios, validation_interval,
-                  checkpoint_interval)
+    _check_common(
+        targets, steps, seed, out, validation_scenarios, validation_interval, checkpoint_interval
+    )
     if warmup < 0 or buffer < 1:
         raise InputError(f"--warmup must be >= 0 and --buffer >= 1, got {warmup} and {buffer}")
     _require_learn_extra()
@@ -132,10 +168,13 @@ def learn_adfq(
     from hptrack.learning.train import TrainConfig, Trainer, tracking_task
 
     task = tracking_task(targets, homogeneous, validation_scenarios)
-    config = TrainConfig(steps=steps, seed=seed, validation_interval=validation_interval,
-                         checkpoint_interval=checkpoint_interval,
-                         agent=AdfqConfig(warmup_steps=warmup, buffer_size=buffer,
-                                          prioritized=prioritized))
+    config = TrainConfig(
+        steps=steps,
+        seed=seed,
+        validation_interval=validation_interval,
+        checkpoint_interval=checkpoint_interval,
+        agent=AdfqConfig(warmup_steps=warmup, buffer_size=buffer, prioritized=prioritized),
+    )
     _train(Trainer(task, config, out), f"adfq n={targets}", out)
 
 
@@ -152,28 +191,35 @@ def learn_sb3_ppo(
 ) -> None:
     """Train stable-baselines3 PPO (MlpPolicy, one 1800-step rollout per update) on
     Tracking-v0."""
-    _check_common(targets, steps, seed, out, validation_scenarios, validation_interval,
-                  checkpoint_interval)
+    _check_common(
+        targets, steps, seed, out, validation_scenarios, validation_interval, checkpoint_interval
+    )
     _require_learn_extra()
     try:
         import stable_baselines3  # noqa: F401
     except ModuleNotFoundError:
-        raise InputError("hptrack learn sb3-ppo needs stable-baselines3: "
-                         "pip install 'hptrack[learn]'") from None
+        raise InputError(
+            "hptrack learn sb3-ppo needs stable-baselines3: pip install 'hptrack[learn]'"
+        ) from None
     from hptrack.learning.sb3 import PpoConfig, PpoTrainer
     from hptrack.learning.train import tracking_task
 
     task = tracking_task(targets, homogeneous, validation_scenarios)
-    config = PpoConfig(steps=steps, seed=seed, validation_interval=validation_interval,
-                       checkpoint_interval=checkpoint_interval)
+    config = PpoConfig(
+        steps=steps,
+        seed=seed,
+        validation_interval=validation_interval,
+        checkpoint_interval=checkpoint_interval,
+    )
     _train(PpoTrainer(task, config, out), f"sb3-ppo n={targets}", out)
 
 
 @learn_app.command("plot")
 def learn_plot(
     run: Annotated[Path, typer.Argument(help="Run folder of 'hptrack learn'.")],
-    output: Annotated[Path | None, typer.Option(
-        "--output", "-o", help="PNG to write (default RUN/curve.png).")] = None,
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="PNG to write (default RUN/curve.png).")
+    ] = None,
     title: Annotated[str | None, typer.Option(help="Figure title.")] = None,
 ) -> None:
     """Draw a run's training curve: final U of the training episodes and of the validation

@@ -37,8 +37,18 @@ MAX_COVERAGE_STEPS = 10_000_000
 def position_det(poly, n):
     """``det Sigma^xy`` (m^4) after ``n`` steps from :func:`position_polynomials`' ``poly``
     (its first ten entries), by Horner's rule."""
-    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = (poly[0], poly[1], poly[2], poly[3], poly[4],
-                                              poly[5], poly[6], poly[7], poly[8], poly[9])
+    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = (
+        poly[0],
+        poly[1],
+        poly[2],
+        poly[3],
+        poly[4],
+        poly[5],
+        poly[6],
+        poly[7],
+        poly[8],
+        poly[9],
+    )
     sxx = x0 + n * (x1 + n * (x2 + n * x3))
     syy = y0 + n * (y1 + n * (y2 + n * x3))
     sxy = c0 + n * (c1 + n * c2)
@@ -61,8 +71,15 @@ def _covered_ratio(cov, q, k, tau, c_per_step, speed, diameter):
 
 
 @numba.njit(cache=True)
-def coverage_outcome(cov: np.ndarray, q: float, tau: float, c_per_step: float, speed: float,
-                     diameter: float, max_steps: int) -> tuple:
+def coverage_outcome(
+    cov: np.ndarray,
+    q: float,
+    tau: float,
+    c_per_step: float,
+    speed: float,
+    diameter: float,
+    max_steps: int,
+) -> tuple:
     """Estimated outcome of a coverage starting from covariance ``cov``.
 
     Args:
@@ -107,8 +124,15 @@ def coverage_outcome(cov: np.ndarray, q: float, tau: float, c_per_step: float, s
 
 
 @numba.njit(cache=True)
-def coverage_cdf(cov: np.ndarray, q: float, tau: float, c_per_step: float, speed: float,
-                 diameter: float, n_steps: int) -> np.ndarray:
+def coverage_cdf(
+    cov: np.ndarray,
+    q: float,
+    tau: float,
+    c_per_step: float,
+    speed: float,
+    diameter: float,
+    n_steps: int,
+) -> np.ndarray:
     """``P_cdf(k)`` for ``k = 0 .. n_steps - 1`` (no cutoff applied), for plots and reports."""
     out = np.empty(n_steps)
     for k in range(n_steps):
@@ -167,13 +191,16 @@ def check_state_covariance(covariance: np.ndarray) -> np.ndarray:
         raise ValueError(f"covariance is not positive semi-definite: {cov.tolist()}")
     det = cov[0, 0] * cov[1, 1] - cov[0, 1] * cov[1, 0]
     if not (cov[0, 0] > 0.0 and det > 1e-12 * cov[0, 0] * cov[1, 1]):
-        raise ValueError("position covariance is not positive definite "
-                         f"({cov[:2, :2].tolist()} m^2): the belief ellipse is degenerate")
+        raise ValueError(
+            "position covariance is not positive definite "
+            f"({cov[:2, :2].tolist()} m^2): the belief ellipse is degenerate"
+        )
     return cov
 
 
-def estimate_coverage(covariance: np.ndarray, q: float, mission: MissionSpec,
-                      remaining_time: float | None = None) -> CoverageEstimate:
+def estimate_coverage(
+    covariance: np.ndarray, q: float, mission: MissionSpec, remaining_time: float | None = None
+) -> CoverageEstimate:
     """Estimate the outcome of a spiral coverage starting from ``covariance`` (Sec. IV-B).
 
     Args:
@@ -202,14 +229,17 @@ def estimate_coverage(covariance: np.ndarray, q: float, mission: MissionSpec,
         return CoverageEstimate(0, 0.0, 0.0, np.zeros(0), tau, True)
     else:
         max_steps = min(math.floor(remaining_time / tau + 1e-9), MAX_COVERAGE_STEPS)
-    cutoff, p_find, expected = coverage_outcome(cov, float(q), tau, c_per_step, speed, diameter,
-                                                max_steps)
+    cutoff, p_find, expected = coverage_outcome(
+        cov, float(q), tau, c_per_step, speed, diameter, max_steps
+    )
     cutoff = int(cutoff)
     limited = cutoff == max_steps and _covered_ratio(
-        cov, float(q), cutoff + 1.0, tau, c_per_step, speed, diameter) > _covered_ratio(
-        cov, float(q), float(cutoff), tau, c_per_step, speed, diameter)
+        cov, float(q), cutoff + 1.0, tau, c_per_step, speed, diameter
+    ) > _covered_ratio(cov, float(q), float(cutoff), tau, c_per_step, speed, diameter)
     if limited and remaining_time is None:
-        raise ValueError(f"P_cdf still rises after {MAX_COVERAGE_STEPS} steps: the belief does "
-                         "not grow (zero velocity variance and q = 0?), so t_cutoff is undefined")
+        raise ValueError(
+            f"P_cdf still rises after {MAX_COVERAGE_STEPS} steps: the belief does "
+            "not grow (zero velocity variance and q = 0?), so t_cutoff is undefined"
+        )
     cdf = coverage_cdf(cov, float(q), tau, c_per_step, speed, diameter, cutoff + 1)
     return CoverageEstimate(cutoff, float(p_find), float(expected) * tau, cdf, tau, bool(limited))

@@ -32,8 +32,15 @@ CEIL_SLACK = 1e-9
 
 
 @numba.njit(cache=True)
-def intercept_time(agent_x: float, agent_y: float, mean_x: float, mean_y: float, vel_x: float,
-                   vel_y: float, speed: float) -> float:
+def intercept_time(
+    agent_x: float,
+    agent_y: float,
+    mean_x: float,
+    mean_y: float,
+    vel_x: float,
+    vel_y: float,
+    speed: float,
+) -> float:
     """Smallest ``t >= 0`` (s) with ``|mean + vel t - agent| = speed t`` (closed form).
 
     Positions in m, velocities in m/s. Returns ``inf`` when ``|vel| >= speed`` (the target cannot
@@ -57,8 +64,17 @@ def intercept_time(agent_x: float, agent_y: float, mean_x: float, mean_y: float,
 
 
 @numba.njit(cache=True)
-def intercept_steps(agent_x: float, agent_y: float, mean_x: float, mean_y: float, vel_x: float,
-                    vel_y: float, speed: float, tau: float, footprint_radius: float) -> int:
+def intercept_steps(
+    agent_x: float,
+    agent_y: float,
+    mean_x: float,
+    mean_y: float,
+    vel_x: float,
+    vel_y: float,
+    speed: float,
+    tau: float,
+    footprint_radius: float,
+) -> int:
     """Whole steps of the intercept flight (module docstring): ``ceil(t / tau)``, or ``0`` when
     the mean is within ``footprint_radius`` (m) of the agent. ``-1`` when ``|vel| >= speed``."""
     dx = mean_x - agent_x
@@ -72,8 +88,17 @@ def intercept_steps(agent_x: float, agent_y: float, mean_x: float, mean_y: float
 
 
 @numba.njit(cache=True)
-def approach_step(agent_x: float, agent_y: float, mean_x: float, mean_y: float, vel_x: float,
-                  vel_y: float, speed: float, tau: float, steps: int) -> tuple:
+def approach_step(
+    agent_x: float,
+    agent_y: float,
+    mean_x: float,
+    mean_y: float,
+    vel_x: float,
+    vel_y: float,
+    speed: float,
+    tau: float,
+    steps: int,
+) -> tuple:
     """The agent's displacement per step relative to the belief mean during an intercept flight
     of ``steps`` whole steps (module docstring), m: ``v_a tau u - v_hat tau`` with ``u`` the unit
     vector towards the mean at step ``steps``. ``(0, 0)`` when ``steps <= 0``."""
@@ -115,9 +140,14 @@ def _finite_vector(name: str, value: np.ndarray | tuple[float, float]) -> np.nda
     return array
 
 
-def plan_intercept(agent_position: np.ndarray, mean_position: np.ndarray,
-                   mean_velocity: np.ndarray, speed: float, time_step: float,
-                   sensor_diameter: float) -> Intercept:
+def plan_intercept(
+    agent_position: np.ndarray,
+    mean_position: np.ndarray,
+    mean_velocity: np.ndarray,
+    speed: float,
+    time_step: float,
+    sensor_diameter: float,
+) -> Intercept:
     """Plan the intercept of a belief mean moving at ``mean_velocity`` (m/s) by an agent at
     ``agent_position`` (m) flying at ``speed`` (m/s), with the whole-step convention.
 
@@ -128,14 +158,19 @@ def plan_intercept(agent_position: np.ndarray, mean_position: np.ndarray,
     agent = _finite_vector("agent_position", agent_position)
     mean = _finite_vector("mean_position", mean_position)
     velocity = _finite_vector("mean_velocity", mean_velocity)
-    for name, value in (("speed", speed), ("time_step", time_step),
-                        ("sensor_diameter", sensor_diameter)):
+    for name, value in (
+        ("speed", speed),
+        ("time_step", time_step),
+        ("sensor_diameter", sensor_diameter),
+    ):
         if not (math.isfinite(value) and value > 0.0):
             raise ValueError(f"{name} must be a positive finite number, got {value!r}")
     target_speed = float(np.hypot(*velocity))
     if target_speed >= speed:
-        raise ValueError(f"the target's estimated speed {target_speed:g} m/s is not below the "
-                         f"agent speed {speed:g} m/s: the belief mean cannot be intercepted")
+        raise ValueError(
+            f"the target's estimated speed {target_speed:g} m/s is not below the "
+            f"agent speed {speed:g} m/s: the belief mean cannot be intercepted"
+        )
     if np.hypot(*(mean - agent)) <= 0.5 * sensor_diameter:
         return Intercept(0.0, 0, agent, time_step)
     t = intercept_time(agent[0], agent[1], mean[0], mean[1], velocity[0], velocity[1], speed)
@@ -143,8 +178,12 @@ def plan_intercept(agent_position: np.ndarray, mean_position: np.ndarray,
     return Intercept(t, steps, mean + velocity * steps * time_step, time_step)
 
 
-def intercept_path(agent_position: np.ndarray, intercept: Intercept, step_length: float,
-                   steps: np.ndarray | None = None) -> np.ndarray:
+def intercept_path(
+    agent_position: np.ndarray,
+    intercept: Intercept,
+    step_length: float,
+    steps: np.ndarray | None = None,
+) -> np.ndarray:
     """Agent positions ``(len(steps), 2)`` at the given steps (default ``0..n``) of the intercept
     flight: straight towards ``intercept.start`` at ``step_length`` (m) per step, the last step
     possibly shorter; from step ``n`` on the agent is at ``intercept.start``."""
@@ -160,8 +199,9 @@ def intercept_path(agent_position: np.ndarray, intercept: Intercept, step_length
     return path
 
 
-def intercept_waypoint(agent_position: np.ndarray, intercept: Intercept, step_length: float,
-                       step: int) -> np.ndarray:
+def intercept_waypoint(
+    agent_position: np.ndarray, intercept: Intercept, step_length: float, step: int
+) -> np.ndarray:
     """The agent's position ``(2,)`` at one ``step`` of the intercept flight (no allocation of
     the whole path, whatever its length)."""
     return intercept_path(agent_position, intercept, step_length, np.array([step]))[0]

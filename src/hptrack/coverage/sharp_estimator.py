@@ -116,9 +116,11 @@ def strip_constants(strip_halfwidth):
     estimate: ``(w_n, H(w_n^2), e^{-w_n^2/2})`` and the three node weights times ``2 w_n
     phi(y_i)``."""
     w = strip_halfwidth
-    factors = (2.0 * w * STRIP_WEIGHTS[0] * _density(w * STRIP_NODES[0]),
-               2.0 * w * STRIP_WEIGHTS[1] * _density(w * STRIP_NODES[1]),
-               2.0 * w * STRIP_WEIGHTS[2] * _density(w * STRIP_NODES[2]))
+    factors = (
+        2.0 * w * STRIP_WEIGHTS[0] * _density(w * STRIP_NODES[0]),
+        2.0 * w * STRIP_WEIGHTS[1] * _density(w * STRIP_NODES[1]),
+        2.0 * w * STRIP_WEIGHTS[2] * _density(w * STRIP_NODES[2]),
+    )
     edge = math.exp(-0.5 * w * w)
     at_edge = strip_mass(w * w, (w, 0.0, edge, factors[0], factors[1], factors[2]))
     return w, at_edge, edge, factors[0], factors[1], factors[2]
@@ -133,9 +135,11 @@ def strip_mass(h_found, strip):
         return 0.5 * (math.exp(-0.5 * h_found) - strip[2]) + strip[1]
     # int_{-w_n}^{w_n} phi(y) P(X >= sqrt(h - y^2)) dy
     y0, y1, y2 = w * STRIP_NODES[0], w * STRIP_NODES[1], w * STRIP_NODES[2]
-    return (strip[3] * _upper_tail(math.sqrt(h_found - y0 * y0))
-            + strip[4] * _upper_tail(math.sqrt(h_found - y1 * y1))
-            + strip[5] * _upper_tail(math.sqrt(h_found - y2 * y2)))
+    return (
+        strip[3] * _upper_tail(math.sqrt(h_found - y0 * y0))
+        + strip[4] * _upper_tail(math.sqrt(h_found - y1 * y1))
+        + strip[5] * _upper_tail(math.sqrt(h_found - y2 * y2))
+    )
 
 
 @numba.njit(cache=True)
@@ -202,8 +206,11 @@ def _outer_growing(poly, k, area_ab, perimeter, radius):
     sxx = x0 + k * (x1 + k * (x2 + k * x3))
     syy = y0 + k * (y1 + k * (y2 + k * x3))
     sxy = c0 + k * (c1 + k * c2)
-    det_rate = ((x1 + k * (2.0 * x2 + 3.0 * k * x3)) * syy
-                + sxx * (y1 + k * (2.0 * y2 + 3.0 * k * x3)) - 2.0 * sxy * (c1 + 2.0 * k * c2))
+    det_rate = (
+        (x1 + k * (2.0 * x2 + 3.0 * k * x3)) * syy
+        + sxx * (y1 + k * (2.0 * y2 + 3.0 * k * x3))
+        - 2.0 * sxy * (c1 + 2.0 * k * c2)
+    )
     return 2.0 * area_rate * (sxx * syy - sxy * sxy) > area * det_rate
 
 
@@ -243,8 +250,9 @@ def _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ra
 
 
 @numba.njit(cache=True, inline="always")
-def _found(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start,
-           flight_steps, strip):
+def _found(
+    poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start, flight_steps, strip
+):
     """``F(k)``: spiral plus flight strip."""
     h = _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start)
     p = -math.expm1(-0.5 * h)
@@ -254,9 +262,18 @@ def _found(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, s
 
 
 @numba.njit(cache=True)
-def sharp_coverage_outcome(cov: np.ndarray, q: float, tau: float, c_per_step: float,
-                           speed: float, diameter: float, max_steps: int, flight_steps: int,
-                           approach_x: float, approach_y: float) -> tuple:
+def sharp_coverage_outcome(
+    cov: np.ndarray,
+    q: float,
+    tau: float,
+    c_per_step: float,
+    speed: float,
+    diameter: float,
+    max_steps: int,
+    flight_steps: int,
+    approach_x: float,
+    approach_y: float,
+) -> tuple:
     """Outcome of a sub-task (intercept flight, then spiral) with the sharp model.
 
     Args:
@@ -309,26 +326,50 @@ def sharp_coverage_outcome(cov: np.ndarray, q: float, tau: float, c_per_step: fl
     flight_sum = 0.0
     strip = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     if flight_steps > 0:
-        flight_sum, sigma_c = flight_detection_sum(cov, flight_steps, approach_x, approach_y,
-                                                   radius)
+        flight_sum, sigma_c = flight_detection_sum(
+            cov, flight_steps, approach_x, approach_y, radius
+        )
         strip = strip_constants(radius / sigma_c)
     # F on a grid; sum_{k < K} F(k) by linear interpolation between its points, less the
     # curvature term F'' L (L^2 - 1) / 12 of each interval of L steps (F'' from its neighbours).
     spacing = max(1, -(-(cutoff - EXACT_STEPS) // GRID_INTERVALS))
     at, before = 0, 0
     start = _outer_area_ratio(poly, 0.0, area_ab, perimeter, radius)
-    found = _found(poly, 0.0, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start,
-                   flight_steps, strip)
+    found = _found(
+        poly,
+        0.0,
+        pitch,
+        area_ab,
+        perimeter,
+        radius,
+        peak_steps,
+        peak_ratio,
+        start,
+        flight_steps,
+        strip,
+    )
     previous = found
     coverage_sum = 0.0
     while at < cutoff:
         length = min(1 if at < EXACT_STEPS else spacing, cutoff - at)
-        nxt = _found(poly, float(at + length), pitch, area_ab, perimeter, radius, peak_steps,
-                     peak_ratio, start, flight_steps, strip)
+        nxt = _found(
+            poly,
+            float(at + length),
+            pitch,
+            area_ab,
+            perimeter,
+            radius,
+            peak_steps,
+            peak_ratio,
+            start,
+            flight_steps,
+            strip,
+        )
         coverage_sum += length * found + 0.5 * (nxt - found) * (length - 1)
         if length > 1 and before > 0:
-            second = 2.0 * ((nxt - found) / length - (found - previous) / before) / (
-                length + before)
+            second = (
+                2.0 * ((nxt - found) / length - (found - previous) / before) / (length + before)
+            )
             coverage_sum -= second * length * (length * length - 1) / 12.0
         previous, found, before = found, nxt, length
         at += length
@@ -371,9 +412,14 @@ class SharpEstimate:
         return self.flight_steps + self.cutoff_steps
 
 
-def estimate_sharp(covariance: np.ndarray, q: float, mission: MissionSpec, flight_steps: int,
-                   approach: tuple[float, float] | np.ndarray,
-                   remaining_time: float | None = None) -> SharpEstimate:
+def estimate_sharp(
+    covariance: np.ndarray,
+    q: float,
+    mission: MissionSpec,
+    flight_steps: int,
+    approach: tuple[float, float] | np.ndarray,
+    remaining_time: float | None = None,
+) -> SharpEstimate:
     """The sharp estimate of a sub-task whose coverage starts from ``covariance`` after an
     intercept flight of ``flight_steps`` steps, ``approach`` (m) per step relative to the belief
     mean (:func:`hptrack.coverage.intercept.approach_step`).
@@ -392,14 +438,25 @@ def estimate_sharp(covariance: np.ndarray, q: float, mission: MissionSpec, fligh
     if steps < 0 or steps != flight_steps:
         raise ValueError(f"flight_steps must be a non-negative integer, got {flight_steps!r}")
     if step.shape != (2,) or not np.all(np.isfinite(step)) or (steps > 0 and not np.any(step)):
-        raise ValueError(f"approach must be two finite numbers (m per step, non-zero with a "
-                         f"flight), got {approach!r}")
+        raise ValueError(
+            f"approach must be two finite numbers (m per step, non-zero with a "
+            f"flight), got {approach!r}"
+        )
     tau = mission.time_step
     if remaining_time is not None and remaining_time < 0.0:
         return SharpEstimate(steps, 0, 0.0, 0.0, tau, True)
     cutoff, p_find, expected = sharp_coverage_outcome(
-        np.asarray(covariance, dtype=float), float(q), tau, mission.c_per_step,
-        mission.agent_speed, mission.sensor_diameter, paper.cutoff_steps, steps,
-        float(step[0]), float(step[1]))
-    return SharpEstimate(steps, int(cutoff), float(p_find), float(expected) * tau, tau,
-                         paper.budget_limited)
+        np.asarray(covariance, dtype=float),
+        float(q),
+        tau,
+        mission.c_per_step,
+        mission.agent_speed,
+        mission.sensor_diameter,
+        paper.cutoff_steps,
+        steps,
+        float(step[0]),
+        float(step[1]),
+    )
+    return SharpEstimate(
+        steps, int(cutoff), float(p_find), float(expected) * tau, tau, paper.budget_limited
+    )

@@ -45,8 +45,16 @@ def _gap(theta, pitch, semi_a, semi_b, ref_x, ref_y, step2):
 
 
 @numba.njit(cache=True)
-def spiral_phases(theta_start: float, pitch: float, semi_a: float, semi_b: float,
-                  shift_x: float, shift_y: float, step_length: float, out: np.ndarray) -> int:
+def spiral_phases(
+    theta_start: float,
+    pitch: float,
+    semi_a: float,
+    semi_b: float,
+    shift_x: float,
+    shift_y: float,
+    step_length: float,
+    out: np.ndarray,
+) -> int:
     """Fill ``out`` with the phases ``theta_{k+1}, theta_{k+2}, ...`` that follow ``theta_start``.
 
     Args:
@@ -65,8 +73,7 @@ def spiral_phases(theta_start: float, pitch: float, semi_a: float, semi_b: float
     speed_scale = pitch * max(semi_a, semi_b)  # |dp/dtheta| <= speed_scale * sqrt(1 + theta^2)
     # A root lies below theta_k + reach: on the u1 axis |p_E(m pi)| = b m pi A while
     # |p_E(theta_k)| <= b theta_k A, so some m pi in that range is farther than step + shift.
-    reach = 2.0 * math.pi + 2.0 * (step_length + math.hypot(shift_x, shift_y)) / (
-        pitch * semi_a)
+    reach = 2.0 * math.pi + 2.0 * (step_length + math.hypot(shift_x, shift_y)) / (pitch * semi_a)
     theta = theta_start
     for i in range(out.shape[0]):
         r = pitch * theta
@@ -115,8 +122,10 @@ def ellipse_axes(position_covariance: np.ndarray) -> tuple[float, float, np.ndar
         raise ValueError(f"position covariance is not symmetric: {cov.tolist()}")
     eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (cov + cov.T))
     if eigenvalues[0] <= 1e-12 * eigenvalues[1]:
-        raise ValueError("position covariance is not positive definite (eigenvalues "
-                         f"{eigenvalues.tolist()} m^2): the belief ellipse is degenerate")
+        raise ValueError(
+            "position covariance is not positive definite (eigenvalues "
+            f"{eigenvalues.tolist()} m^2): the belief ellipse is degenerate"
+        )
     rotation = eigenvectors[:, ::-1].copy()  # columns u1 (largest eigenvalue), u2
     if np.linalg.det(rotation) < 0.0:
         rotation[:, 1] *= -1.0
@@ -138,22 +147,39 @@ class ShiftingSpiral:
         sensor_diameter: footprint diameter ``w``, m.
     """
 
-    def __init__(self, centre: np.ndarray, velocity: np.ndarray, position_covariance: np.ndarray,
-                 speed: float, time_step: float, sensor_diameter: float) -> None:
+    def __init__(
+        self,
+        centre: np.ndarray,
+        velocity: np.ndarray,
+        position_covariance: np.ndarray,
+        speed: float,
+        time_step: float,
+        sensor_diameter: float,
+    ) -> None:
         self.centre = np.asarray(centre, dtype=float).copy()
         self.velocity = np.asarray(velocity, dtype=float).copy()
-        if self.centre.shape != (2,) or self.velocity.shape != (2,) or not (
-                np.all(np.isfinite(self.centre)) and np.all(np.isfinite(self.velocity))):
-            raise ValueError(f"centre and velocity must be two finite numbers each, got "
-                             f"{centre!r} and {velocity!r}")
-        for name, value in (("speed", speed), ("time_step", time_step),
-                            ("sensor_diameter", sensor_diameter)):
+        if (
+            self.centre.shape != (2,)
+            or self.velocity.shape != (2,)
+            or not (np.all(np.isfinite(self.centre)) and np.all(np.isfinite(self.velocity)))
+        ):
+            raise ValueError(
+                f"centre and velocity must be two finite numbers each, got "
+                f"{centre!r} and {velocity!r}"
+            )
+        for name, value in (
+            ("speed", speed),
+            ("time_step", time_step),
+            ("sensor_diameter", sensor_diameter),
+        ):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
         target_speed = float(np.hypot(*self.velocity))
         if target_speed >= speed:
-            raise ValueError(f"the target's estimated speed {target_speed:g} m/s is not below "
-                             f"the agent speed {speed:g} m/s: no spiral can keep up")
+            raise ValueError(
+                f"the target's estimated speed {target_speed:g} m/s is not below "
+                f"the agent speed {speed:g} m/s: no spiral can keep up"
+            )
         self.semi_a, self.semi_b, self.rotation = ellipse_axes(position_covariance)
         self.pitch = sensor_diameter / (2.0 * math.pi * max(self.semi_a, self.semi_b))
         self.speed = float(speed)
@@ -171,12 +197,21 @@ class ShiftingSpiral:
         while self._phases.shape[0] < n_steps:
             more = max(CHUNK_STEPS, n_steps - self._phases.shape[0])
             out = np.empty(more)
-            filled = spiral_phases(float(self._phases[-1]), self.pitch, self.semi_a, self.semi_b,
-                                   float(self._shift[0]), float(self._shift[1]),
-                                   self.step_length, out)
+            filled = spiral_phases(
+                float(self._phases[-1]),
+                self.pitch,
+                self.semi_a,
+                self.semi_b,
+                float(self._shift[0]),
+                float(self._shift[1]),
+                self.step_length,
+                out,
+            )
             if filled < more:
-                raise RuntimeError(f"spiral step {self._phases.shape[0] + filled} could not be "
-                                   "bracketed; the spiral parameters are inconsistent")
+                raise RuntimeError(
+                    f"spiral step {self._phases.shape[0] + filled} could not be "
+                    "bracketed; the spiral parameters are inconsistent"
+                )
             self._phases = np.concatenate([self._phases, out])
 
     def phases(self, n_steps: int) -> np.ndarray:
@@ -190,14 +225,16 @@ class ShiftingSpiral:
         """``(n_steps, 2)`` positions in ``{E}`` (moving with the mean, axes ``u1, u2``), m."""
         theta = self.phases(n_steps)
         r = self.pitch * theta
-        return np.stack([r * self.semi_a * np.cos(theta), r * self.semi_b * np.sin(theta)],
-                        axis=1)
+        return np.stack([r * self.semi_a * np.cos(theta), r * self.semi_b * np.sin(theta)], axis=1)
 
     def positions(self, n_steps: int) -> np.ndarray:
         """``(n_steps, 2)`` world positions of steps ``0 .. n_steps - 1`` (Eq. (5)), m."""
         k = np.arange(n_steps, dtype=float)[:, None]
-        return (self.centre + self.frame_positions(n_steps) @ self.rotation.T
-                + self.velocity * (k * self.time_step))
+        return (
+            self.centre
+            + self.frame_positions(n_steps) @ self.rotation.T
+            + self.velocity * (k * self.time_step)
+        )
 
     def position(self, step: int) -> np.ndarray:
         """World position ``(2,)`` of step ``step``, m."""

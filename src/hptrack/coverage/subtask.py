@@ -53,16 +53,25 @@ class CoverageSubtask:
         ValueError: bad belief or inputs, or a target not slower than the agent.
     """
 
-    def __init__(self, agent_position: np.ndarray, mean: np.ndarray, covariance: np.ndarray,
-                 q: float, mission: MissionSpec, remaining_budget: float | None,
-                 target_index: int = 0, start_step: int = 0) -> None:
+    def __init__(
+        self,
+        agent_position: np.ndarray,
+        mean: np.ndarray,
+        covariance: np.ndarray,
+        q: float,
+        mission: MissionSpec,
+        remaining_budget: float | None,
+        target_index: int = 0,
+        start_step: int = 0,
+    ) -> None:
         self.mission = mission
         self.target_index = int(target_index)
         self.start_step = int(start_step)
         self.q = float(q)
         if not (0 <= self.target_index < mission.n_targets):
-            raise ValueError(f"target_index {target_index} out of range for "
-                             f"{mission.n_targets} targets")
+            raise ValueError(
+                f"target_index {target_index} out of range for {mission.n_targets} targets"
+            )
         mean = np.asarray(mean, dtype=float)
         if mean.shape != (4,) or not np.all(np.isfinite(mean)):
             raise ValueError(f"mean must be 4 finite numbers [x, y, vx, vy], got {mean!r}")
@@ -72,30 +81,49 @@ class CoverageSubtask:
         self.mean = mean.copy()
         self.remaining_budget = remaining_budget
         self.agent_position = np.asarray(agent_position, dtype=float).copy()
-        self.intercept: Intercept = plan_intercept(self.agent_position, mean[:2], mean[2:],
-                                                   m.agent_speed, m.time_step, m.sensor_diameter)
+        self.intercept: Intercept = plan_intercept(
+            self.agent_position, mean[:2], mean[2:], m.agent_speed, m.time_step, m.sensor_diameter
+        )
         n = self.intercept.steps
-        _, covs = m.motion.predict(mean[None, :], np.asarray(covariance, dtype=float)[None],
-                                   self.q, n * m.time_step)
+        _, covs = m.motion.predict(
+            mean[None, :], np.asarray(covariance, dtype=float)[None], self.q, n * m.time_step
+        )
         self.start_covariance = covs[0]
         self.estimate: CoverageEstimate = estimate_coverage(
-            self.start_covariance, self.q, m,
-            None if remaining_budget is None else remaining_budget - n * m.time_step)
-        self.spiral = ShiftingSpiral(self.intercept.start, mean[2:], self.start_covariance[:2, :2],
-                                     m.agent_speed, m.time_step, m.sensor_diameter)
+            self.start_covariance,
+            self.q,
+            m,
+            None if remaining_budget is None else remaining_budget - n * m.time_step,
+        )
+        self.spiral = ShiftingSpiral(
+            self.intercept.start,
+            mean[2:],
+            self.start_covariance[:2, :2],
+            m.agent_speed,
+            m.time_step,
+            m.sensor_diameter,
+        )
         self.total_steps = n + self.estimate.cutoff_steps
         if remaining_budget is not None:
             budget_steps = math.floor(remaining_budget / m.time_step + 1e-9)
             self.total_steps = min(self.total_steps, max(budget_steps, 0))
 
     @classmethod
-    def from_observation(cls, observation: Observation, target_index: int,
-                         mission: MissionSpec) -> CoverageSubtask:
+    def from_observation(
+        cls, observation: Observation, target_index: int, mission: MissionSpec
+    ) -> CoverageSubtask:
         """Plan a sub-task on target ``target_index`` from the current observation."""
         i = int(target_index)
-        return cls(observation.agent_position, observation.means[i], observation.covariances[i],
-                   float(mission.process_noise[i]), mission, observation.remaining_budget,
-                   i, observation.step)
+        return cls(
+            observation.agent_position,
+            observation.means[i],
+            observation.covariances[i],
+            float(mission.process_noise[i]),
+            mission,
+            observation.remaining_budget,
+            i,
+            observation.step,
+        )
 
     # --- the planned estimate ---------------------------------------------------------------
     @cached_property
@@ -103,10 +131,20 @@ class CoverageSubtask:
         """The sharp estimator's outcome of this sub-task (flight detections included, expected
         duration from its start; :mod:`hptrack.coverage.sharp_estimator`)."""
         m, n, mean = self.mission, self.intercept.steps, self.mean
-        approach = approach_step(self.agent_position[0], self.agent_position[1], mean[0],
-                                 mean[1], mean[2], mean[3], m.agent_speed, m.time_step, n)
-        remaining = (None if self.remaining_budget is None
-                     else self.remaining_budget - n * m.time_step)
+        approach = approach_step(
+            self.agent_position[0],
+            self.agent_position[1],
+            mean[0],
+            mean[1],
+            mean[2],
+            mean[3],
+            m.agent_speed,
+            m.time_step,
+            n,
+        )
+        remaining = (
+            None if self.remaining_budget is None else self.remaining_budget - n * m.time_step
+        )
         return estimate_sharp(self.start_covariance, self.q, m, n, approach, remaining)
 
     @property
@@ -136,10 +174,15 @@ class CoverageSubtask:
 
     def summary(self) -> dict:
         """JSON-ready summary of the plan (times in s)."""
-        return {"target_index": self.target_index, "start_step": self.start_step,
-                "intercept_time": self.intercept_time, "t_cutoff": self.cutoff_time,
-                "p_find": self.p_find, "expected_time": self.expected_time,
-                "budget_limited": self.estimate.budget_limited}
+        return {
+            "target_index": self.target_index,
+            "start_step": self.start_step,
+            "intercept_time": self.intercept_time,
+            "t_cutoff": self.cutoff_time,
+            "p_find": self.p_find,
+            "expected_time": self.expected_time,
+            "budget_limited": self.estimate.budget_limited,
+        }
 
     # --- execution --------------------------------------------------------------------------
     def waypoint(self, j: int) -> np.ndarray:
@@ -148,8 +191,9 @@ class CoverageSubtask:
             raise ValueError(f"step offset must be non-negative, got {j}")
         n = self.intercept.steps
         if j <= n:
-            return intercept_waypoint(self.agent_position, self.intercept,
-                                      self.mission.step_length, j)
+            return intercept_waypoint(
+                self.agent_position, self.intercept, self.mission.step_length, j
+            )
         return self.spiral.position(j - n)
 
     def planned_positions(self, n_steps: int | None = None) -> np.ndarray:
@@ -157,8 +201,12 @@ class CoverageSubtask:
         the budget's end, whichever comes first (``total_steps + 1`` positions), m."""
         count = self.total_steps + 1 if n_steps is None else int(n_steps)
         n = self.intercept.steps
-        head = intercept_path(self.agent_position, self.intercept, self.mission.step_length,
-                              np.arange(min(count, n + 1)))
+        head = intercept_path(
+            self.agent_position,
+            self.intercept,
+            self.mission.step_length,
+            np.arange(min(count, n + 1)),
+        )
         if count <= n + 1:
             return head
         return np.concatenate([head, self.spiral.positions(count - n)[1:]])
@@ -173,5 +221,8 @@ class CoverageSubtask:
 
     def done(self, observation: Observation) -> bool:
         """The target is detected, ``t_cutoff`` is reached, or the budget is spent."""
-        return (self.found(observation) or observation.step >= self.end_step
-                or observation.remaining_budget <= 0.0)
+        return (
+            self.found(observation)
+            or observation.step >= self.end_step
+            or observation.remaining_budget <= 0.0
+        )

@@ -34,5 +34,12 @@ def _register() -> None:
 
 _register()
 
-__all__ = ["ENTRY_POINTS", "HOVER", "MissionEnv", "ObservationLayout", "SubtaskTrackingEnv",
-           "TrackingEnv", "action_waypoint"]
+__all__ = [
+    "ENTRY_POINTS",
+    "HOVER",
+    "MissionEnv",
+    "ObservationLayout",
+    "SubtaskTrackingEnv",
+    "TrackingEnv",
+    "action_waypoint",
+]

@@ -96,14 +96,15 @@ class ObservationLayout:
 
     def target_features(self, observation: np.ndarray) -> np.ndarray:
         """``(..., n_slots, 6)`` view of the per-target features of observations ``(..., size)``."""
-        return observation[..., :self.budget_index].reshape(
-            *observation.shape[:-1], self.n_slots, N_FEATURES)
+        return observation[..., : self.budget_index].reshape(
+            *observation.shape[:-1], self.n_slots, N_FEATURES
+        )
 
     def mask(self, observation: np.ndarray) -> np.ndarray:
         """``(..., n_slots)`` bool: which slots hold a real target."""
         if not self.masked:
             return np.ones((*observation.shape[:-1], self.n_slots), dtype=bool)
-        return observation[..., self.budget_index + 1:] > 0.5
+        return observation[..., self.budget_index + 1 :] > 0.5
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """``(low, high)`` float32 arrays of the observation space."""
@@ -114,14 +115,19 @@ class ObservationLayout:
         high = np.concatenate([np.tile(per_target_high, self.n_slots), np.ones(tail)])
         return low.astype(np.float32), high.astype(np.float32)
 
-    def encode(self, agent: np.ndarray, means: np.ndarray, logdets: np.ndarray,
-               seen: np.ndarray, budget_fraction: float) -> np.ndarray:
+    def encode(
+        self,
+        agent: np.ndarray,
+        means: np.ndarray,
+        logdets: np.ndarray,
+        seen: np.ndarray,
+        budget_fraction: float,
+    ) -> np.ndarray:
         """A new observation vector (module docstring)."""
         if means.shape[0] > self.n_slots:
             raise ValueError(f"{means.shape[0]} targets do not fit in {self.n_slots} slots")
         out = np.empty(self.size, dtype=np.float32)
-        encode(agent, means, logdets, seen, float(budget_fraction), self.n_slots, self.masked,
-               out)
+        encode(agent, means, logdets, seen, float(budget_fraction), self.n_slots, self.masked, out)
         return out
 
     def encode_observation(self, observation: Observation, budget: float) -> np.ndarray:
@@ -131,7 +137,10 @@ class ObservationLayout:
         covs = np.ascontiguousarray(observation.covariances, dtype=float)
         logdets = np.empty(covs.shape[0])
         position_logdets(covs, logdets)
-        return self.encode(np.asarray(observation.agent_position, dtype=float),
-                           np.ascontiguousarray(observation.means, dtype=float), logdets,
-                           np.asarray(observation.detected, dtype=bool),
-                           observation.remaining_budget / budget)
+        return self.encode(
+            np.asarray(observation.agent_position, dtype=float),
+            np.ascontiguousarray(observation.means, dtype=float),
+            logdets,
+            np.asarray(observation.detected, dtype=bool),
+            observation.remaining_budget / budget,
+        )

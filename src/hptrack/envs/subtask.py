@@ -49,8 +49,9 @@ class SubtaskTrackingEnv(MissionEnv):
         self.action_space = spaces.Discrete(self.layout.n_slots)
         self.last_found: int | None = None
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
-              ) -> tuple[np.ndarray, dict]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict]:
         self.last_found = None
         return super().reset(seed=seed, options=options)
 
@@ -66,16 +67,28 @@ class SubtaskTrackingEnv(MissionEnv):
             mean = w.means[i]
             if math.hypot(mean[2], mean[3]) >= m.agent_speed:
                 continue
-            steps = intercept_steps(w.agent[0], w.agent[1], mean[0], mean[1], mean[2], mean[3],
-                                    m.agent_speed, m.time_step, m.sensor_radius)
+            steps = intercept_steps(
+                w.agent[0],
+                w.agent[1],
+                mean[0],
+                mean[1],
+                mean[2],
+                mean[3],
+                m.agent_speed,
+                m.time_step,
+                m.sensor_radius,
+            )
             mask[i] = 0 <= steps < left
         if self.last_found is not None:
             mask[self.last_found] = True
         return mask
 
     def _info(self) -> dict[str, Any]:
-        return {**super()._info(), "action_mask": self.action_masks(),
-                "last_found": self.last_found}
+        return {
+            **super()._info(),
+            "action_mask": self.action_masks(),
+            "last_found": self.last_found,
+        }
 
     def _follow(self, i: int) -> None:
         w = self._world()
@@ -98,8 +111,10 @@ class SubtaskTrackingEnv(MissionEnv):
         else:
             outcome = "budget" if w.done else "missed"
         plan = subtask.summary()
-        return outcome, {k: plan[k] for k in ("intercept_time", "t_cutoff", "p_find",
-                                              "expected_time", "budget_limited")}
+        return outcome, {
+            k: plan[k]
+            for k in ("intercept_time", "t_cutoff", "p_find", "expected_time", "budget_limited")
+        }
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         world = self._check_running()
@@ -122,7 +137,13 @@ class SubtaskTrackingEnv(MissionEnv):
         steps = world.step_index - start
         reward = -(world.uncertainty - before) / world.n_targets
         info = self._info()
-        info["subtask"] = {"target_index": i, "outcome": outcome, "start_step": start,
-                           "end_step": world.step_index, "steps": steps,
-                           "duration": steps * world.mission.time_step, **plan}
+        info["subtask"] = {
+            "target_index": i,
+            "outcome": outcome,
+            "start_step": start,
+            "end_step": world.step_index,
+            "steps": steps,
+            "duration": steps * world.mission.time_step,
+            **plan,
+        }
         return self._observation(), float(reward), False, world.done, info

@@ -40,8 +40,9 @@ SETTINGS = ("heterogeneous", "homogeneous")
 N_HEADINGS = 12
 HOVER = N_HEADINGS
 """The discrete action that keeps the agent in place."""
-HEADINGS = tuple((math.cos(math.radians(30.0 * k)), math.sin(math.radians(30.0 * k)))
-                 for k in range(N_HEADINGS)) + ((0.0, 0.0),)
+HEADINGS = tuple(
+    (math.cos(math.radians(30.0 * k)), math.sin(math.radians(30.0 * k))) for k in range(N_HEADINGS)
+) + ((0.0, 0.0),)
 """Unit displacement of each discrete action (hover last)."""
 RESET_OPTIONS = ("scenario", "seed")
 
@@ -49,8 +50,11 @@ RESET_OPTIONS = ("scenario", "seed")
 def _target_range(n_targets: int | tuple[int, int]) -> tuple[int, int]:
     if isinstance(n_targets, int | np.integer) and not isinstance(n_targets, bool):
         lo = hi = int(n_targets)
-    elif (isinstance(n_targets, tuple | list) and len(n_targets) == 2
-          and all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in n_targets)):
+    elif (
+        isinstance(n_targets, tuple | list)
+        and len(n_targets) == 2
+        and all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in n_targets)
+    ):
         lo, hi = int(n_targets[0]), int(n_targets[1])
     else:
         raise InputError(f"n_targets must be an int or a (min, max) pair, got {n_targets!r}")
@@ -59,8 +63,9 @@ def _target_range(n_targets: int | tuple[int, int]) -> tuple[int, int]:
     return lo, hi
 
 
-def action_waypoint(action_type: str, action: Any, agent: np.ndarray, step_length: float
-                    ) -> tuple[float, float]:
+def action_waypoint(
+    action_type: str, action: Any, agent: np.ndarray, step_length: float
+) -> tuple[float, float]:
     """The waypoint (m) an action of ``action_type`` (``"discrete"`` or ``"box"``) gives an agent
     at ``agent`` moving at most ``step_length`` m per step (module docstring): the environment's
     rule, also for flying a learned policy as a planner in the simulator.
@@ -96,15 +101,24 @@ class MissionEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
 
-    def __init__(self, n_targets: int | tuple[int, int] = 4, setting: str = "heterogeneous",
-                 max_targets: int | None = None, render_mode: str | None = None) -> None:
+    def __init__(
+        self,
+        n_targets: int | tuple[int, int] = 4,
+        setting: str = "heterogeneous",
+        max_targets: int | None = None,
+        render_mode: str | None = None,
+    ) -> None:
         self._n_range = _target_range(n_targets)
         if setting not in SETTINGS:
             raise InputError(f"setting must be one of {', '.join(SETTINGS)}, got {setting!r}")
-        if max_targets is not None and (isinstance(max_targets, bool) or not isinstance(
-                max_targets, int | np.integer) or max_targets < self._n_range[1]):
-            raise InputError(f"max_targets must be an int >= n_targets {n_targets!r}, "
-                             f"got {max_targets!r}")
+        if max_targets is not None and (
+            isinstance(max_targets, bool)
+            or not isinstance(max_targets, int | np.integer)
+            or max_targets < self._n_range[1]
+        ):
+            raise InputError(
+                f"max_targets must be an int >= n_targets {n_targets!r}, got {max_targets!r}"
+            )
         if self._n_range[0] != self._n_range[1] and max_targets is None:
             raise InputError(f"n_targets={n_targets!r} varies per episode: give max_targets")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -113,7 +127,8 @@ class MissionEnv(gym.Env):
         self.render_mode = render_mode
         self.max_targets = None if max_targets is None else int(max_targets)
         self.layout = ObservationLayout(
-            self._n_range[1] if max_targets is None else int(max_targets), max_targets is not None)
+            self._n_range[1] if max_targets is None else int(max_targets), max_targets is not None
+        )
         low, high = self.layout.bounds()
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.world: World | None = None
@@ -128,8 +143,9 @@ class MissionEnv(gym.Env):
         seed = int(self.np_random.integers(2**63))
         return random_scenario(n, seed=seed, homogeneous=self.setting == "homogeneous")
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
-              ) -> tuple[np.ndarray, dict]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict]:
         """Start an episode: ``options={"scenario": Scenario}`` flies that scenario with its own
         seed (or ``options["seed"]``), exactly as the simulator; otherwise a random scenario of
         the env's setting is drawn from the env's generator (seeded by ``seed``)."""
@@ -137,8 +153,10 @@ class MissionEnv(gym.Env):
         options = dict(options or {})
         unknown = sorted(set(options) - set(RESET_OPTIONS))
         if unknown:
-            raise InputError(f"reset options: unknown {', '.join(map(repr, unknown))} "
-                             f"(known: {', '.join(RESET_OPTIONS)})")
+            raise InputError(
+                f"reset options: unknown {', '.join(map(repr, unknown))} "
+                f"(known: {', '.join(RESET_OPTIONS)})"
+            )
         scenario = options.get("scenario")
         if scenario is None:
             scenario = self._draw_scenario()
@@ -146,9 +164,11 @@ class MissionEnv(gym.Env):
             raise InputError(f"reset option scenario must be a Scenario, got {type(scenario)}")
         n = len(scenario.targets)
         if n > self.layout.n_slots or (not self.layout.masked and n != self.layout.n_slots):
-            raise InputError(f"reset option scenario has {n} targets; this env observes "
-                             f"{self.layout.n_slots}" + ("" if self.layout.masked else
-                                                         " (give max_targets to pad)"))
+            raise InputError(
+                f"reset option scenario has {n} targets; this env observes "
+                f"{self.layout.n_slots}"
+                + ("" if self.layout.masked else " (give max_targets to pad)")
+            )
         self.scenario = scenario
         self.world = World(scenario, options.get("seed"))
         self.never_observed_uncertainty = scenario.never_observed_uncertainty()
@@ -179,21 +199,33 @@ class MissionEnv(gym.Env):
 
     def _observation(self) -> np.ndarray:
         w = self._world()
-        return self.layout.encode(w.agent, w.means, w.logdets, w.seen,
-                                  w.remaining_budget / w.mission.budget)
+        return self.layout.encode(
+            w.agent, w.means, w.logdets, w.seen, w.remaining_budget / w.mission.budget
+        )
 
     def _info(self) -> dict[str, Any]:
         w = self._world()
-        return {"U": w.uncertainty, "per_target_logdet": w.logdets.copy(),
-                "never_observed_U": self.never_observed_uncertainty,
-                "detected": w.seen.copy(), "step": w.step_index}
+        return {
+            "U": w.uncertainty,
+            "per_target_logdet": w.logdets.copy(),
+            "never_observed_U": self.never_observed_uncertainty,
+            "detected": w.seen.copy(),
+            "step": w.step_index,
+        }
 
     # --- rendering ---------------------------------------------------------------------------
     def _record(self) -> None:
         if self.render_mode is not None:
             w = self._world()
-            self._history.append((w.agent.copy(), w.truth.copy(), w.seen.copy(), w.means.copy(),
-                                  w.covariances.copy()))
+            self._history.append(
+                (
+                    w.agent.copy(),
+                    w.truth.copy(),
+                    w.seen.copy(),
+                    w.means.copy(),
+                    w.covariances.copy(),
+                )
+            )
 
     def episode_record(self) -> EpisodeRecord:
         """The episode so far as an :class:`~hptrack.sim.record.EpisodeRecord` (only with
@@ -204,11 +236,19 @@ class MissionEnv(gym.Env):
         agent, truth, seen, means, covs = (np.stack(a) for a in zip(*self._history, strict=True))
         m = w.mission
         return EpisodeRecord(
-            planner=self.spec.id if self.spec is not None else type(self).__name__, seed=w.seed,
-            target_ids=m.target_ids, time_step=m.time_step, sensor_diameter=m.sensor_diameter,
-            agent_path=agent, true_states=truth, belief_steps=np.arange(len(self._history)),
-            belief_means=means, belief_covariances=covs, detections=seen,
-            per_target_logdet=w.logdets.copy())
+            planner=self.spec.id if self.spec is not None else type(self).__name__,
+            seed=w.seed,
+            target_ids=m.target_ids,
+            time_step=m.time_step,
+            sensor_diameter=m.sensor_diameter,
+            agent_path=agent,
+            true_states=truth,
+            belief_steps=np.arange(len(self._history)),
+            belief_means=means,
+            belief_covariances=covs,
+            detections=seen,
+            per_target_logdet=w.logdets.copy(),
+        )
 
     def render(self) -> np.ndarray | None:
         """The mission figure of the episode so far (:func:`hptrack.viz.mission.plot_mission`)

@@ -60,8 +60,12 @@ class BenchmarkConfig:
     def keys(self) -> list[EpisodeKey]:
         """Every episode of the benchmark, in run order."""
         seeds = range(self.first_seed, self.first_seed + self.scenarios)
-        return [EpisodeKey(p, n, s, self.setting, self.settings[p].canonical())
-                for n in self.target_counts for s in seeds for p in self.planners]
+        return [
+            EpisodeKey(p, n, s, self.setting, self.settings[p].canonical())
+            for n in self.target_counts
+            for s in seeds
+            for p in self.planners
+        ]
 
 
 def setting_name(homogeneous: bool, process_noise_form: str = "continuous") -> str:
@@ -74,8 +78,12 @@ def setting_name(homogeneous: bool, process_noise_form: str = "continuous") -> s
 def scenario_for(key: EpisodeKey) -> Scenario:
     """The random scenario of a benchmark episode."""
     base, _, form = key.setting.partition("+")
-    return random_scenario(key.n_targets, seed=key.seed, homogeneous=base == "homogeneous",
-                           process_noise_form=form or "continuous")
+    return random_scenario(
+        key.n_targets,
+        seed=key.seed,
+        homogeneous=base == "homogeneous",
+        process_noise_form=form or "continuous",
+    )
 
 
 def planner_for(key: EpisodeKey):
@@ -91,13 +99,23 @@ def run_one(key: EpisodeKey) -> EpisodeRow:
     start = time.perf_counter()
     record = run_episode(scenario, planner, belief_stride=scenario.n_steps)
     wall = time.perf_counter() - start
-    return EpisodeRow(key, record.uncertainty, scenario.never_observed_uncertainty(),
-                      int(record.detections.sum()), wall, record.info)
+    return EpisodeRow(
+        key,
+        record.uncertainty,
+        scenario.never_observed_uncertainty(),
+        int(record.detections.sum()),
+        wall,
+        record.info,
+    )
 
 
-def run_benchmark(config: BenchmarkConfig, store: ResultStore, workers: int = 1,
-                  on_done: Callable[[EpisodeRow, int, int], None] | None = None,
-                  executor: Executor | None = None) -> int:
+def run_benchmark(
+    config: BenchmarkConfig,
+    store: ResultStore,
+    workers: int = 1,
+    on_done: Callable[[EpisodeRow, int, int], None] | None = None,
+    executor: Executor | None = None,
+) -> int:
     """Run every episode not yet in ``store``; each is claimed before it runs and stored as soon
     as it finishes.
 
@@ -115,9 +133,13 @@ def run_benchmark(config: BenchmarkConfig, store: ResultStore, workers: int = 1,
     return run_keys(config.keys(), store, workers, on_done, executor)
 
 
-def run_keys(keys: Iterable[EpisodeKey], store: ResultStore, workers: int = 1,
-             on_done: Callable[[EpisodeRow, int, int], None] | None = None,
-             executor: Executor | None = None) -> int:
+def run_keys(
+    keys: Iterable[EpisodeKey],
+    store: ResultStore,
+    workers: int = 1,
+    on_done: Callable[[EpisodeRow, int, int], None] | None = None,
+    executor: Executor | None = None,
+) -> int:
     """:func:`run_benchmark` on any list of episodes (in this order)."""
     store.release_stale_claims()
     done = store.done()
@@ -178,11 +200,13 @@ def summarise(rows: Iterable[EpisodeRow]) -> dict:
         out[planner] = {}
         for n, items in sorted(by_n.items()):
             u = np.array([r.uncertainty for r in items])
-            out[planner][n] = {"mean": float(u.mean()), "std": float(u.std()),
-                               "episodes": len(items),
-                               "never_observed": float(np.mean([r.never_observed
-                                                                for r in items])),
-                               "wall_time_s": float(np.mean([r.wall_time_s for r in items]))}
+            out[planner][n] = {
+                "mean": float(u.mean()),
+                "std": float(u.std()),
+                "episodes": len(items),
+                "never_observed": float(np.mean([r.never_observed for r in items])),
+                "wall_time_s": float(np.mean([r.wall_time_s for r in items])),
+            }
     return out
 
 
@@ -195,6 +219,7 @@ def reductions(summary: dict) -> dict:
             if a == b:
                 continue
             shared = sorted(set(by_a) & set(by_b))
-            out[(a, b)] = {n: 100.0 * (by_b[n]["mean"] - by_a[n]["mean"]) / by_b[n]["mean"]
-                           for n in shared}
+            out[(a, b)] = {
+                n: 100.0 * (by_b[n]["mean"] - by_a[n]["mean"]) / by_b[n]["mean"] for n in shared
+            }
     return out

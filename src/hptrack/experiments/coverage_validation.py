@@ -58,11 +58,31 @@ CASES_FILE = "cases.csv"
 CONFIG_FILE = "config.json"
 
 CASE_FIELDS = (
-    "case", "delay", "mean_x", "mean_y", "vel_x", "vel_y", "var_x", "var_y", "cov_xy", "var_vx",
-    "var_vy", "q", "intercept_time", "t_cutoff", "est_p_find", "emp_p_find",
-    "est_expected_time", "emp_expected_time", "emp_found_in_flight", "emp_p_find_spiral_only",
-    "emp_expected_time_spiral_only", "est_time_from_departure", "emp_time_from_departure",
-    "sharp_p_find", "sharp_expected_time",
+    "case",
+    "delay",
+    "mean_x",
+    "mean_y",
+    "vel_x",
+    "vel_y",
+    "var_x",
+    "var_y",
+    "cov_xy",
+    "var_vx",
+    "var_vy",
+    "q",
+    "intercept_time",
+    "t_cutoff",
+    "est_p_find",
+    "emp_p_find",
+    "est_expected_time",
+    "emp_expected_time",
+    "emp_found_in_flight",
+    "emp_p_find_spiral_only",
+    "emp_expected_time_spiral_only",
+    "est_time_from_departure",
+    "emp_time_from_departure",
+    "sharp_p_find",
+    "sharp_expected_time",
 )
 
 
@@ -97,19 +117,29 @@ class ValidationConfig:
         """The delay in whole steps; raises if it is negative or not a whole number of steps."""
         steps = delay / self.mission.time_step
         if not (math.isfinite(delay) and delay >= 0.0 and abs(steps - round(steps)) < 1e-9):
-            raise ValueError(f"delay {delay!r} s is not a non-negative whole number of "
-                             f"{self.mission.time_step:g} s steps")
+            raise ValueError(
+                f"delay {delay!r} s is not a non-negative whole number of "
+                f"{self.mission.time_step:g} s steps"
+            )
         return round(steps)
 
     def identity(self) -> dict:
         """Everything that determines a case's rows (``cases`` excluded, so runs can extend)."""
         m = self.mission
-        return {"runs": self.runs, "delays": [float(d) for d in self.delays], "seed": self.seed,
-                "mission": {"time_step": m.time_step, "agent_speed": m.agent_speed,
-                            "sensor_diameter": m.sensor_diameter,
-                            "process_noise_form": m.process_noise_form},
-                "block_steps": BLOCK_STEPS, "sampler": "models.motion.advance_true_state",
-                "estimators": ["paper", "sharp"]}
+        return {
+            "runs": self.runs,
+            "delays": [float(d) for d in self.delays],
+            "seed": self.seed,
+            "mission": {
+                "time_step": m.time_step,
+                "agent_speed": m.agent_speed,
+                "sensor_diameter": m.sensor_diameter,
+                "process_noise_form": m.process_noise_form,
+            },
+            "block_steps": BLOCK_STEPS,
+            "sampler": "models.motion.advance_true_state",
+            "estimators": ["paper", "sharp"],
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,23 +181,46 @@ class CoveragePlan:
     sharp: SharpEstimate
 
 
-def plan_coverage(case: CoverageCase, delay_steps: int, mission: MissionSpec,
-                  agent_position: np.ndarray | None = None) -> CoveragePlan:
+def plan_coverage(
+    case: CoverageCase,
+    delay_steps: int,
+    mission: MissionSpec,
+    agent_position: np.ndarray | None = None,
+) -> CoveragePlan:
     """Wait ``delay_steps`` at ``agent_position`` (default the origin), then fly the planner's
     coverage sub-task (intercept, spiral) to ``t_cutoff``."""
     agent = np.zeros(2) if agent_position is None else np.asarray(agent_position, dtype=float)
-    means, covs = mission.motion.predict(case.mean[None], case.covariance[None], case.q,
-                                         delay_steps * mission.time_step)
+    means, covs = mission.motion.predict(
+        case.mean[None], case.covariance[None], case.q, delay_steps * mission.time_step
+    )
     mean, cov = means[0], covs[0]
     single = replace(mission, process_noise=np.array([case.q]), target_ids=("case",))
     subtask = CoverageSubtask(agent, mean, cov, case.q, single, None)
-    return CoveragePlan(mean, cov, subtask.intercept.steps, subtask.estimate,
-                        subtask.planned_positions(), subtask.sharp_estimate)
+    return CoveragePlan(
+        mean,
+        cov,
+        subtask.intercept.steps,
+        subtask.estimate,
+        subtask.planned_positions(),
+        subtask.sharp_estimate,
+    )
 
 
 @numba.njit(cache=True)
-def _advance_block(states, active, noise, path, first_step, flight_steps, sqrt_q, tau,
-                   c_per_step, radius2, first_any, first_spiral):
+def _advance_block(
+    states,
+    active,
+    noise,
+    path,
+    first_step,
+    flight_steps,
+    sqrt_q,
+    tau,
+    c_per_step,
+    radius2,
+    first_any,
+    first_spiral,
+):
     """Advance the ``active`` runs through steps ``first_step ..`` with unit normal ``noise``
     ``(runs, steps, 4)`` and record detections; a run stops at its first detection on the
     spiral (step >= ``flight_steps``)."""
@@ -187,14 +240,15 @@ def _advance_block(states, active, noise, path, first_step, flight_steps, sqrt_q
                     break
 
 
-def first_detections(plan: CoveragePlan, q: float, mission: MissionSpec, runs: int,
-                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def first_detections(
+    plan: CoveragePlan, q: float, mission: MissionSpec, runs: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """Monte Carlo of the fixed plan: for each of ``runs`` sampled trajectories, the first step
     (from departure) at which the target is detected, and the first such step on the spiral
     (``>= n``); ``-1`` when not detected by ``t_cutoff``.
     """
     states = rng.multivariate_normal(plan.mean, plan.covariance, size=runs, method="cholesky")
-    radius2 = mission.sensor_radius ** 2
+    radius2 = mission.sensor_radius**2
     n = plan.intercept_steps
     first_any = np.full(runs, -1, dtype=np.int64)
     first_spiral = np.full(runs, -1, dtype=np.int64)
@@ -208,8 +262,20 @@ def first_detections(plan: CoveragePlan, q: float, mission: MissionSpec, runs: i
     while step < total and active.size:
         block = min(BLOCK_STEPS, total - step)
         noise = rng.standard_normal((active.size, block, 4))
-        _advance_block(states, active, noise, plan.path, step, n, math.sqrt(q),
-                       mission.time_step, mission.c_per_step, radius2, first_any, first_spiral)
+        _advance_block(
+            states,
+            active,
+            noise,
+            plan.path,
+            step,
+            n,
+            math.sqrt(q),
+            mission.time_step,
+            mission.c_per_step,
+            radius2,
+            first_any,
+            first_spiral,
+        )
         active = active[first_spiral[active] < 0]
         step += block
     return first_any, first_spiral
@@ -219,8 +285,9 @@ def _mean_or_nan(values: np.ndarray) -> float:
     return float(np.mean(values)) if values.size else math.nan
 
 
-def case_rows(case: CoverageCase, config: ValidationConfig,
-              keep_times: bool = False) -> tuple[list[dict], dict]:
+def case_rows(
+    case: CoverageCase, config: ValidationConfig, keep_times: bool = False
+) -> tuple[list[dict], dict]:
     """Plan, estimate and simulate every delay of one case.
 
     Returns:
@@ -233,37 +300,52 @@ def case_rows(case: CoverageCase, config: ValidationConfig,
         d = config.delay_steps(delay)
         plan = plan_coverage(case, d, s)
         rng = np.random.default_rng(
-            np.random.SeedSequence(config.seed, spawn_key=(case.index, 1 + d)))
+            np.random.SeedSequence(config.seed, spawn_key=(case.index, 1 + d))
+        )
         first_any, first_spiral = first_detections(plan, case.q, s, config.runs, rng)
         n, est = plan.intercept_steps, plan.estimate
         found = first_any >= 0
         coverage_time = np.maximum(first_any[found] - n, 0) * s.time_step
         spiral_found = first_spiral >= 0
-        rows.append({
-            "case": case.index, "delay": float(delay),
-            "mean_x": case.mean[0], "mean_y": case.mean[1],
-            "vel_x": case.mean[2], "vel_y": case.mean[3],
-            "var_x": case.covariance[0, 0], "var_y": case.covariance[1, 1],
-            "cov_xy": case.covariance[0, 1], "var_vx": case.covariance[2, 2],
-            "var_vy": case.covariance[3, 3], "q": case.q,
-            "intercept_time": n * s.time_step, "t_cutoff": est.cutoff_time,
-            "est_p_find": est.p_find, "emp_p_find": float(np.mean(found)),
-            "est_expected_time": est.expected_time,
-            "emp_expected_time": _mean_or_nan(coverage_time),
-            "emp_found_in_flight": float(np.mean(found & (first_any < n))),
-            "emp_p_find_spiral_only": float(np.mean(spiral_found)),
-            "emp_expected_time_spiral_only": _mean_or_nan(
-                (first_spiral[spiral_found] - n) * s.time_step),
-            "est_time_from_departure": n * s.time_step + est.expected_time,
-            "emp_time_from_departure": _mean_or_nan(first_any[found] * s.time_step),
-            "sharp_p_find": plan.sharp.p_find,
-            "sharp_expected_time": plan.sharp.expected_time,
-        })
+        rows.append(
+            {
+                "case": case.index,
+                "delay": float(delay),
+                "mean_x": case.mean[0],
+                "mean_y": case.mean[1],
+                "vel_x": case.mean[2],
+                "vel_y": case.mean[3],
+                "var_x": case.covariance[0, 0],
+                "var_y": case.covariance[1, 1],
+                "cov_xy": case.covariance[0, 1],
+                "var_vx": case.covariance[2, 2],
+                "var_vy": case.covariance[3, 3],
+                "q": case.q,
+                "intercept_time": n * s.time_step,
+                "t_cutoff": est.cutoff_time,
+                "est_p_find": est.p_find,
+                "emp_p_find": float(np.mean(found)),
+                "est_expected_time": est.expected_time,
+                "emp_expected_time": _mean_or_nan(coverage_time),
+                "emp_found_in_flight": float(np.mean(found & (first_any < n))),
+                "emp_p_find_spiral_only": float(np.mean(spiral_found)),
+                "emp_expected_time_spiral_only": _mean_or_nan(
+                    (first_spiral[spiral_found] - n) * s.time_step
+                ),
+                "est_time_from_departure": n * s.time_step + est.expected_time,
+                "emp_time_from_departure": _mean_or_nan(first_any[found] * s.time_step),
+                "sharp_p_find": plan.sharp.p_find,
+                "sharp_expected_time": plan.sharp.expected_time,
+            }
+        )
         if keep_times:
             detection = np.full(config.runs, math.nan)
             detection[found] = coverage_time
-            times[f"{delay:g}"] = {"estimated_cdf": est.cdf, "detection_times": detection,
-                                   "time_step": s.time_step}
+            times[f"{delay:g}"] = {
+                "estimated_cdf": est.cdf,
+                "detection_times": detection,
+                "time_step": s.time_step,
+            }
     return rows, times
 
 
@@ -298,26 +380,30 @@ def summarise(rows: Sequence[dict], delays: Sequence[float]) -> dict[str, dict[s
             "mape_p_find": mape(col("est_p_find"), col("emp_p_find")),
             "mape_expected_time": mape(col("est_expected_time"), col("emp_expected_time")),
             "mape_p_find_spiral_only": mape(col("est_p_find"), col("emp_p_find_spiral_only")),
-            "mape_expected_time_spiral_only": mape(col("est_expected_time"),
-                                                   col("emp_expected_time_spiral_only")),
-            "mape_time_from_departure": mape(col("est_time_from_departure"),
-                                             col("emp_time_from_departure")),
+            "mape_expected_time_spiral_only": mape(
+                col("est_expected_time"), col("emp_expected_time_spiral_only")
+            ),
+            "mape_time_from_departure": mape(
+                col("est_time_from_departure"), col("emp_time_from_departure")
+            ),
             "mean_est_p_find": float(np.mean(col("est_p_find"))) if sel else math.nan,
             "mean_emp_p_find": float(np.mean(col("emp_p_find"))) if sel else math.nan,
-            "mean_est_expected_time": float(np.mean(col("est_expected_time"))) if sel
+            "mean_est_expected_time": float(np.mean(col("est_expected_time"))) if sel else math.nan,
+            "mean_emp_expected_time": float(np.nanmean(col("emp_expected_time")))
+            if sel
             else math.nan,
-            "mean_emp_expected_time": float(np.nanmean(col("emp_expected_time"))) if sel
-            else math.nan,
-            "mean_found_in_flight": float(np.mean(col("emp_found_in_flight"))) if sel
-            else math.nan,
+            "mean_found_in_flight": float(np.mean(col("emp_found_in_flight"))) if sel else math.nan,
             "sharp_mape_p_find": mape(col("sharp_p_find"), col("emp_p_find")),
-            "sharp_mape_expected_time": mape(col("sharp_expected_time"),
-                                             col("emp_time_from_departure")),
+            "sharp_mape_expected_time": mape(
+                col("sharp_expected_time"), col("emp_time_from_departure")
+            ),
             "mean_sharp_p_find": float(np.mean(col("sharp_p_find"))) if sel else math.nan,
-            "mean_sharp_expected_time": float(np.mean(col("sharp_expected_time"))) if sel
+            "mean_sharp_expected_time": float(np.mean(col("sharp_expected_time")))
+            if sel
             else math.nan,
             "mean_emp_time_from_departure": float(np.nanmean(col("emp_time_from_departure")))
-            if sel else math.nan,
+            if sel
+            else math.nan,
         }
     return out
 
@@ -327,8 +413,10 @@ def read_rows(path: Path) -> list[dict]:
     if not path.exists():
         return []
     with path.open(newline="") as f:
-        return [{k: float(v) if k != "case" else int(v) for k, v in row.items()}
-                for row in csv.DictReader(f)]
+        return [
+            {k: float(v) if k != "case" else int(v) for k, v in row.items()}
+            for row in csv.DictReader(f)
+        ]
 
 
 def _check_config(out_dir: Path, config: ValidationConfig) -> None:
@@ -337,14 +425,20 @@ def _check_config(out_dir: Path, config: ValidationConfig) -> None:
     if path.exists():
         stored = json.loads(path.read_text())
         if stored != identity:
-            raise InputError(f"--out {out_dir} holds results of another configuration "
-                             f"({stored}); use another --out folder")
+            raise InputError(
+                f"--out {out_dir} holds results of another configuration "
+                f"({stored}); use another --out folder"
+            )
     else:
         path.write_text(json.dumps(identity, indent=2) + "\n")
 
 
-def run_validation(config: ValidationConfig, out_dir: Path, workers: int = 1,
-                   on_case: Callable[[int, int], None] | None = None) -> list[dict]:
+def run_validation(
+    config: ValidationConfig,
+    out_dir: Path,
+    workers: int = 1,
+    on_case: Callable[[int, int], None] | None = None,
+) -> list[dict]:
     """Run (or resume) the experiment, appending each finished case's rows to
     ``out_dir/cases.csv``; cases already there are skipped.
 
@@ -397,28 +491,35 @@ def run_validation(config: ValidationConfig, out_dir: Path, workers: int = 1,
 
 def table_markdown(summary: dict[str, dict[str, float]], wall_time: float | None = None) -> str:
     """The MAPE table (percent) of both estimators beside the paper's Table I, as Markdown."""
-    lines = ["| t_d (s) | cases | MAPE(P_find), paper's estimator | sharp | paper's Table I | "
-             "MAPE(E[T_find]), paper's estimator | sharp | paper's Table I |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| t_d (s) | cases | MAPE(P_find), paper's estimator | sharp | paper's Table I | "
+        "MAPE(E[T_find]), paper's estimator | sharp | paper's Table I |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for delay, s in summary.items():
         paper = PAPER_MAPE.get(delay)
         p_p, p_t = (f"{paper[0]:.2f} %", f"{paper[1]:.2f} %") if paper else ("-", "-")
-        lines.append(f"| {delay} | {s['cases']} | {s['mape_p_find']:.2f} % | "
-                     f"{s['sharp_mape_p_find']:.2f} % | {p_p} | "
-                     f"{s['mape_expected_time']:.2f} % | {s['sharp_mape_expected_time']:.2f} % | "
-                     f"{p_t} |")
+        lines.append(
+            f"| {delay} | {s['cases']} | {s['mape_p_find']:.2f} % | "
+            f"{s['sharp_mape_p_find']:.2f} % | {p_p} | "
+            f"{s['mape_expected_time']:.2f} % | {s['sharp_mape_expected_time']:.2f} % | "
+            f"{p_t} |"
+        )
     lines.append("")
-    lines.append("E[T_find]: the paper's estimator from the start of the coverage (flight "
-                 "detections at 0); the sharp estimator's expected sub-task duration given a "
-                 "find, from departure, against the simulated detection time from departure.")
+    lines.append(
+        "E[T_find]: the paper's estimator from the start of the coverage (flight "
+        "detections at 0); the sharp estimator's expected sub-task duration given a "
+        "find, from departure, against the simulated detection time from departure."
+    )
     if wall_time is not None:
         lines.append("")
         lines.append(f"Wall time: {wall_time:.0f} s.")
     return "\n".join(lines) + "\n"
 
 
-def write_reports(summary: dict[str, dict[str, float]], out_dir: Path,
-                  wall_time: float | None = None) -> None:
+def write_reports(
+    summary: dict[str, dict[str, float]], out_dir: Path, wall_time: float | None = None
+) -> None:
     """``mape.md`` (the table), ``mape.csv`` (every summary figure per delay) and
     ``mape-both.json`` (:func:`mape_json_both`)."""
     (out_dir / "mape.md").write_text(table_markdown(summary, wall_time))
@@ -433,15 +534,22 @@ def write_reports(summary: dict[str, dict[str, float]], out_dir: Path,
 
 def mape_json(summary: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
     """``{"0": {"mape_p_find": .., "mape_expected_time": ..}, ...}`` (percent)."""
-    return {d: {"mape_p_find": s["mape_p_find"], "mape_expected_time": s["mape_expected_time"]}
-            for d, s in summary.items()}
+    return {
+        d: {"mape_p_find": s["mape_p_find"], "mape_expected_time": s["mape_expected_time"]}
+        for d, s in summary.items()
+    }
 
 
-def mape_json_both(summary: dict[str, dict[str, float]]
-                   ) -> dict[str, dict[str, dict[str, float]]]:
+def mape_json_both(summary: dict[str, dict[str, float]]) -> dict[str, dict[str, dict[str, float]]]:
     """``{"paper": mape_json(summary), "sharp": {delay: {"mape_p_find", "mape_expected_time"}}}``
     (percent; the sharp estimator's time is its duration from departure)."""
-    return {"paper": mape_json(summary),
-            "sharp": {d: {"mape_p_find": s["sharp_mape_p_find"],
-                          "mape_expected_time": s["sharp_mape_expected_time"]}
-                      for d, s in summary.items()}}
+    return {
+        "paper": mape_json(summary),
+        "sharp": {
+            d: {
+                "mape_p_find": s["sharp_mape_p_find"],
+                "mape_expected_time": s["sharp_mape_expected_time"],
+            }
+            for d, s in summary.items()
+        },
+    }

@@ -44,8 +44,9 @@ class DaskPool:
     address: str
 
 
-def check_dask_options(scheduler: str | None, local_workers: int | None,
-                       timeout_s: float = SCHEDULER_TIMEOUT_S) -> None:
+def check_dask_options(
+    scheduler: str | None, local_workers: int | None, timeout_s: float = SCHEDULER_TIMEOUT_S
+) -> None:
     """Refuse contradictory or impossible Dask options, and a missing Dask, before any work.
 
     Raises:
@@ -53,26 +54,32 @@ def check_dask_options(scheduler: str | None, local_workers: int | None,
             Dask not installed (one line naming the option and its value).
     """
     if scheduler is not None and local_workers is not None:
-        raise InputError(f"give --scheduler ({scheduler}) or --dask-local ({local_workers}), "
-                         "not both")
+        raise InputError(
+            f"give --scheduler ({scheduler}) or --dask-local ({local_workers}), not both"
+        )
     if scheduler is None and local_workers is None:
         return
-    option = (f"--scheduler {scheduler}" if scheduler is not None
-              else f"--dask-local {local_workers}")
+    option = (
+        f"--scheduler {scheduler}" if scheduler is not None else f"--dask-local {local_workers}"
+    )
     if local_workers is not None and local_workers < 1:
-        raise InputError(f"--dask-local must be a positive number of worker processes, "
-                         f"got {local_workers}")
+        raise InputError(
+            f"--dask-local must be a positive number of worker processes, got {local_workers}"
+        )
     if scheduler is not None and not scheduler.strip():
-        raise InputError(f"--scheduler expects a scheduler address such as "
-                         f"tcp://host:8786, got {scheduler!r}")
+        raise InputError(
+            f"--scheduler expects a scheduler address such as tcp://host:8786, got {scheduler!r}"
+        )
     if not timeout_s > 0:
-        raise InputError(f"--scheduler-timeout must be a positive number of seconds, "
-                         f"got {timeout_s}")
+        raise InputError(
+            f"--scheduler-timeout must be a positive number of seconds, got {timeout_s}"
+        )
     try:
         import distributed  # noqa: F401
     except ImportError as err:
-        raise InputError(f"{option}: Dask is not installed ({err}); "
-                         "pip install 'hptrack[dask]'") from None
+        raise InputError(
+            f"{option}: Dask is not installed ({err}); pip install 'hptrack[dask]'"
+        ) from None
 
 
 def _one_line(err: BaseException) -> str:
@@ -86,16 +93,18 @@ def _probe(address: str, timeout_s: float) -> None:
     from distributed.security import Security
 
     async def probe() -> None:
-        comm = await connect(address, timeout=timeout_s,
-                             **Security().get_connection_args("client"))
+        comm = await connect(address, timeout=timeout_s, **Security().get_connection_args("client"))
         await comm.close()
 
     asyncio.run(probe())
 
 
 @contextmanager
-def dask_executor(scheduler: str | None = None, local_workers: int | None = None,
-                  timeout_s: float = SCHEDULER_TIMEOUT_S) -> Iterator[DaskPool]:
+def dask_executor(
+    scheduler: str | None = None,
+    local_workers: int | None = None,
+    timeout_s: float = SCHEDULER_TIMEOUT_S,
+) -> Iterator[DaskPool]:
     """Connect to the Dask scheduler at ``scheduler`` (e.g. ``tcp://host:8786``), or start a
     local cluster of ``local_workers`` processes with one thread each on 127.0.0.1 (no
     dashboard) and close it on exit.
@@ -114,17 +123,26 @@ def dask_executor(scheduler: str | None = None, local_workers: int | None = None
             try:
                 _probe(scheduler, timeout_s)
             except (ValueError, TypeError) as err:
-                raise InputError(f"--scheduler {scheduler}: not a Dask scheduler address such "
-                                 f"as tcp://host:8786 ({_one_line(err)})") from None
+                raise InputError(
+                    f"--scheduler {scheduler}: not a Dask scheduler address such "
+                    f"as tcp://host:8786 ({_one_line(err)})"
+                ) from None
             except OSError as err:
-                raise InputError(f"--scheduler {scheduler}: no Dask scheduler answered within "
-                                 f"{timeout_s:g} s ({_one_line(err)})") from None
-            client = stack.enter_context(Client(scheduler, timeout=timeout_s,
-                                                set_as_default=False))
+                raise InputError(
+                    f"--scheduler {scheduler}: no Dask scheduler answered within "
+                    f"{timeout_s:g} s ({_one_line(err)})"
+                ) from None
+            client = stack.enter_context(Client(scheduler, timeout=timeout_s, set_as_default=False))
         else:
-            cluster = stack.enter_context(LocalCluster(
-                n_workers=local_workers, threads_per_worker=1, processes=True,
-                host="127.0.0.1", dashboard_address=None))
+            cluster = stack.enter_context(
+                LocalCluster(
+                    n_workers=local_workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    host="127.0.0.1",
+                    dashboard_address=None,
+                )
+            )
             client = stack.enter_context(Client(cluster, set_as_default=False))
         threads = sum(client.nthreads().values())
         logger.info("Dask scheduler %s: %d worker threads", client.scheduler.address, threads)

@@ -15,19 +15,44 @@ def effort_label(key: EpisodeKey) -> str:
     """The planning effort an episode's settings set (``"none"`` for a planner without one)."""
     return planner_entry(key.planner).settings_type.from_canonical(key.settings).effort_label()
 
+
 # Paper, Tables II and III (mean +- std of U over its random cases), for side-by-side reports.
 PAPER_TABLE = {
-    "ARVI (paper)": {2: (40.64, 11.58), 3: (62.84, 12.69), 4: (83.55, 13.30),
-                     5: (105.51, 15.22), 6: (127.71, 15.25)},
-    "A* with heuristic (paper)": {2: (46.35, 1.52), 3: (69.42, 2.24), 4: (93.05, 2.81),
-                                  5: (115.84, 3.65), 6: (139.42, 3.57)},
-    "hierarchical, homogeneous (paper)": {2: (13.99, 3.97), 3: (26.25, 7.03), 4: (51.47, 17.07),
-                                          5: (83.59, 21.33), 6: (112.10, 17.62)},
-    "ADFQ (paper)": {2: (50.90, 1.47), 3: (75.76, 2.72), 4: (101.14, 3.02), 5: (126.22, 2.88),
-                     6: (152.10, 3.05)},
-    "hierarchical, heterogeneous (paper)": {2: (35.87, 6.87), 3: (59.77, 7.15),
-                                            4: (83.38, 7.93), 5: (108.61, 8.06),
-                                            6: (134.76, 7.76)},
+    "ARVI (paper)": {
+        2: (40.64, 11.58),
+        3: (62.84, 12.69),
+        4: (83.55, 13.30),
+        5: (105.51, 15.22),
+        6: (127.71, 15.25),
+    },
+    "A* with heuristic (paper)": {
+        2: (46.35, 1.52),
+        3: (69.42, 2.24),
+        4: (93.05, 2.81),
+        5: (115.84, 3.65),
+        6: (139.42, 3.57),
+    },
+    "hierarchical, homogeneous (paper)": {
+        2: (13.99, 3.97),
+        3: (26.25, 7.03),
+        4: (51.47, 17.07),
+        5: (83.59, 21.33),
+        6: (112.10, 17.62),
+    },
+    "ADFQ (paper)": {
+        2: (50.90, 1.47),
+        3: (75.76, 2.72),
+        4: (101.14, 3.02),
+        5: (126.22, 2.88),
+        6: (152.10, 3.05),
+    },
+    "hierarchical, heterogeneous (paper)": {
+        2: (35.87, 6.87),
+        3: (59.77, 7.15),
+        4: (83.38, 7.93),
+        5: (108.61, 8.06),
+        6: (134.76, 7.76),
+    },
 }
 
 
@@ -37,28 +62,50 @@ def markdown_tables(rows: list[EpisodeRow], paper_rows: tuple[str, ...] = ()) ->
     ns = sorted({n for by_n in summary.values() for n in by_n})
     head = "| planner | " + " | ".join(f"n={n}" for n in ns) + " |"
     rule = "|---|" + "---|" * len(ns)
-    lines = ["Mean +- std of U (lower is better); episodes per cell in brackets.", "",
-             head, rule]
+    lines = ["Mean +- std of U (lower is better); episodes per cell in brackets.", "", head, rule]
     for planner, by_n in summary.items():
-        cells = [f"{by_n[n]['mean']:.2f} +- {by_n[n]['std']:.2f} ({by_n[n]['episodes']})"
-                 if n in by_n else "" for n in ns]
+        cells = [
+            f"{by_n[n]['mean']:.2f} +- {by_n[n]['std']:.2f} ({by_n[n]['episodes']})"
+            if n in by_n
+            else ""
+            for n in ns
+        ]
         lines.append(f"| {planner} | " + " | ".join(cells) + " |")
     first = next(iter(summary.values()))
-    lines.append("| never observed (same scenarios) | " + " | ".join(
-        f"{first[n]['never_observed']:.2f}" if n in first else "" for n in ns) + " |")
+    lines.append(
+        "| never observed (same scenarios) | "
+        + " | ".join(f"{first[n]['never_observed']:.2f}" if n in first else "" for n in ns)
+        + " |"
+    )
     for name in paper_rows:
         paper = PAPER_TABLE[name]
-        lines.append(f"| {name} | " + " | ".join(
-            f"{paper[n][0]:.2f} +- {paper[n][1]:.2f}" if n in paper else "" for n in ns) + " |")
-    lines += ["", "Reduction of mean U, percent (row planner against column baseline):", "",
-              "| planner vs baseline | " + " | ".join(f"n={n}" for n in ns) + " |", rule]
+        lines.append(
+            f"| {name} | "
+            + " | ".join(
+                f"{paper[n][0]:.2f} +- {paper[n][1]:.2f}" if n in paper else "" for n in ns
+            )
+            + " |"
+        )
+    lines += [
+        "",
+        "Reduction of mean U, percent (row planner against column baseline):",
+        "",
+        "| planner vs baseline | " + " | ".join(f"n={n}" for n in ns) + " |",
+        rule,
+    ]
     for (a, b), by_n in reductions(summary).items():
-        lines.append(f"| {a} vs {b} | " + " | ".join(
-            f"{by_n[n]:.2f}" if n in by_n else "" for n in ns) + " |")
+        lines.append(
+            f"| {a} vs {b} | "
+            + " | ".join(f"{by_n[n]:.2f}" if n in by_n else "" for n in ns)
+            + " |"
+        )
     lines += ["", "Mean wall time per episode, s:", "", head, rule]
     for planner, by_n in summary.items():
-        lines.append(f"| {planner} | " + " | ".join(
-            f"{by_n[n]['wall_time_s']:.1f}" if n in by_n else "" for n in ns) + " |")
+        lines.append(
+            f"| {planner} | "
+            + " | ".join(f"{by_n[n]['wall_time_s']:.1f}" if n in by_n else "" for n in ns)
+            + " |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -66,18 +113,59 @@ def write_csv(rows: list[EpisodeRow], path: Path) -> None:
     """Per-episode rows and, in a sibling file, the per-cell summary."""
     with open(path, "w", newline="") as fh:
         writer = csv.writer(fh)
-        writer.writerow(["planner", "n_targets", "seed", "setting", "effort", "U",
-                         "never_observed", "detections", "wall_time_s", "settings"])
+        writer.writerow(
+            [
+                "planner",
+                "n_targets",
+                "seed",
+                "setting",
+                "effort",
+                "U",
+                "never_observed",
+                "detections",
+                "wall_time_s",
+                "settings",
+            ]
+        )
         for r in rows:
-            writer.writerow([r.key.planner, r.key.n_targets, r.key.seed, r.key.setting,
-                             effort_label(r.key), r.uncertainty, r.never_observed, r.detections,
-                             r.wall_time_s, r.key.settings])
+            writer.writerow(
+                [
+                    r.key.planner,
+                    r.key.n_targets,
+                    r.key.seed,
+                    r.key.setting,
+                    effort_label(r.key),
+                    r.uncertainty,
+                    r.never_observed,
+                    r.detections,
+                    r.wall_time_s,
+                    r.key.settings,
+                ]
+            )
     summary_path = path.with_name(path.stem + "_summary.csv")
     with open(summary_path, "w", newline="") as fh:
         writer = csv.writer(fh)
-        writer.writerow(["planner", "n_targets", "mean_U", "std_U", "episodes",
-                         "never_observed", "mean_wall_time_s"])
+        writer.writerow(
+            [
+                "planner",
+                "n_targets",
+                "mean_U",
+                "std_U",
+                "episodes",
+                "never_observed",
+                "mean_wall_time_s",
+            ]
+        )
         for planner, by_n in summarise(rows).items():
             for n, cell in by_n.items():
-                writer.writerow([planner, n, cell["mean"], cell["std"], cell["episodes"],
-                                 cell["never_observed"], cell["wall_time_s"]])
+                writer.writerow(
+                    [
+                        planner,
+                        n,
+                        cell["mean"],
+                        cell["std"],
+                        cell["episodes"],
+                        cell["never_observed"],
+                        cell["wall_time_s"],
+                    ]
+                )

@@ -119,14 +119,17 @@ class ResultStore:
             path.parent.mkdir(parents=True, exist_ok=True)
             self._db = sqlite3.connect(str(path), timeout=60.0)
             version = self._db.execute("PRAGMA user_version").fetchone()[0]
-            tables = {r[0] for r in self._db.execute(
-                "SELECT name FROM sqlite_master WHERE type='table'")}
+            tables = {
+                r[0] for r in self._db.execute("SELECT name FROM sqlite_master WHERE type='table'")
+            }
         except (sqlite3.DatabaseError, OSError) as err:
             raise InputError(f"--db {path}: not an hptrack results database ({err})") from None
         if tables and (version != SCHEMA_VERSION or "episodes" not in tables):
             self._db.close()
-            raise InputError(f"--db {path}: a database of another layout (version {version}, "
-                             f"tables {sorted(tables)}); use a new --db file")
+            raise InputError(
+                f"--db {path}: a database of another layout (version {version}, "
+                f"tables {sorted(tables)}); use a new --db file"
+            )
         self._db.executescript(SCHEMA)
         self._db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
         self._db.commit()
@@ -139,16 +142,26 @@ class ResultStore:
         key = row.key
         self._db.execute(
             "INSERT OR IGNORE INTO episodes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (*key._id(), key.settings, row.uncertainty, row.never_observed, row.detections,
-             row.wall_time_s, json.dumps(row.info)))
-        self._db.execute("DELETE FROM claims WHERE planner=? AND n_targets=? AND seed=? AND "
-                         "setting=? AND settings_hash=?", key._id())
+            (
+                *key._id(),
+                key.settings,
+                row.uncertainty,
+                row.never_observed,
+                row.detections,
+                row.wall_time_s,
+                json.dumps(row.info),
+            ),
+        )
+        self._db.execute(
+            "DELETE FROM claims WHERE planner=? AND n_targets=? AND seed=? AND "
+            "setting=? AND settings_hash=?",
+            key._id(),
+        )
         self._db.commit()
 
     def done(self) -> set[EpisodeKey]:
         """Keys of every stored episode."""
-        cur = self._db.execute(
-            "SELECT planner, n_targets, seed, setting, settings FROM episodes")
+        cur = self._db.execute("SELECT planner, n_targets, seed, setting, settings FROM episodes")
         return {EpisodeKey(*r) for r in cur}
 
     def release_stale_claims(self) -> int:
@@ -156,8 +169,12 @@ class ResultStore:
         many were released."""
         now = time.time()
         rows = self._db.execute("SELECT rowid, host, pid, claimed_at FROM claims").fetchall()
-        stale = [r[0] for r in rows if now - r[3] > STALE_CLAIM_S
-                 or (r[1] == self._host and r[2] != self._pid and not _alive(r[2]))]
+        stale = [
+            r[0]
+            for r in rows
+            if now - r[3] > STALE_CLAIM_S
+            or (r[1] == self._host and r[2] != self._pid and not _alive(r[2]))
+        ]
         self._db.executemany("DELETE FROM claims WHERE rowid=?", [(r,) for r in stale])
         self._db.commit()
         return len(stale)
@@ -165,28 +182,36 @@ class ResultStore:
     def claim(self, key: EpisodeKey) -> bool:
         """Claim ``key`` for this process; ``False`` if it is done or another run holds it."""
         with self._db:
-            if self._db.execute("SELECT 1 FROM episodes WHERE planner=? AND n_targets=? AND "
-                                "seed=? AND setting=? AND settings_hash=?",
-                                key._id()).fetchone():
+            if self._db.execute(
+                "SELECT 1 FROM episodes WHERE planner=? AND n_targets=? AND "
+                "seed=? AND setting=? AND settings_hash=?",
+                key._id(),
+            ).fetchone():
                 return False
-            cur = self._db.execute("INSERT OR IGNORE INTO claims VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                                   (*key._id(), self._host, self._pid, time.time()))
+            cur = self._db.execute(
+                "INSERT OR IGNORE INTO claims VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                (*key._id(), self._host, self._pid, time.time()),
+            )
             return cur.rowcount == 1
 
     def release(self, key: EpisodeKey) -> None:
         """Give up this process's claim of ``key`` (an episode that was not run after all)."""
-        self._db.execute("DELETE FROM claims WHERE planner=? AND n_targets=? AND seed=? AND "
-                         "setting=? AND settings_hash=? AND host=? AND pid=?",
-                         (*key._id(), self._host, self._pid))
+        self._db.execute(
+            "DELETE FROM claims WHERE planner=? AND n_targets=? AND seed=? AND "
+            "setting=? AND settings_hash=? AND host=? AND pid=?",
+            (*key._id(), self._host, self._pid),
+        )
         self._db.commit()
 
     def rows(self) -> list[EpisodeRow]:
         """Every stored episode, in key order."""
         cur = self._db.execute(
             "SELECT planner, n_targets, seed, setting, settings, uncertainty, never_observed, "
-            "detections, wall_time_s, info FROM episodes ORDER BY planner, n_targets, seed")
-        return [EpisodeRow(EpisodeKey(*r[:5]), r[5], r[6], r[7], r[8], json.loads(r[9]))
-                for r in cur]
+            "detections, wall_time_s, info FROM episodes ORDER BY planner, n_targets, seed"
+        )
+        return [
+            EpisodeRow(EpisodeKey(*r[:5]), r[5], r[6], r[7], r[8], json.loads(r[9])) for r in cur
+        ]
 
     def close(self) -> None:
         self._db.close()

@@ -52,8 +52,14 @@ from hptrack.models.motion import ConstantVelocityModel
 from hptrack.registry import make_planner, planner_settings
 from hptrack.sim.step import move_towards
 
-__all__ = ["STONESOUP_TO_HPTRACK", "FootprintPositionSensor", "HoverSensorManager",
-           "HptrackSensorManager", "hptrack_beliefs", "process_noise_of"]
+__all__ = [
+    "STONESOUP_TO_HPTRACK",
+    "FootprintPositionSensor",
+    "HoverSensorManager",
+    "HptrackSensorManager",
+    "hptrack_beliefs",
+    "process_noise_of",
+]
 
 log = logging.getLogger(__name__)
 
@@ -66,13 +72,16 @@ def _state_indices(state_mapping: Sequence[int]) -> np.ndarray:
     """Track-state indices of hptrack's ``[x, y, vx, vy]`` given those of ``[x, vx, y, vy]``."""
     mapping = np.asarray(state_mapping)
     if mapping.shape != (4,) or len(set(mapping.tolist())) != 4 or np.any(mapping < 0):
-        raise ValueError("state_mapping must give 4 distinct indices of x, vx, y, vy in the "
-                         f"track state, got {list(state_mapping)}")
+        raise ValueError(
+            "state_mapping must give 4 distinct indices of x, vx, y, vy in the "
+            f"track state, got {list(state_mapping)}"
+        )
     return mapping[list(STONESOUP_TO_HPTRACK)]
 
 
-def hptrack_beliefs(states: Sequence[GaussianState],
-                    state_mapping: Sequence[int] = (0, 1, 2, 3)) -> tuple[np.ndarray, np.ndarray]:
+def hptrack_beliefs(
+    states: Sequence[GaussianState], state_mapping: Sequence[int] = (0, 1, 2, 3)
+) -> tuple[np.ndarray, np.ndarray]:
     """Stacked hptrack beliefs of Stone Soup Gaussian states: means ``(n, 4)`` ordered
     ``[x, y, vx, vy]`` (m, m/s) and covariances ``(n, 4, 4)``.
 
@@ -100,8 +109,10 @@ def process_noise_of(transition_model: CombinedLinearGaussianTransitionModel) ->
     """
     models = getattr(transition_model, "model_list", ())
     if len(models) < 2 or not all(isinstance(m, ConstantVelocity) for m in models[:2]):
-        raise ValueError("the transition model must combine ConstantVelocity models on x and y, "
-                         f"got {transition_model!r}")
+        raise ValueError(
+            "the transition model must combine ConstantVelocity models on x and y, "
+            f"got {transition_model!r}"
+        )
     qx, qy = (float(m.noise_diff_coeff) for m in models[:2])
     if not math.isclose(qx, qy, rel_tol=1e-12, abs_tol=0.0):
         raise ValueError(f"hptrack needs one process noise for x and y, got {qx} and {qy}")
@@ -122,20 +133,23 @@ class FootprintPositionSensor(SimpleSensor):
     diameter: float = Property(doc="Footprint diameter ``w``, m.")
     ndim_state: int = Property(default=4, doc="Dimension of the target state.")
     mapping: Sequence[int] = Property(
-        default=(0, 2), doc="Indices of ``x`` and ``y`` in the target state.")
+        default=(0, 2), doc="Indices of ``x`` and ``y`` in the target state."
+    )
 
     @property
     def measurement_model(self) -> LinearGaussian:
-        return LinearGaussian(ndim_state=self.ndim_state, mapping=self.mapping,
-                              noise_covar=self.noise_covar)
+        return LinearGaussian(
+            ndim_state=self.ndim_state, mapping=self.mapping, noise_covar=self.noise_covar
+        )
 
     def _within(self, xy: np.ndarray) -> bool:
         centre = np.asarray(self.position, dtype=float).reshape(-1)[:2]
         return float(np.hypot(*(xy - centre))) <= 0.5 * self.diameter
 
     def is_detectable(self, state, measurement_model=None) -> bool:
-        return self._within(np.asarray(state.state_vector, dtype=float).reshape(-1)[
-            list(self.mapping)])
+        return self._within(
+            np.asarray(state.state_vector, dtype=float).reshape(-1)[list(self.mapping)]
+        )
 
     def is_clutter_detectable(self, state) -> bool:
         return self._within(np.asarray(state.state_vector, dtype=float).reshape(-1)[:2])
@@ -144,13 +158,16 @@ class FootprintPositionSensor(SimpleSensor):
 def _movable_of(platform: Any) -> MaxSpeedActionableMovable:
     movable = getattr(platform, "movement_controller", platform)
     if not isinstance(movable, MaxSpeedActionableMovable):
-        raise ValueError("the platform must be moved by a MaxSpeedActionableMovable, got "
-                         f"{type(movable).__name__}")
+        raise ValueError(
+            "the platform must be moved by a MaxSpeedActionableMovable, got "
+            f"{type(movable).__name__}"
+        )
     return movable
 
 
-def _position_generator(platform: Any, timestamp: datetime.datetime
-                        ) -> MaxSpeedPositionActionGenerator:
+def _position_generator(
+    platform: Any, timestamp: datetime.datetime
+) -> MaxSpeedPositionActionGenerator:
     (generator,) = platform.actions(timestamp)
     return generator
 
@@ -159,11 +176,16 @@ class HoverSensorManager(SensorManager):
     """Keeps every managed platform where it is (each position generator's default action): the
     baseline that :class:`HptrackSensorManager` must beat."""
 
-    def choose_actions(self, tracks: Iterable[Track], timestamp: datetime.datetime,
-                       nchoose: int = 1, **kwargs) -> list[dict]:
+    def choose_actions(
+        self, tracks: Iterable[Track], timestamp: datetime.datetime, nchoose: int = 1, **kwargs
+    ) -> list[dict]:
         _check_nchoose(nchoose)
-        return [{platform: [generator.default_action for generator in platform.actions(timestamp)]
-                 for platform in self.platforms}]
+        return [
+            {
+                platform: [generator.default_action for generator in platform.actions(timestamp)]
+                for platform in self.platforms
+            }
+        ]
 
 
 class HptrackSensorManager(SensorManager):
@@ -179,37 +201,46 @@ class HptrackSensorManager(SensorManager):
 
     process_noise: float | Mapping[str, float] = Property(
         doc="Target process noise ``q``, m^2/s^3 (:func:`process_noise_of` reads it from a "
-            "transition model): one value for every track, or a mapping of track id to ``q``.")
+        "transition model): one value for every track, or a mapping of track id to ``q``."
+    )
     time_step: float = Property(doc="Decision interval ``tau``, s.")
     planner: str = Property(default="mcts", doc="hptrack planner name (``hptrack.registry``).")
     planner_options: Mapping[str, Any] = Property(
-        default=None, doc="The planner's options, e.g. ``{'iterations': 2000}``.")
+        default=None, doc="The planner's options, e.g. ``{'iterations': 2000}``."
+    )
     budget: float = Property(default=900.0, doc="Mission duration ``B``, s.")
     sensor_diameter: float = Property(
-        default=None, doc="Footprint diameter ``w``, m (default: the platform's sensor's).")
+        default=None, doc="Footprint diameter ``w``, m (default: the platform's sensor's)."
+    )
     measurement_noise: np.ndarray = Property(
-        default=None, doc="Position measurement noise ``R`` (2x2), m^2 (default: the "
-                          "platform's sensor's).")
+        default=None,
+        doc="Position measurement noise ``R`` (2x2), m^2 (default: the platform's sensor's).",
+    )
     state_mapping: Sequence[int] = Property(
-        default=(0, 1, 2, 3), doc="Indices of ``x, vx, y, vy`` in the track states.")
+        default=(0, 1, 2, 3), doc="Indices of ``x, vx, y, vy`` in the track states."
+    )
     discrete_actions: bool = Property(
-        default=False, doc="Take the position generator's action closest to the waypoint "
-                           "instead of flying straight at it at full speed.")
+        default=False,
+        doc="Take the position generator's action closest to the waypoint "
+        "instead of flying straight at it at full speed.",
+    )
     seed: int = Property(default=None, doc="Seed of the planner's random streams.")
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         if len(self.platforms) != 1:
-            raise ValueError(f"HptrackSensorManager flies exactly one platform, got "
-                             f"{len(self.platforms)}")
+            raise ValueError(
+                f"HptrackSensorManager flies exactly one platform, got {len(self.platforms)}"
+            )
         (self._platform,) = self.platforms
         self._movable = _movable_of(self._platform)
         self._settings = planner_settings(self.planner, dict(self.planner_options or {}))
         for name in ("time_step", "budget"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be a positive finite number of seconds, "
-                                 f"got {value!r}")
+                raise ValueError(
+                    f"{name} must be a positive finite number of seconds, got {value!r}"
+                )
         self._diameter, self._noise = self._sensor_model()
         _state_indices(self.state_mapping)
         self._seeds = np.random.SeedSequence(self.seed)
@@ -223,14 +254,17 @@ class HptrackSensorManager(SensorManager):
         if diameter is None or noise is None:
             footprints = [s for s in self.sensors if isinstance(s, FootprintPositionSensor)]
             if len(footprints) != 1:
-                raise ValueError("give sensor_diameter and measurement_noise, or mount one "
-                                 f"FootprintPositionSensor on the platform (found "
-                                 f"{len(footprints)})")
+                raise ValueError(
+                    "give sensor_diameter and measurement_noise, or mount one "
+                    f"FootprintPositionSensor on the platform (found "
+                    f"{len(footprints)})"
+                )
             diameter = footprints[0].diameter if diameter is None else diameter
             noise = footprints[0].noise_covar if noise is None else noise
         if not (math.isfinite(diameter) and diameter > 0.0):
-            raise ValueError(f"sensor_diameter must be a positive number of metres, "
-                             f"got {diameter!r}")
+            raise ValueError(
+                f"sensor_diameter must be a positive number of metres, got {diameter!r}"
+            )
         return float(diameter), check_noise_covariance(np.asarray(noise, dtype=float))
 
     @property
@@ -267,15 +301,18 @@ class HptrackSensorManager(SensorManager):
             raise ValueError(f"process_noise must be finite and >= 0 m^2/s^3, got {q.tolist()}")
         return q
 
-    def _beliefs(self, tracks: Sequence[Track], q: np.ndarray, now: datetime.datetime
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _beliefs(
+        self, tracks: Sequence[Track], q: np.ndarray, now: datetime.datetime
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Means, covariances (predicted to ``now`` when a track is older) and which tracks
         were updated at ``now``."""
         states = [track.state for track in tracks]
         for track, state in zip(tracks, states, strict=True):
             if state.timestamp is None or state.timestamp > now:
-                raise ValueError(f"track {track.id!r} is at {state.timestamp}, the platform at "
-                                 f"{now}: tracks must not be ahead of the platform")
+                raise ValueError(
+                    f"track {track.id!r} is at {state.timestamp}, the platform at "
+                    f"{now}: tracks must not be ahead of the platform"
+                )
         means, covs = hptrack_beliefs(states, self.state_mapping)
         ages = np.array([(now - s.timestamp).total_seconds() for s in states])
         means, covs = ConstantVelocityModel(self.time_step).predict(means, covs, q, ages)
@@ -286,21 +323,28 @@ class HptrackSensorManager(SensorManager):
         position = np.asarray(self._movable.position, dtype=float).reshape(-1)
         return position[list(self._movable.action_mapping)]
 
-    def _start_mission(self, ids: tuple[str, ...], q: np.ndarray,
-                       observation: Observation, now: datetime.datetime) -> None:
+    def _start_mission(
+        self, ids: tuple[str, ...], q: np.ndarray, observation: Observation, now: datetime.datetime
+    ) -> None:
         self._mission = MissionSpec(
-            time_step=self.time_step, budget=self.budget,
-            agent_speed=float(self._movable.max_speed), sensor_diameter=self._diameter,
-            measurement_noise=self._noise, process_noise_form="continuous", process_noise=q,
-            target_ids=ids)
+            time_step=self.time_step,
+            budget=self.budget,
+            agent_speed=float(self._movable.max_speed),
+            sensor_diameter=self._diameter,
+            measurement_noise=self._noise,
+            process_noise_form="continuous",
+            process_noise=q,
+            target_ids=ids,
+        )
         self._mission_start = now
         self._planner = make_planner(self.planner, self._settings)
         (seq,) = self._seeds.spawn(1)
         self._planner.reset(self._mission, observation, np.random.default_rng(seq))
         log.info("new %s mission at %s over %d tracks", self.planner, now, len(ids))
 
-    def _observation(self, step: int, means: np.ndarray, covs: np.ndarray,
-                     detected: np.ndarray) -> Observation:
+    def _observation(
+        self, step: int, means: np.ndarray, covs: np.ndarray, detected: np.ndarray
+    ) -> Observation:
         arrays = [self._agent_position(), means, covs, detected]
         for a in arrays:
             a.flags.writeable = False
@@ -308,12 +352,19 @@ class HptrackSensorManager(SensorManager):
         return Observation(step, time, self.budget - time, *arrays)
 
     # --- waypoint -> action --------------------------------------------------------------
-    def _action(self, generator: MaxSpeedPositionActionGenerator, waypoint: np.ndarray
-                ) -> MovePositionAction:
+    def _action(
+        self, generator: MaxSpeedPositionActionGenerator, waypoint: np.ndarray
+    ) -> MovePositionAction:
         mapping = list(self._movable.action_mapping)
         if self.discrete_actions:
-            return min(generator, key=lambda a: float(np.hypot(
-                *(np.asarray(a.target_value, dtype=float).reshape(-1)[mapping] - waypoint))))
+            return min(
+                generator,
+                key=lambda a: float(
+                    np.hypot(
+                        *(np.asarray(a.target_value, dtype=float).reshape(-1)[mapping] - waypoint)
+                    )
+                ),
+            )
         goal = move_towards(self._agent_position(), waypoint, generator.maximum_travel)
         space = self._movable.action_space
         if space is not None:
@@ -326,8 +377,9 @@ class HptrackSensorManager(SensorManager):
             raise RuntimeError(f"position {goal} is out of the platform's reach")
         return action
 
-    def choose_actions(self, tracks: Iterable[Track], timestamp: datetime.datetime,
-                       nchoose: int = 1, **kwargs) -> list[dict]:
+    def choose_actions(
+        self, tracks: Iterable[Track], timestamp: datetime.datetime, nchoose: int = 1, **kwargs
+    ) -> list[dict]:
         """Plan the platform's move until ``timestamp`` (``time_step`` s after the platform's
         current time) from ``tracks`` (Gaussian states at or before the platform's time).
 
@@ -342,9 +394,11 @@ class HptrackSensorManager(SensorManager):
         now = self._movable.state.timestamp
         interval = (timestamp - now).total_seconds()
         if not math.isclose(interval, self.time_step, rel_tol=1e-9, abs_tol=1e-6):
-            raise ValueError(f"choose_actions for {timestamp} is {interval} s after the "
-                             f"platform's time {now}; this manager decides every "
-                             f"time_step = {self.time_step} s")
+            raise ValueError(
+                f"choose_actions for {timestamp} is {interval} s after the "
+                f"platform's time {now}; this manager decides every "
+                f"time_step = {self.time_step} s"
+            )
         generator = _position_generator(self._platform, timestamp)
         ordered = self._ordered(tracks)
         if not ordered:
@@ -360,9 +414,9 @@ class HptrackSensorManager(SensorManager):
         if restart:
             step = 0
             self._start_mission(ids, q, self._observation(0, means, covs, detected), now)
-        waypoint = np.asarray(self._planner.act(self._observation(step, means, covs, detected)),
-                              dtype=float)
+        waypoint = np.asarray(
+            self._planner.act(self._observation(step, means, covs, detected)), dtype=float
+        )
         if waypoint.shape != (2,) or not np.all(np.isfinite(waypoint)):
-            raise ValueError(f"planner {self.planner!r} returned an invalid waypoint "
-                             f"{waypoint!r}")
+            raise ValueError(f"planner {self.planner!r} returned an invalid waypoint {waypoint!r}")
         return [{self._platform: [self._action(generator, waypoint)]}]

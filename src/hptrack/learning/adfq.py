@@ -36,10 +36,17 @@ def _others_index(n_actions: int) -> np.ndarray:
     return grid[~np.eye(n_actions, dtype=bool)].reshape(n_actions, n_actions - 1)
 
 
-def adfq_posterior(prior_mean: np.ndarray, prior_var: np.ndarray, next_means: np.ndarray,
-                   next_vars: np.ndarray, reward: np.ndarray, discount: float,
-                   terminal: np.ndarray | None = None, noise: float = 0.0,
-                   var_floor: float = VARIANCE_FLOOR) -> tuple[np.ndarray, np.ndarray]:
+def adfq_posterior(
+    prior_mean: np.ndarray,
+    prior_var: np.ndarray,
+    next_means: np.ndarray,
+    next_vars: np.ndarray,
+    reward: np.ndarray,
+    discount: float,
+    terminal: np.ndarray | None = None,
+    noise: float = 0.0,
+    var_floor: float = VARIANCE_FLOOR,
+) -> tuple[np.ndarray, np.ndarray]:
     """ADFQ posterior mean and variance of ``Q(s, a)`` for a batch of transitions.
 
     Args:
@@ -83,9 +90,11 @@ def adfq_posterior(prior_mean: np.ndarray, prior_var: np.ndarray, next_means: np
         # peak and precision when the first k others pull, k = 0..A-1: (B, A, A)
         zero = np.zeros((batch, n_actions, 1))
         prec_k = 1.0 / bar_var[:, :, None] + np.concatenate(
-            [zero, np.cumsum(other_prec, axis=2)], axis=2)
+            [zero, np.cumsum(other_prec, axis=2)], axis=2
+        )
         info_k = (bar_mean / bar_var)[:, :, None] + np.concatenate(
-            [zero, np.cumsum(other_mean * other_prec, axis=2)], axis=2)
+            [zero, np.cumsum(other_mean * other_prec, axis=2)], axis=2
+        )
         peak_k = info_k / prec_k
         # the j-th other pulls if its target lies above the peak with the first j pulling;
         # the scan stops at the first that does not
@@ -93,8 +102,10 @@ def adfq_posterior(prior_mean: np.ndarray, prior_var: np.ndarray, next_means: np
         n_pull = pulls.sum(axis=2)
         peak = np.take_along_axis(peak_k, n_pull[:, :, None], axis=2)[:, :, 0]
         peak_var = 1.0 / np.take_along_axis(prec_k, n_pull[:, :, None], axis=2)[:, :, 0]
-        mismatch = (np.where(pulls, (peak[:, :, None] - other_mean) ** 2 * other_prec, 0.0)
-                    .sum(axis=2) + (peak - bar_mean) ** 2 / bar_var)
+        mismatch = (
+            np.where(pulls, (peak[:, :, None] - other_mean) ** 2 * other_prec, 0.0).sum(axis=2)
+            + (peak - bar_mean) ** 2 / bar_var
+        )
         log_weight = log_evidence + 0.5 * np.log(peak_var / bar_var) - 0.5 * mismatch
 
     # moment matching of the mixture (softmax weights)

@@ -76,14 +76,19 @@ class AdfqAgent:
     def __init__(self, obs_dim: int, n_actions: int, config: AdfqConfig | None = None) -> None:
         self.config = config = config or AdfqConfig()
         self.obs_dim, self.n_actions = obs_dim, n_actions
-        self.online = GaussianQNetwork(obs_dim, n_actions, config.hidden, config.init_mean,
-                                       config.init_sd)
+        self.online = GaussianQNetwork(
+            obs_dim, n_actions, config.hidden, config.init_mean, config.init_sd
+        )
         self.target = copy.deepcopy(self.online)
         self.target.requires_grad_(False)
-        self.optimizer = torch.optim.Adam(self.online.parameters(), lr=config.learning_rate,
-                                          foreach=True)
-        self.replay = (PrioritizedReplayBuffer(config.buffer_size, obs_dim, config.alpha)
-                       if config.prioritized else ReplayBuffer(config.buffer_size, obs_dim))
+        self.optimizer = torch.optim.Adam(
+            self.online.parameters(), lr=config.learning_rate, foreach=True
+        )
+        self.replay = (
+            PrioritizedReplayBuffer(config.buffer_size, obs_dim, config.alpha)
+            if config.prioritized
+            else ReplayBuffer(config.buffer_size, obs_dim)
+        )
         self._huber = nn.HuberLoss(reduction="none")
 
     # --- acting ------------------------------------------------------------------------------
@@ -98,14 +103,14 @@ class AdfqAgent:
         mean, sd = self.beliefs(obs[None])
         return int(np.argmax(mean[0] + sd[0] * rng.standard_normal(self.n_actions)))
 
-    def test_actions(self, obs: np.ndarray, epsilon: float, rng: np.random.Generator
-                     ) -> np.ndarray:
+    def test_actions(self, obs: np.ndarray, epsilon: float, rng: np.random.Generator) -> np.ndarray:
         """The test policy on observations ``(B, d)``: greedy on the means, ``epsilon``-random."""
         return greedy_actions(self.beliefs(obs)[0], epsilon, rng)
 
     # --- learning ----------------------------------------------------------------------------
-    def remember(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
-                 terminal: bool) -> None:
+    def remember(
+        self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray, terminal: bool
+    ) -> None:
         """Store a transition; ``terminal`` only for a true terminal state, never for the time
         limit."""
         self.replay.add(obs, action, reward, next_obs, terminal)
@@ -124,18 +129,25 @@ class AdfqAgent:
         var = np.exp(2.0 * log_sd.numpy().astype(np.float64))
         b = len(batch["action"])
         rows = np.arange(b)
-        return adfq_posterior(mean[rows, batch["action"]], var[rows, batch["action"]],
-                              mean[b:], var[b:], batch["reward"], self.config.gamma,
-                              batch["terminal"], noise=self.config.noise)
+        return adfq_posterior(
+            mean[rows, batch["action"]],
+            var[rows, batch["action"]],
+            mean[b:],
+            var[b:],
+            batch["reward"],
+            self.config.gamma,
+            batch["terminal"],
+            noise=self.config.noise,
+        )
 
-    def train_step(self, rng: np.random.Generator, beta: float | None = None
-                   ) -> dict[str, float]:
+    def train_step(self, rng: np.random.Generator, beta: float | None = None) -> dict[str, float]:
         """One gradient step on a replayed batch; ``beta`` is the importance exponent of
         prioritised replay. Returns the loss and its mean and log-sd parts."""
         cfg = self.config
         if cfg.prioritized:
-            batch = self.replay.sample(cfg.batch_size, rng,
-                                       cfg.beta_start if beta is None else beta)
+            batch = self.replay.sample(
+                cfg.batch_size, rng, cfg.beta_start if beta is None else beta
+            )
         else:
             batch = self.replay.sample(cfg.batch_size, rng)
         target_mean, target_var = self.posterior_targets(batch)
@@ -155,14 +167,20 @@ class AdfqAgent:
         self.optimizer.step()
         if cfg.prioritized:
             self.replay.update_priorities(batch["index"], target_mean - mean.detach().numpy())
-        return {"loss": loss.item(), "mean_loss": mean_loss.detach().mean().item(),
-                "sd_loss": sd_loss.detach().mean().item()}
+        return {
+            "loss": loss.item(),
+            "mean_loss": mean_loss.detach().mean().item(),
+            "sd_loss": sd_loss.detach().mean().item(),
+        }
 
     # --- saving ------------------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
         """Networks and optimiser (the replay is saved separately: it is large)."""
-        return {"online": self.online.state_dict(), "target": self.target.state_dict(),
-                "optimizer": self.optimizer.state_dict()}
+        return {
+            "online": self.online.state_dict(),
+            "target": self.target.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+        }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.online.load_state_dict(state["online"])
@@ -172,8 +190,15 @@ class AdfqAgent:
 
 def save_policy(path: str, network: GaussianQNetwork, metadata: dict[str, Any]) -> None:
     """Write a trained network and what produced it (a small ``.pt`` file)."""
-    torch.save({"format": POLICY_FORMAT, "network": network.config(),
-                "state_dict": network.state_dict(), "metadata": metadata}, path)
+    torch.save(
+        {
+            "format": POLICY_FORMAT,
+            "network": network.config(),
+            "state_dict": network.state_dict(),
+            "metadata": metadata,
+        },
+        path,
+    )
 
 
 def load_policy(path: str) -> tuple[GaussianQNetwork, dict[str, Any]]:
@@ -198,4 +223,3 @@ def set_torch_threads() -> None:
     """One intra-op thread: the network is too small to gain from more."""
     if torch.get_num_threads() != 1:
         torch.set_num_threads(1)
-

@@ -21,8 +21,9 @@ def load_curve(run: Path) -> list[dict[str, Any]]:
     return json.loads(path.read_text())
 
 
-def plot_training_curve(ax: Axes, curve: list[dict[str, Any]], label: str = "validation",
-                        window: int = 10) -> dict[str, Any]:
+def plot_training_curve(
+    ax: Axes, curve: list[dict[str, Any]], label: str = "validation", window: int = 10
+) -> dict[str, Any]:
     """Gap to the never-observed score, ``Delta U = U - U_never`` (lower is better; 0 is a
     policy that never re-acquires a target after the start), against environment steps: each
     training episode (dots, its own scenario) with a running mean over ``window`` episodes,
@@ -30,23 +31,31 @@ def plot_training_curve(ax: Axes, curve: list[dict[str, Any]], label: str = "val
     artists by name."""
     episodes = [e for e in curve if e["kind"] == "episode"]
     validations = [e for e in curve if e["kind"] == "validation"]
-    artists: dict[str, Any] = {"zero": ax.axhline(0.0, color="tab:red", ls="--", lw=1,
-                                                  label="never observed (ΔU = 0)")}
+    artists: dict[str, Any] = {
+        "zero": ax.axhline(0.0, color="tab:red", ls="--", lw=1, label="never observed (ΔU = 0)")
+    }
     if episodes:
         steps = np.array([e["step"] for e in episodes])
         gap = np.array([e["U"] - e["never_observed_U"] for e in episodes])
-        artists["episodes"] = ax.scatter(steps, gap, s=6, alpha=0.35, color="tab:gray",
-                                         label="training episodes")
+        artists["episodes"] = ax.scatter(
+            steps, gap, s=6, alpha=0.35, color="tab:gray", label="training episodes"
+        )
         if len(gap) >= window:
             running = np.convolve(gap, np.ones(window) / window, mode="valid")
-            artists["running"] = ax.plot(steps[window - 1:], running, color="tab:gray",
-                                         label=f"training, mean of {window}")[0]
+            artists["running"] = ax.plot(
+                steps[window - 1 :], running, color="tab:gray", label=f"training, mean of {window}"
+            )[0]
     if validations:
         artists["validation"] = ax.errorbar(
             [e["step"] for e in validations],
             [e["mean_delta_U"] for e in validations],
-            yerr=[e["sem_delta_U"] for e in validations], marker="o", ms=3, capsize=2,
-            color="tab:blue", label=f"{label} mean (± s.e.)")
+            yerr=[e["sem_delta_U"] for e in validations],
+            marker="o",
+            ms=3,
+            capsize=2,
+            color="tab:blue",
+            label=f"{label} mean (± s.e.)",
+        )
     ax.set_xlabel("environment steps")
     ax.set_ylabel("ΔU = U − U never observed")
     ax.grid(alpha=0.3)

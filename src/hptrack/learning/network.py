@@ -23,8 +23,14 @@ INIT_SD = 10.0
 class GaussianQNetwork(nn.Module):
     """``obs (B, d) -> (mean (B, A), sd (B, A))`` through ReLU layers ``hidden``."""
 
-    def __init__(self, obs_dim: int, n_actions: int, hidden: tuple[int, ...] = HIDDEN,
-                 init_mean: float = INIT_MEAN, init_sd: float = INIT_SD) -> None:
+    def __init__(
+        self,
+        obs_dim: int,
+        n_actions: int,
+        hidden: tuple[int, ...] = HIDDEN,
+        init_mean: float = INIT_MEAN,
+        init_sd: float = INIT_SD,
+    ) -> None:
         super().__init__()
         self.obs_dim, self.n_actions, self.hidden = obs_dim, n_actions, tuple(hidden)
         layers: list[nn.Module] = []
@@ -42,16 +48,18 @@ class GaussianQNetwork(nn.Module):
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Means and log standard deviations ``(B, A)`` (log sd clipped)."""
         out = self.head(self.body(obs))
-        mean, rho = out[:, :self.n_actions], out[:, self.n_actions:]
+        mean, rho = out[:, : self.n_actions], out[:, self.n_actions :]
         log_sd = torch.clamp(-rho, math.log(SD_MIN), math.log(SD_MAX))
         return mean, log_sd
 
     def config(self) -> dict[str, object]:
         """What :meth:`from_config` needs to rebuild the architecture."""
-        return {"obs_dim": self.obs_dim, "n_actions": self.n_actions,
-                "hidden": list(self.hidden)}
+        return {"obs_dim": self.obs_dim, "n_actions": self.n_actions, "hidden": list(self.hidden)}
 
     @classmethod
     def from_config(cls, config: dict) -> GaussianQNetwork:
-        return cls(int(config["obs_dim"]), int(config["n_actions"]),
-                   tuple(int(h) for h in config["hidden"]))
+        return cls(
+            int(config["obs_dim"]),
+            int(config["n_actions"]),
+            tuple(int(h) for h in config["hidden"]),
+        )

@@ -44,8 +44,10 @@ def _model_path(planner: str, option: str | None, n_targets: int) -> Path:
         return path
     path = packaged_model(planner, n_targets)
     if not path.is_file():
-        raise InputError(f"planner {planner!r}: no shipped model for {n_targets} targets; "
-                         f"give -o model=PATH (train one with 'hptrack learn')")
+        raise InputError(
+            f"planner {planner!r}: no shipped model for {n_targets} targets; "
+            f"give -o model=PATH (train one with 'hptrack learn')"
+        )
     return path
 
 
@@ -73,8 +75,9 @@ class _DiscretePolicyPlanner(ABC):
     name: str
     settings: AdfqSettings | Sb3Settings
 
-    def reset(self, mission: MissionSpec, observation: Observation,
-              rng: np.random.Generator) -> None:
+    def reset(
+        self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
+    ) -> None:
         from hptrack.envs.observation import ObservationLayout
         from hptrack.envs.tracking import HEADINGS
 
@@ -98,14 +101,18 @@ class _DiscretePolicyPlanner(ABC):
             raise InputError(
                 f"planner {self.name!r}: model {self._model_file} takes {obs_dim} inputs and "
                 f"{n_actions} actions; a {self._mission.n_targets}-target mission needs "
-                f"{self._layout.size} and {len(self._headings)}")
+                f"{self._layout.size} and {len(self._headings)}"
+            )
 
     def encode(self, observation: Observation) -> np.ndarray:
         """The environment's observation vector of ``observation``."""
-        return self._layout.encode(observation.agent_position, observation.means,
-                                   position_logdet(observation.covariances),
-                                   observation.detected,
-                                   observation.remaining_budget / self._mission.budget)
+        return self._layout.encode(
+            observation.agent_position,
+            observation.means,
+            position_logdet(observation.covariances),
+            observation.detected,
+            observation.remaining_budget / self._mission.budget,
+        )
 
     def act(self, observation: Observation) -> np.ndarray:
         action = self._choose(self.encode(observation))
@@ -113,8 +120,11 @@ class _DiscretePolicyPlanner(ABC):
         return observation.agent_position + self._mission.step_length * self._headings[action]
 
     def episode_info(self) -> dict[str, Any]:
-        return {"settings": self.settings.as_json(), "model_file": str(self._model_file),
-                "action_counts": self._actions.tolist()}
+        return {
+            "settings": self.settings.as_json(),
+            "model_file": str(self._model_file),
+            "action_counts": self._actions.tolist(),
+        }
 
 
 class AdfqPlanner(_DiscretePolicyPlanner):
@@ -169,8 +179,9 @@ class Sb3Planner(_DiscretePolicyPlanner):
             self._model = load_model(path)
         except ValueError as err:
             raise InputError(f"planner 'sb3': {err}") from None
-        self._check_sizes(int(np.prod(self._model.observation_space.shape)),
-                          int(self._model.action_space.n))
+        self._check_sizes(
+            int(np.prod(self._model.observation_space.shape)), int(self._model.action_space.n)
+        )
 
     def _choose(self, vector: np.ndarray) -> int:
         if self.settings.deterministic:

@@ -32,8 +32,9 @@ class ReplayBuffer:
     def __len__(self) -> int:
         return self.size
 
-    def add(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
-            terminal: bool) -> int:
+    def add(
+        self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray, terminal: bool
+    ) -> int:
         """Store one transition (overwriting the oldest when full); returns its slot."""
         slot = self.cursor
         self.obs[slot], self.next_obs[slot] = obs, next_obs
@@ -44,10 +45,15 @@ class ReplayBuffer:
 
     def batch(self, index: np.ndarray) -> dict[str, np.ndarray]:
         """The transitions at ``index``."""
-        return {"obs": self.obs[index], "action": self.action[index],
-                "reward": self.reward[index], "next_obs": self.next_obs[index],
-                "terminal": self.terminal[index], "index": index,
-                "weight": np.ones(len(index))}
+        return {
+            "obs": self.obs[index],
+            "action": self.action[index],
+            "reward": self.reward[index],
+            "next_obs": self.next_obs[index],
+            "terminal": self.terminal[index],
+            "index": index,
+            "weight": np.ones(len(index)),
+        }
 
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         """``batch_size`` transitions drawn uniformly (with replacement); weights are 1."""
@@ -56,15 +62,22 @@ class ReplayBuffer:
     def state_dict(self) -> dict[str, np.ndarray]:
         """The filled part of the buffer and its cursor."""
         n = self.size
-        return {"obs": self.obs[:n], "next_obs": self.next_obs[:n], "action": self.action[:n],
-                "reward": self.reward[:n], "terminal": self.terminal[:n],
-                "cursor": np.array(self.cursor)}
+        return {
+            "obs": self.obs[:n],
+            "next_obs": self.next_obs[:n],
+            "action": self.action[:n],
+            "reward": self.reward[:n],
+            "terminal": self.terminal[:n],
+            "cursor": np.array(self.cursor),
+        }
 
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
         n = len(state["action"])
         if n > self.capacity or state["obs"].shape[1:] != (self.obs_dim,):
-            raise ValueError(f"saved replay of {n} x {state['obs'].shape[1:]} does not fit "
-                             f"a buffer of {self.capacity} x ({self.obs_dim},)")
+            raise ValueError(
+                f"saved replay of {n} x {state['obs'].shape[1:]} does not fit "
+                f"a buffer of {self.capacity} x ({self.obs_dim},)"
+            )
         for name in ("obs", "next_obs", "action", "reward", "terminal"):
             getattr(self, name)[:n] = state[name]
         self.size, self.cursor = n, int(state["cursor"])
@@ -88,8 +101,9 @@ class PrioritizedReplayBuffer(ReplayBuffer):
             nodes = np.unique(nodes // 2)
             self.tree[nodes] = self.tree[2 * nodes] + self.tree[2 * nodes + 1]
 
-    def add(self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray,
-            terminal: bool) -> int:
+    def add(
+        self, obs: np.ndarray, action: int, reward: float, next_obs: np.ndarray, terminal: bool
+    ) -> int:
         slot = super().add(obs, action, reward, next_obs, terminal)
         self._set(np.array([slot]), np.array([self.max_priority**self.alpha]))
         return slot
@@ -103,8 +117,9 @@ class PrioritizedReplayBuffer(ReplayBuffer):
             node = np.where(go_right, left + 1, left)
         return np.minimum(node - self._leaves, self.size - 1)
 
-    def sample(self, batch_size: int, rng: np.random.Generator, beta: float = 0.4
-               ) -> dict[str, np.ndarray]:
+    def sample(
+        self, batch_size: int, rng: np.random.Generator, beta: float = 0.4
+    ) -> dict[str, np.ndarray]:
         """Stratified proportional sample with importance weights (exponent ``beta``)."""
         total = self.tree[1]
         edges = np.linspace(0.0, total, batch_size + 1)
@@ -123,7 +138,7 @@ class PrioritizedReplayBuffer(ReplayBuffer):
 
     def state_dict(self) -> dict[str, np.ndarray]:
         state = super().state_dict()
-        state["priority"] = self.tree[self._leaves:self._leaves + self.size].copy()
+        state["priority"] = self.tree[self._leaves : self._leaves + self.size].copy()
         state["max_priority"] = np.array(self.max_priority)
         return state
 

@@ -88,17 +88,23 @@ class PpoTrainer:
         if config.steps < 1:
             raise InputError(f"--steps must be at least 1, got {config.steps}")
         if config.n_steps % config.batch_size:
-            raise InputError(f"batch_size {config.batch_size} must divide n_steps "
-                             f"{config.n_steps}")
+            raise InputError(f"batch_size {config.batch_size} must divide n_steps {config.n_steps}")
         self.task, self.config, self.out = task, config, Path(out)
-        self.metadata = {"task": task.description, "train": {"algorithm": "PPO",
-                                                             **config.identity()}}
+        self.metadata = {
+            "task": task.description,
+            "train": {"algorithm": "PPO", **config.identity()},
+        }
         check_run_config(self.out, self.metadata)
         set_torch_threads()
-        self.state: dict[str, Any] = {"step": 0, "episodes": 0, "last_checkpoint": 0,
-                                      "curve": [],
-                                      "best_u": float("inf"), "best_step": -1,
-                                      "checkpoint": None}
+        self.state: dict[str, Any] = {
+            "step": 0,
+            "episodes": 0,
+            "last_checkpoint": 0,
+            "curve": [],
+            "best_u": float("inf"),
+            "best_step": -1,
+            "checkpoint": None,
+        }
         if (self.out / "state.json").exists():
             self.state = json.loads((self.out / "state.json").read_text())
 
@@ -111,13 +117,24 @@ class PpoTrainer:
         env = DummyVecEnv([lambda: Monitor(self.task.make_env())])
         if self.state["checkpoint"] is not None:
             model = PPO.load(str(self.out / self.state["checkpoint"]), env=env, device="cpu")
-            model.set_random_seed(int(np.random.SeedSequence([cfg.seed, self.state["step"]])
-                                      .generate_state(1)[0]))
+            model.set_random_seed(
+                int(np.random.SeedSequence([cfg.seed, self.state["step"]]).generate_state(1)[0])
+            )
             return model
-        return PPO("MlpPolicy", env, learning_rate=cfg.learning_rate, n_steps=cfg.n_steps,
-                   batch_size=cfg.batch_size, n_epochs=cfg.n_epochs, gamma=cfg.gamma,
-                   gae_lambda=cfg.gae_lambda, ent_coef=cfg.ent_coef, seed=cfg.seed,
-                   device="cpu", verbose=0)
+        return PPO(
+            "MlpPolicy",
+            env,
+            learning_rate=cfg.learning_rate,
+            n_steps=cfg.n_steps,
+            batch_size=cfg.batch_size,
+            n_epochs=cfg.n_epochs,
+            gamma=cfg.gamma,
+            gae_lambda=cfg.gae_lambda,
+            ent_coef=cfg.ent_coef,
+            seed=cfg.seed,
+            device="cpu",
+            verbose=0,
+        )
 
     def save_checkpoint(self, model) -> None:
         """The model first, then the state that names it."""
@@ -135,8 +152,9 @@ class PpoTrainer:
                 old.unlink()
 
     def validate(self, model) -> dict[str, Any]:
-        entry = validation_entry(int(model.num_timesteps),
-                                 run_validation(_policy(model), self.task))
+        entry = validation_entry(
+            int(model.num_timesteps), run_validation(_policy(model), self.task)
+        )
         self.state["curve"].append(entry)
         if entry["mean_U"] < self.state["best_u"]:
             self.state["best_u"], self.state["best_step"] = entry["mean_U"], entry["step"]
@@ -165,18 +183,30 @@ class PpoTrainer:
                 for info in self.locals["infos"]:
                     if "episode" in info:
                         state["episodes"] += 1
-                        state["curve"].append({
-                            "kind": "episode", "step": step, "episode": state["episodes"],
-                            "return": float(info["episode"]["r"]),
-                            "U": float(info.get("U", np.nan)),
-                            "never_observed_U": float(info.get("never_observed_U", np.nan))})
+                        state["curve"].append(
+                            {
+                                "kind": "episode",
+                                "step": step,
+                                "episode": state["episodes"],
+                                "return": float(info["episode"]["r"]),
+                                "U": float(info.get("U", np.nan)),
+                                "never_observed_U": float(info.get("never_observed_U", np.nan)),
+                            }
+                        )
                 state["step"] = step
                 if step % cfg.validation_interval == 0:
                     trainer.validate(self.model)
                 if on_progress is not None:
-                    on_progress(Progress(step, cfg.steps, state["episodes"],
-                                         trainer._recent_return(), trainer._last_validation(),
-                                         state["best_u"]))
+                    on_progress(
+                        Progress(
+                            step,
+                            cfg.steps,
+                            state["episodes"],
+                            trainer._recent_return(),
+                            trainer._last_validation(),
+                            state["best_u"],
+                        )
+                    )
                 return True
 
             def _on_rollout_end(self) -> None:
@@ -187,8 +217,7 @@ class PpoTrainer:
             self.validate(model)
         remaining = cfg.steps - int(model.num_timesteps)
         if remaining > 0:
-            model.learn(total_timesteps=remaining, callback=_Callback(),
-                        reset_num_timesteps=False)
+            model.learn(total_timesteps=remaining, callback=_Callback(), reset_num_timesteps=False)
         step = int(model.num_timesteps)
         validated = any(e["kind"] == "validation" and e["step"] == step for e in state["curve"])
         if not validated:
@@ -196,7 +225,11 @@ class PpoTrainer:
         if not validated or state["last_checkpoint"] != step:
             self.save_checkpoint(model)
         model.get_env().close()
-        return {"steps": step, "episodes": state["episodes"],
-                "best_U": state["best_u"], "best_step": state["best_step"],
-                "last_validation_U": self._last_validation(),
-                "best_model": str(self.out / "best.zip")}
+        return {
+            "steps": step,
+            "episodes": state["episodes"],
+            "best_U": state["best_u"],
+            "best_step": state["best_step"],
+            "last_validation_U": self._last_validation(),
+            "best_model": str(self.out / "best.zip"),
+        }

@@ -70,8 +70,12 @@ class Task:
         return gym.make(self.env_id, **self.env_kwargs)
 
 
-def tracking_task(n_targets: int, homogeneous: bool = False, validation_scenarios: int = 50,
-                  action_repeat: int = 1) -> Task:
+def tracking_task(
+    n_targets: int,
+    homogeneous: bool = False,
+    validation_scenarios: int = 50,
+    action_repeat: int = 1,
+) -> Task:
     """``hptrack/Tracking-v0`` with ``n_targets`` random targets and validation on the random
     scenarios of seeds ``VALIDATION_FIRST_SEED + i``."""
     import hptrack.envs  # noqa: F401  (registers the environments)
@@ -82,13 +86,22 @@ def tracking_task(n_targets: int, homogeneous: bool = False, validation_scenario
     if validation_scenarios < 1:
         raise InputError(f"--validation-scenarios must be at least 1, got {validation_scenarios}")
     setting = "homogeneous" if homogeneous else "heterogeneous"
-    scenarios = tuple(random_scenario(n_targets, VALIDATION_FIRST_SEED + i, homogeneous)
-                      for i in range(validation_scenarios))
-    return Task("hptrack/Tracking-v0", {"n_targets": n_targets, "setting": setting},
-                tuple({"options": {"scenario": s}} for s in scenarios),
-                {"env": "hptrack/Tracking-v0", "n_targets": n_targets, "setting": setting,
-                 "validation_scenarios": validation_scenarios,
-                 "validation_first_seed": VALIDATION_FIRST_SEED})
+    scenarios = tuple(
+        random_scenario(n_targets, VALIDATION_FIRST_SEED + i, homogeneous)
+        for i in range(validation_scenarios)
+    )
+    return Task(
+        "hptrack/Tracking-v0",
+        {"n_targets": n_targets, "setting": setting},
+        tuple({"options": {"scenario": s}} for s in scenarios),
+        {
+            "env": "hptrack/Tracking-v0",
+            "n_targets": n_targets,
+            "setting": setting,
+            "validation_scenarios": validation_scenarios,
+            "validation_first_seed": VALIDATION_FIRST_SEED,
+        },
+    )
 
 
 @dataclass(frozen=True)
@@ -132,14 +145,16 @@ class _State:
     best_step: int = -1
 
 
-def run_validation(policy: Callable[[np.ndarray], np.ndarray], task: Task
-                   ) -> list[dict[str, float]]:
+def run_validation(
+    policy: Callable[[np.ndarray], np.ndarray], task: Task
+) -> list[dict[str, float]]:
     """Fly ``policy`` (observations ``(B, d)`` -> actions ``(B,)``) on every validation episode
     of ``task`` in lockstep (one batched call per step); returns per episode the return, the
     final ``U`` and the never-observed ``U`` (``info["never_observed_U"]``, NaN without)."""
     envs = [task.make_env() for _ in task.validation]
-    obs = np.stack([env.reset(**kwargs)[0] for env, kwargs in zip(envs, task.validation,
-                                                                   strict=True)])
+    obs = np.stack(
+        [env.reset(**kwargs)[0] for env, kwargs in zip(envs, task.validation, strict=True)]
+    )
     returns = np.zeros(len(envs))
     results: list[dict[str, float]] = [{} for _ in envs]
     active = np.arange(len(envs))
@@ -150,8 +165,11 @@ def run_validation(policy: Callable[[np.ndarray], np.ndarray], task: Task
             obs[i], reward, terminated, truncated, info = envs[i].step(int(actions[j]))
             returns[i] += reward
             if terminated or truncated:
-                results[i] = {"return": float(returns[i]), "U": float(info["U"]),
-                              "never_observed_U": float(info.get("never_observed_U", np.nan))}
+                results[i] = {
+                    "return": float(returns[i]),
+                    "U": float(info["U"]),
+                    "never_observed_U": float(info.get("never_observed_U", np.nan)),
+                }
             else:
                 still.append(i)
         active = np.asarray(still, dtype=int)
@@ -168,14 +186,21 @@ def validation_entry(step: int, results: list[dict[str, float]]) -> dict[str, An
     def sem(x: np.ndarray) -> float:
         return float(x.std(ddof=1) / np.sqrt(len(x))) if len(x) > 1 else 0.0
 
-    return {"kind": "validation", "step": step, "mean_U": float(u.mean()), "sem_U": sem(u),
-            "mean_never_observed_U": float(np.mean([r["never_observed_U"] for r in results])),
-            "mean_delta_U": float(gap.mean()), "sem_delta_U": sem(gap),
-            "mean_return": float(np.mean([r["return"] for r in results]))}
+    return {
+        "kind": "validation",
+        "step": step,
+        "mean_U": float(u.mean()),
+        "sem_U": sem(u),
+        "mean_never_observed_U": float(np.mean([r["never_observed_U"] for r in results])),
+        "mean_delta_U": float(gap.mean()),
+        "sem_delta_U": sem(gap),
+        "mean_return": float(np.mean([r["return"] for r in results])),
+    }
 
 
-def network_policy(network: GaussianQNetwork, epsilon: float, rng: np.random.Generator
-                   ) -> Callable[[np.ndarray], np.ndarray]:
+def network_policy(
+    network: GaussianQNetwork, epsilon: float, rng: np.random.Generator
+) -> Callable[[np.ndarray], np.ndarray]:
     """The test policy of a Deep ADFQ network: greedy on the means, ``epsilon``-random."""
 
     def policy(obs: np.ndarray) -> np.ndarray:
@@ -213,8 +238,10 @@ def check_run_config(out: Path, config: dict[str, Any]) -> None:
         for key in sorted(set(saved.get(section, {})) | set(config[section])):
             old, new = saved.get(section, {}).get(key), config[section].get(key)
             if old != new:
-                raise InputError(f"--out {out}: this run was started with {key}={old!r}, not "
-                                 f"{new!r}; use the same options or another folder")
+                raise InputError(
+                    f"--out {out}: this run was started with {key}={old!r}, not "
+                    f"{new!r}; use the same options or another folder"
+                )
 
 
 class Trainer:
@@ -227,8 +254,9 @@ class Trainer:
             if getattr(config, name) < 1:
                 raise InputError(f"{name} must be at least 1, got {getattr(config, name)}")
         if not 0.0 <= config.validation_epsilon <= 1.0:
-            raise InputError(f"validation_epsilon must be in [0, 1], got "
-                             f"{config.validation_epsilon}")
+            raise InputError(
+                f"validation_epsilon must be in [0, 1], got {config.validation_epsilon}"
+            )
         self.task, self.config, self.out = task, config, Path(out)
         self.metadata = {"task": task.description, "train": config.identity()}
         check_run_config(self.out, self.metadata)
@@ -237,8 +265,9 @@ class Trainer:
         space = self.env.observation_space
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(config.seed)
-            self.agent = AdfqAgent(int(np.prod(space.shape)), int(self.env.action_space.n),
-                                   config.agent)
+            self.agent = AdfqAgent(
+                int(np.prod(space.shape)), int(self.env.action_space.n), config.agent
+            )
         self.rng = np.random.default_rng(np.random.SeedSequence(config.seed))
         self.state = _State()
         if (self.out / "checkpoint.pt").exists():
@@ -261,9 +290,15 @@ class Trainer:
         np.savez(tmp, **self.agent.replay.state_dict())
         os.replace(tmp, self.out / replay_file)
         s.last_checkpoint = s.step
-        atomic_torch_save({"agent": self.agent.state_dict(), "rng": self.rng.bit_generator.state,
-                            "state": asdict(s), "replay_file": replay_file},
-                           self.out / "checkpoint.pt")
+        atomic_torch_save(
+            {
+                "agent": self.agent.state_dict(),
+                "rng": self.rng.bit_generator.state,
+                "state": asdict(s),
+                "replay_file": replay_file,
+            },
+            self.out / "checkpoint.pt",
+        )
         atomic_write(json.dumps(s.curve) + "\n", self.out / "curve.json")
         for old in self.out.glob("replay-*.npz"):
             if old.name != replay_file:
@@ -278,9 +313,16 @@ class Trainer:
         s.curve.append(entry)
         if entry["mean_U"] < s.best_u:
             s.best_u, s.best_step = entry["mean_U"], s.step
-            save_policy(str(self.out / "best.pt"), self.agent.online, {
-                **self.metadata, "step": s.step, "validation_mean_U": entry["mean_U"],
-                "validation_epsilon": cfg.validation_epsilon})
+            save_policy(
+                str(self.out / "best.pt"),
+                self.agent.online,
+                {
+                    **self.metadata,
+                    "step": s.step,
+                    "validation_mean_U": entry["mean_U"],
+                    "validation_epsilon": cfg.validation_epsilon,
+                },
+            )
         return entry
 
     # --- the loop ----------------------------------------------------------------------------
@@ -319,11 +361,17 @@ class Trainer:
                     agent.sync_target()
             if terminated or truncated:
                 s.episodes += 1
-                s.curve.append({"kind": "episode", "step": s.step, "episode": s.episodes,
-                                "return": episode_return, "U": float(info.get("U", np.nan)),
-                                "never_observed_U": float(info.get("never_observed_U",
-                                                                   np.nan)),
-                                "loss": float(np.mean(losses)) if losses else None})
+                s.curve.append(
+                    {
+                        "kind": "episode",
+                        "step": s.step,
+                        "episode": s.episodes,
+                        "return": episode_return,
+                        "U": float(info.get("U", np.nan)),
+                        "never_observed_U": float(info.get("never_observed_U", np.nan)),
+                        "loss": float(np.mean(losses)) if losses else None,
+                    }
+                )
                 obs = None
             else:
                 obs = next_obs
@@ -332,14 +380,27 @@ class Trainer:
             if obs is None and s.step - s.last_checkpoint >= cfg.checkpoint_interval:
                 self.save_checkpoint()
             if on_progress is not None:
-                on_progress(Progress(s.step, cfg.steps, s.episodes, self._recent_return(),
-                                     self._last_validation(), s.best_u))
+                on_progress(
+                    Progress(
+                        s.step,
+                        cfg.steps,
+                        s.episodes,
+                        self._recent_return(),
+                        self._last_validation(),
+                        s.best_u,
+                    )
+                )
         validated = any(e["kind"] == "validation" and e["step"] == s.step for e in s.curve)
         if not validated:
             self.validate()
         if not validated or s.last_checkpoint != s.step:
             self.save_checkpoint()
         self.env.close()
-        return {"steps": s.step, "episodes": s.episodes, "best_U": s.best_u,
-                "best_step": s.best_step, "last_validation_U": self._last_validation(),
-                "best_model": str(self.out / "best.pt")}
+        return {
+            "steps": s.step,
+            "episodes": s.episodes,
+            "best_U": s.best_u,
+            "best_step": s.best_step,
+            "last_validation_U": self._last_validation(),
+            "best_model": str(self.out / "best.pt"),
+        }

@@ -49,7 +49,8 @@ class TargetBeliefs:
     def predict(self, duration: float) -> None:
         """Propagate every belief ``duration`` seconds with Eq. (1) (closed form, any gap)."""
         self.means, self.covariances = self.motion.predict(
-            self.means, self.covariances, self.process_noise, duration)
+            self.means, self.covariances, self.process_noise, duration
+        )
 
     def update(self, indices: np.ndarray, measurements: np.ndarray) -> None:
         """Kalman-update the beliefs of targets ``indices`` with position ``measurements``."""
@@ -69,5 +70,10 @@ class TargetBeliefs:
 
     def copy(self) -> TargetBeliefs:
         """An independent copy (arrays copied, models shared)."""
-        return TargetBeliefs(self.means.copy(), self.covariances.copy(),
-                             self.process_noise.copy(), self.motion, self.sensor)
+        return TargetBeliefs(
+            self.means.copy(),
+            self.covariances.copy(),
+            self.process_noise.copy(),
+            self.motion,
+            self.sensor,
+        )

@@ -27,16 +27,35 @@ def _gain(cov, noise):
     g10, g11 = p01 * i00 + p11 * i01, p01 * i01 + p11 * i11
     g20, g21 = p02 * i00 + p12 * i01, p02 * i01 + p12 * i11
     g30, g31 = p03 * i00 + p13 * i01, p03 * i01 + p13 * i11
-    return (g00, g01, g10, g11, g20, g21, g30, g31,
-            p00, p01, p02, p03, p11, p12, p13, p22, p23, p33)
+    return (
+        g00,
+        g01,
+        g10,
+        g11,
+        g20,
+        g21,
+        g30,
+        g31,
+        p00,
+        p01,
+        p02,
+        p03,
+        p11,
+        p12,
+        p13,
+        p22,
+        p23,
+        p33,
+    )
 
 
 @numba.njit(cache=True)
 def update_covariance(cov, noise, out):
     """Posterior covariance of a position measurement with noise ``R = noise`` (2x2):
     ``out = P - P H' (H P H' + R)^-1 H P`` (symmetric by construction; ``out`` may be ``cov``)."""
-    (g00, g01, g10, g11, g20, g21, g30, g31,
-     p00, p01, p02, p03, p11, p12, p13, p22, p23, p33) = _gain(cov, noise)
+    (g00, g01, g10, g11, g20, g21, g30, g31, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33) = (
+        _gain(cov, noise)
+    )
     out[0, 0] = p00 - (g00 * p00 + g01 * p01)
     out[1, 1] = p11 - (g10 * p01 + g11 * p11)
     out[2, 2] = p22 - (g20 * p02 + g21 * p12)
@@ -68,8 +87,7 @@ def kalman_update(mean, cov, z, noise, mean_out, cov_out):
 @numba.njit(cache=True)
 def _update_stacked(means, covariances, measurements, noise):
     for i in range(means.shape[0]):
-        kalman_update(means[i], covariances[i], measurements[i], noise, means[i],
-                      covariances[i])
+        kalman_update(means[i], covariances[i], measurements[i], noise, means[i], covariances[i])
 
 
 def check_noise_covariance(noise: np.ndarray) -> np.ndarray:
@@ -97,24 +115,29 @@ class PositionMeasurementModel:
         sensor_diameter: footprint diameter ``w``, m; targets within ``w/2`` are measured.
     """
 
-    def __init__(self, noise_covariance: np.ndarray | None = None,
-                 sensor_diameter: float = 100.0) -> None:
-        r = check_noise_covariance(10.0 * np.eye(2) if noise_covariance is None
-                                   else noise_covariance)
+    def __init__(
+        self, noise_covariance: np.ndarray | None = None, sensor_diameter: float = 100.0
+    ) -> None:
+        r = check_noise_covariance(
+            10.0 * np.eye(2) if noise_covariance is None else noise_covariance
+        )
         r.flags.writeable = False
         self.noise_covariance = r
         self.sensor_diameter = float(sensor_diameter)
         self._factor = np.linalg.cholesky(r)
 
     @classmethod
-    def isotropic(cls, noise_std: float, sensor_diameter: float = 100.0
-                  ) -> PositionMeasurementModel:
+    def isotropic(
+        cls, noise_std: float, sensor_diameter: float = 100.0
+    ) -> PositionMeasurementModel:
         """``R = noise_std^2 I`` (``noise_std`` in m per axis)."""
         return cls(noise_std**2 * np.eye(2), sensor_diameter)
 
     def __repr__(self) -> str:
-        return (f"PositionMeasurementModel(noise_covariance={self.noise_covariance.tolist()}, "
-                f"sensor_diameter={self.sensor_diameter})")
+        return (
+            f"PositionMeasurementModel(noise_covariance={self.noise_covariance.tolist()}, "
+            f"sensor_diameter={self.sensor_diameter})"
+        )
 
     def in_footprint(self, agent_position: np.ndarray, positions: np.ndarray) -> np.ndarray:
         """Boolean mask ``(n,)``: which positions ``(n, 2)`` lie within ``w/2`` of the agent."""
@@ -127,11 +150,16 @@ class PositionMeasurementModel:
         e = rng.standard_normal(np.shape(positions))
         return positions + e @ self._factor.T
 
-    def update(self, means: np.ndarray, covariances: np.ndarray, measurements: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def update(
+        self, means: np.ndarray, covariances: np.ndarray, measurements: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Kalman update of stacked beliefs ``(m, 4)``, ``(m, 4, 4)`` with ``z`` ``(m, 2)``."""
         new_means = np.array(means, dtype=float)
         new_covs = np.array(covariances, dtype=float)
-        _update_stacked(new_means, new_covs, np.ascontiguousarray(measurements, dtype=float),
-                        self.noise_covariance)
+        _update_stacked(
+            new_means,
+            new_covs,
+            np.ascontiguousarray(measurements, dtype=float),
+            self.noise_covariance,
+        )
         return new_means, new_covs

@@ -58,8 +58,9 @@ def _position_block(cov, t, qpp):
 
 
 @numba.njit(cache=True)
-def position_covariance_after(cov: np.ndarray, q: float, steps: float, tau: float,
-                              c_per_step: float) -> tuple:
+def position_covariance_after(
+    cov: np.ndarray, q: float, steps: float, tau: float, c_per_step: float
+) -> tuple:
     """2x2 position covariance ``(sxx, sxy, syy)`` after ``steps`` prediction steps, in m^2.
 
     ``cov`` is the 4x4 state covariance now. O(1) in ``steps`` (Eq. (1) in closed form).
@@ -110,9 +111,18 @@ def position_polynomials(cov, q, tau, c_per_step):
     n1 = q * (a - tau * b + tau * tau * c / 6.0)
     n2 = q * (tau * b - tau * tau * c / 2.0)
     n3 = q * tau * tau * c / 3.0
-    return (cov[0, 0], 2.0 * tau * cov[0, 2] + n1, tau * tau * cov[2, 2] + n2,
-            cov[1, 1], 2.0 * tau * cov[1, 3] + n1, tau * tau * cov[3, 3] + n2,
-            cov[0, 1], tau * (cov[0, 3] + cov[2, 1]), tau * tau * cov[2, 3], n3)
+    return (
+        cov[0, 0],
+        2.0 * tau * cov[0, 2] + n1,
+        tau * tau * cov[2, 2] + n2,
+        cov[1, 1],
+        2.0 * tau * cov[1, 3] + n1,
+        tau * tau * cov[3, 3] + n2,
+        cov[0, 1],
+        tau * (cov[0, 3] + cov[2, 1]),
+        tau * tau * cov[2, 3],
+        n3,
+    )
 
 
 @numba.njit(cache=True, inline="always")
@@ -215,8 +225,13 @@ class ConstantVelocityModel:
         fill_process_noise(float(q), steps, self.time_step, self.c_per_step, out)
         return out
 
-    def predict(self, means: np.ndarray, covariances: np.ndarray, q: np.ndarray | float,
-                duration: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    def predict(
+        self,
+        means: np.ndarray,
+        covariances: np.ndarray,
+        q: np.ndarray | float,
+        duration: np.ndarray | float,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Predict stacked beliefs ``(n, 4)``, ``(n, 4, 4)`` over ``duration`` seconds in closed
         form (any non-negative duration, not only whole steps).
 
@@ -225,21 +240,32 @@ class ConstantVelocityModel:
         means = np.ascontiguousarray(means, dtype=float)
         n = means.shape[0]
         q = np.ascontiguousarray(np.broadcast_to(np.asarray(q, dtype=float), (n,)))
-        steps = np.ascontiguousarray(np.broadcast_to(
-            np.asarray(duration, dtype=float) / self.time_step, (n,)))
+        steps = np.ascontiguousarray(
+            np.broadcast_to(np.asarray(duration, dtype=float) / self.time_step, (n,))
+        )
         out_means = np.empty((n, 4))
         out_covs = np.empty((n, 4, 4))
-        _predict_stacked(means, np.ascontiguousarray(covariances, dtype=float), q, steps,
-                         self.time_step, self.c_per_step, out_means, out_covs)
+        _predict_stacked(
+            means,
+            np.ascontiguousarray(covariances, dtype=float),
+            q,
+            steps,
+            self.time_step,
+            self.c_per_step,
+            out_means,
+            out_covs,
+        )
         return out_means, out_covs
 
-    def sample_motion(self, states: np.ndarray, q: np.ndarray, rng: np.random.Generator
-                      ) -> np.ndarray:
+    def sample_motion(
+        self, states: np.ndarray, q: np.ndarray, rng: np.random.Generator
+    ) -> np.ndarray:
         """Propagate true states ``(n, 4)`` one step with ``w ~ N(0, Q_i)`` noise."""
         out = np.array(states, dtype=float)
         z = rng.standard_normal(out.shape)
-        _sample_stacked(out, z, np.sqrt(np.asarray(q, dtype=float)), self.time_step,
-                        self.c_per_step)
+        _sample_stacked(
+            out, z, np.sqrt(np.asarray(q, dtype=float)), self.time_step, self.c_per_step
+        )
         return out
 
 

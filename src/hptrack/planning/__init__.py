@@ -7,5 +7,14 @@ from hptrack.planning.search import SearchResult, search, search_mdp
 from hptrack.planning.subtask_mdp import PlanningProblem
 from hptrack.planning.tree import ActionStats
 
-__all__ = ["ActionStats", "MdpKernels", "PlanningProblem", "SearchResult", "UniformRandom",
-           "register_mdp", "register_policy", "search", "search_mdp"]
+__all__ = [
+    "ActionStats",
+    "MdpKernels",
+    "PlanningProblem",
+    "SearchResult",
+    "UniformRandom",
+    "register_mdp",
+    "register_policy",
+    "search",
+    "search_mdp",
+]

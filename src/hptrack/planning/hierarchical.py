@@ -42,12 +42,24 @@ DEFAULT_ITERATIONS = 100_000
 
 
 PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {"backup": "sampled", "max_weight": 1.0, "root_split": "even",
-              "common_rollouts": False, "rollout": "uniform", "estimator": "paper",
-              "dwell": 0.0},
-    "improved": {"backup": "max", "max_weight": 1.0, "root_split": "even",
-                 "common_rollouts": False, "rollout": "uniform", "estimator": "paper",
-                 "dwell": 0.0},
+    "paper": {
+        "backup": "sampled",
+        "max_weight": 1.0,
+        "root_split": "even",
+        "common_rollouts": False,
+        "rollout": "uniform",
+        "estimator": "paper",
+        "dwell": 0.0,
+    },
+    "improved": {
+        "backup": "max",
+        "max_weight": 1.0,
+        "root_split": "even",
+        "common_rollouts": False,
+        "rollout": "uniform",
+        "estimator": "paper",
+        "dwell": 0.0,
+    },
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
 improvements measured in ``docs/planner-improvements.md``."""
@@ -119,8 +131,10 @@ class MctsSettings(PlannerSettings):
     @model_validator(mode="after")
     def _max_weight_needs_the_max_backup(self) -> MctsSettings:
         if self.max_weight != 1.0 and self.backup != "max":
-            raise ValueError(f"option max_weight={self.max_weight:g} applies only to "
-                             f"backup=max, got backup={self.backup}")
+            raise ValueError(
+                f"option max_weight={self.max_weight:g} applies only to "
+                f"backup=max, got backup={self.backup}"
+            )
         return self
 
     @classmethod
@@ -167,10 +181,20 @@ def warm_up(policy: tuple = UniformRandom(), estimator: str = "paper") -> None:
         return
     cov = np.diag([1000.0, 1000.0, 0.4, 0.4])
     for fixed in (None, 0):
-        problem = PlanningProblem(np.zeros(2), np.array([[300.0, 0, 1, 0], [-300.0, 0, 0, 1]]),
-                                  np.stack([cov, cov]), np.full(2, 3e-4), 60.0, 0.5, 0.5, 30.0,
-                                  100.0, 10.0 * np.eye(2), current_action=fixed,
-                                  estimator=estimator)
+        problem = PlanningProblem(
+            np.zeros(2),
+            np.array([[300.0, 0, 1, 0], [-300.0, 0, 0, 1]]),
+            np.stack([cov, cov]),
+            np.full(2, 3e-4),
+            60.0,
+            0.5,
+            0.5,
+            30.0,
+            100.0,
+            10.0 * np.eye(2),
+            current_action=fixed,
+            estimator=estimator,
+        )
         search(problem, iterations=64, seed=0, policy=policy)
     _warmed.add((type(policy), estimator))
 
@@ -189,20 +213,42 @@ class HierarchicalPlanner:
         self.policy = self.settings.rollout_policy()
 
     # --- planning -------------------------------------------------------------------------
-    def _search(self, observation: Observation, current_action: int | None = None,
-                last_found: int | None = None) -> SearchResult:
+    def _search(
+        self,
+        observation: Observation,
+        current_action: int | None = None,
+        last_found: int | None = None,
+    ) -> SearchResult:
         problem = PlanningProblem.from_mission(
-            self._mission, observation, available=self._available, last_found=last_found,
-            current_action=current_action, estimator=self.settings.estimator,
-            dwell_time=self.settings.dwell)
-        result = search(problem, iterations=self.iterations, time_limit=self.time_limit,
-                        seed=self._rng, exploration=self.exploration, policy=self.policy,
-                        backup=self.settings.backup, threads=self.settings.threads,
-                        max_weight=self.settings.max_weight,
-                        weighted_root=self.settings.root_split == "weighted",
-                        common_rollouts=self.settings.common_rollouts)
-        self._searches.append({"step": observation.step, "simulations": result.simulations,
-                               "elapsed_s": result.elapsed, "stopped_by": result.stopped_by})
+            self._mission,
+            observation,
+            available=self._available,
+            last_found=last_found,
+            current_action=current_action,
+            estimator=self.settings.estimator,
+            dwell_time=self.settings.dwell,
+        )
+        result = search(
+            problem,
+            iterations=self.iterations,
+            time_limit=self.time_limit,
+            seed=self._rng,
+            exploration=self.exploration,
+            policy=self.policy,
+            backup=self.settings.backup,
+            threads=self.settings.threads,
+            max_weight=self.settings.max_weight,
+            weighted_root=self.settings.root_split == "weighted",
+            common_rollouts=self.settings.common_rollouts,
+        )
+        self._searches.append(
+            {
+                "step": observation.step,
+                "simulations": result.simulations,
+                "elapsed_s": result.elapsed,
+                "stopped_by": result.stopped_by,
+            }
+        )
         return result
 
     def _feasible(self, observation: Observation, target: int) -> bool:
@@ -210,8 +256,17 @@ class HierarchicalPlanner:
         if not self._available[target]:
             return False
         m, agent, mission = observation.means[target], observation.agent_position, self._mission
-        steps = intercept_steps(agent[0], agent[1], m[0], m[1], m[2], m[3], mission.agent_speed,
-                                mission.time_step, mission.sensor_radius)
+        steps = intercept_steps(
+            agent[0],
+            agent[1],
+            m[0],
+            m[1],
+            m[2],
+            m[3],
+            mission.agent_speed,
+            mission.time_step,
+            mission.sensor_radius,
+        )
         return 0 <= steps < steps_left(observation.remaining_budget, mission.time_step)
 
     def _dwell_feasible(self, observation: Observation, last_found: int | None) -> bool:
@@ -224,22 +279,26 @@ class HierarchicalPlanner:
         self._follow = target
         self._subtask = None
         self._dwell_end = observation.step + self._dwell_steps
-        plan = self._search(observation, current_action=self._mission.n_targets,
-                            last_found=target)
+        plan = self._search(observation, current_action=self._mission.n_targets, last_found=target)
         self._plan = (plan.best_after_find, None)
-        self._log.append({"dwell": target, "start_step": observation.step,
-                          "plan_after_dwell": self._plan[0]})
+        self._log.append(
+            {"dwell": target, "start_step": observation.step, "plan_after_dwell": self._plan[0]}
+        )
 
     def _start(self, observation: Observation, target: int) -> None:
         """Begin a sub-task on ``target`` and re-plan with it fixed (conditional plan)."""
         self._subtask = CoverageSubtask.from_observation(observation, target, self._mission)
         plan = self._search(observation, current_action=target)
         self._plan = (plan.best_after_find, plan.best_after_miss)
-        self._log.append({**self._subtask.summary(), "plan_after_find": self._plan[0],
-                          "plan_after_miss": self._plan[1]})
+        self._log.append(
+            {
+                **self._subtask.summary(),
+                "plan_after_find": self._plan[0],
+                "plan_after_miss": self._plan[1],
+            }
+        )
 
-    def _next(self, observation: Observation, planned: int | None,
-              last_found: int | None) -> None:
+    def _next(self, observation: Observation, planned: int | None, last_found: int | None) -> None:
         """Carry on after a sub-task: follow, dwell, start the planned target, or plan
         afresh."""
         dwell = self._mission.n_targets  # the dwell's action index
@@ -265,8 +324,9 @@ class HierarchicalPlanner:
         self._start(observation, planned)
 
     # --- Planner protocol ----------------------------------------------------------------
-    def reset(self, mission: MissionSpec, observation: Observation,
-              rng: np.random.Generator) -> None:
+    def reset(
+        self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
+    ) -> None:
         if self.time_limit is not None:
             warm_up(self.policy, self.settings.estimator)
         self._mission = mission
@@ -287,12 +347,12 @@ class HierarchicalPlanner:
         if subtask is not None and subtask.done(observation):
             found = subtask.found(observation)
             target = subtask.target_index
-            self._log[-1].update(outcome="found" if found else "missed",
-                                 end_step=observation.step)
+            self._log[-1].update(outcome="found" if found else "missed", end_step=observation.step)
             if not found:
                 self._available[target] = False
-            self._next(observation, self._plan[0] if found else self._plan[1],
-                       target if found else None)
+            self._next(
+                observation, self._plan[0] if found else self._plan[1], target if found else None
+            )
         if self._dwell_end is not None and observation.step >= self._dwell_end:
             target = self._follow
             self._follow = self._dwell_end = None
@@ -307,5 +367,8 @@ class HierarchicalPlanner:
     def episode_info(self) -> dict:
         """The sub-tasks flown (plan, estimate, outcome; a planned action ``n`` is the dwell),
         every search's effort, the settings."""
-        return {"settings": self.settings.as_json(), "subtasks": self._log,
-                "searches": self._searches}
+        return {
+            "settings": self.settings.as_json(),
+            "subtasks": self._log,
+            "searches": self._searches,
+        }

@@ -173,14 +173,21 @@ def _catch_up(tree, env, path_action, path_found, applied, depth, root, state, w
     for d in range(applied, depth):
         x = path_action[d]
         found = path_found[d]
-        mdp_apply(env, state, np.int64(tree.a_target[x]), found,
-                  tree.a_find[x] if found else tree.a_miss[x], work)
+        mdp_apply(
+            env,
+            state,
+            np.int64(tree.a_target[x]),
+            found,
+            tree.a_find[x] if found else tree.a_miss[x],
+            work,
+        )
     return depth
 
 
 @numba.njit
-def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed, options,
-                    n_simulations):
+def run_simulations(
+    tree, env, root, state, work, policy, n_actions, max_depth, fixed, options, n_simulations
+):
     """Run up to ``n_simulations`` simulations (Algorithm 1, ``Simulate`` from the root) and
     return how many ran: it stops early when the tree's arrays might not hold one more
     simulation's nodes (:func:`~hptrack.planning.tree.grow_tree` makes room).
@@ -211,8 +218,9 @@ def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, 
                 ret = tree.s_value[s]
                 break
             if first < 0:
-                applied = _catch_up(tree, env, path_action, path_found, applied, depth, root,
-                                    state, work)
+                applied = _catch_up(
+                    tree, env, path_action, path_found, applied, depth, root, state, work
+                )
             if first == UNVISITED:
                 live = False
                 for a in range(n_actions):
@@ -229,24 +237,27 @@ def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, 
                 if options.common_rollouts and depth > 0:
                     substream(tree.rng[1], path_state[depth - 1], common)
                     stream = common
-                ret = rollout(env, state, fixed if s == 0 else -1, policy, stream, candidates,
-                              work)
+                ret = rollout(env, state, fixed if s == 0 else -1, policy, stream, candidates, work)
                 break
             if first == LEAF:
                 _open_slots(tree, env, s, state, fixed, n_actions)
             x = select(tree, s, exploration)
             if tree.a_p[x] < 0.0:
-                applied = _catch_up(tree, env, path_action, path_found, applied, depth, root,
-                                    state, work)
-                p, payload0, payload1 = mdp_expand(env, state, np.int64(tree.a_target[x]),
-                                                   work)
+                applied = _catch_up(
+                    tree, env, path_action, path_found, applied, depth, root, state, work
+                )
+                p, payload0, payload1 = mdp_expand(env, state, np.int64(tree.a_target[x]), work)
                 tree.a_p[x] = p
                 tree.a_find[x] = payload0
                 tree.a_miss[x] = payload1
             if s == 0 and fixed >= 0 and 0.0 < tree.a_p[x] < 1.0:
                 found = _root_outcome(tree.counts[2], tree.a_p[x], options.weighted_root)
-            elif backup_mode > 0 and tree.a_visits[x] > 0 and 0.0 < tree.a_p[x] < 1.0 \
-                    and tree.a_out_visits[x, 0] * tree.a_out_visits[x, 1] == 0:
+            elif (
+                backup_mode > 0
+                and tree.a_visits[x] > 0
+                and 0.0 < tree.a_p[x] < 1.0
+                and tree.a_out_visits[x, 0] * tree.a_out_visits[x, 1] == 0
+            ):
                 found = tree.a_out_visits[x, 0] == 0
             else:
                 found = uniform(tree.rng) < tree.a_p[x]
@@ -261,22 +272,25 @@ def run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, 
                 tree.counts[0] += 1
                 tree.a_child[x, outcome] = child
             s = child
-        backup(tree, path_state, path_action, path_found, depth, ret, backup_mode,
-               options.max_weight)
+        backup(
+            tree, path_state, path_action, path_found, depth, ret, backup_mode, options.max_weight
+        )
     return n_simulations
 
 
 @numba.njit(cache=True, nogil=True)
-def run_subtask_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
-                            options, n_simulations):
+def run_subtask_simulations(
+    tree, env, root, state, work, policy, n_actions, max_depth, fixed, options, n_simulations
+):
     """:func:`run_simulations` on the paper's sub-task MDP, compiled once and cached on disk.
 
     The generic loop is not cached itself: its cache index would hold the signature of every
     MDP it ever ran on (test toys included), and another process that cannot import one of
     them could not read it. It releases the GIL, so root-parallel trees run on several cores.
     """
-    return run_simulations(tree, env, root, state, work, policy, n_actions, max_depth, fixed,
-                           options, n_simulations)
+    return run_simulations(
+        tree, env, root, state, work, policy, n_actions, max_depth, fixed, options, n_simulations
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -329,9 +343,15 @@ def _check_limits(iterations: int | None, time_limit: float | None) -> None:
         raise ValueError(f"time_limit must be positive, got {time_limit}")
 
 
-def run_search(simulate: Callable[[Tree, int], int], n_actions: int, iterations: int | None,
-               time_limit: float | None, seed: int | np.random.Generator,
-               fixed: int = -1, start: float | None = None) -> SearchResult:
+def run_search(
+    simulate: Callable[[Tree, int], int],
+    n_actions: int,
+    iterations: int | None,
+    time_limit: float | None,
+    seed: int | np.random.Generator,
+    fixed: int = -1,
+    start: float | None = None,
+) -> SearchResult:
     """The ``TreeSearch`` loop of Algorithm 1 around a compiled ``simulate(tree, count)``.
 
     Simulations run in chunks; between chunks the tree grows when full and the wall clock is
@@ -364,13 +384,24 @@ def run_search(simulate: Callable[[Tree, int], int], n_actions: int, iterations:
     return _result(tree, fixed, stopped_by, time.perf_counter() - start)
 
 
-def search_mdp(env: tuple, root: tuple, n_actions: int, max_depth: int, work: np.ndarray,
-               iterations: int | None = None, time_limit: float | None = None,
-               seed: int | np.random.Generator = 0, exploration: float = DEFAULT_EXPLORATION,
-               policy: tuple = UniformRandom(), fixed: int = -1,
-               start: float | None = None, backup: str = "sampled",
-               max_weight: float = 1.0, weighted_root: bool = False,
-               common_rollouts: bool = False) -> SearchResult:
+def search_mdp(
+    env: tuple,
+    root: tuple,
+    n_actions: int,
+    max_depth: int,
+    work: np.ndarray,
+    iterations: int | None = None,
+    time_limit: float | None = None,
+    seed: int | np.random.Generator = 0,
+    exploration: float = DEFAULT_EXPLORATION,
+    policy: tuple = UniformRandom(),
+    fixed: int = -1,
+    start: float | None = None,
+    backup: str = "sampled",
+    max_weight: float = 1.0,
+    weighted_root: bool = False,
+    common_rollouts: bool = False,
+) -> SearchResult:
     """Search the registered MDP of ``env`` from ``root`` (a tuple of arrays, not modified).
 
     Args:
@@ -399,24 +430,32 @@ def search_mdp(env: tuple, root: tuple, n_actions: int, max_depth: int, work: np
     if not 0.0 <= max_weight <= 1.0:
         raise ValueError(f"max_weight must be in [0, 1], got {max_weight}")
     state = tuple(np.array(a, copy=True) for a in root)
-    options = SearchOptions(float(exploration), mode, float(max_weight), bool(weighted_root),
-                            bool(common_rollouts))
-    kernel = (run_subtask_simulations if isinstance(env, subtask_mdp.SubtaskEnv)
-              else run_simulations)
+    options = SearchOptions(
+        float(exploration), mode, float(max_weight), bool(weighted_root), bool(common_rollouts)
+    )
+    kernel = run_subtask_simulations if isinstance(env, subtask_mdp.SubtaskEnv) else run_simulations
 
     def simulate(tree: Tree, count: int) -> int:
-        return kernel(tree, env, root, state, work, policy, n_actions, max_depth, fixed, options,
-                      count)
+        return kernel(
+            tree, env, root, state, work, policy, n_actions, max_depth, fixed, options, count
+        )
 
     return run_search(simulate, n_actions, iterations, time_limit, seed, fixed, start)
 
 
-def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
-           time_limit: float | None = None, seed: int | np.random.Generator = 0,
-           exploration: float = DEFAULT_EXPLORATION,
-           policy: tuple = UniformRandom(), backup: str = "sampled",
-           threads: int = 1, max_weight: float = 1.0,
-           weighted_root: bool = False, common_rollouts: bool = False) -> SearchResult:
+def search(
+    problem: subtask_mdp.PlanningProblem,
+    iterations: int | None = None,
+    time_limit: float | None = None,
+    seed: int | np.random.Generator = 0,
+    exploration: float = DEFAULT_EXPLORATION,
+    policy: tuple = UniformRandom(),
+    backup: str = "sampled",
+    threads: int = 1,
+    max_weight: float = 1.0,
+    weighted_root: bool = False,
+    common_rollouts: bool = False,
+) -> SearchResult:
     """Plan from ``problem``'s root state with Algorithm 1 (``TreeSearch``) on the sub-task MDP.
 
     Args:
@@ -454,17 +493,32 @@ def search(problem: subtask_mdp.PlanningProblem, iterations: int | None = None,
     root = problem.root_state()
     fixed = -1 if problem.current_action is None else problem.current_action
 
-    envs = [subtask_mdp.SubtaskEnv(model, subtask_mdp.new_memo(problem.n_targets,
-                                                               problem.n_steps))
-            for _ in range(threads)]  # one memo per tree: the kernels write to it
+    envs = [
+        subtask_mdp.SubtaskEnv(model, subtask_mdp.new_memo(problem.n_targets, problem.n_steps))
+        for _ in range(threads)
+    ]  # one memo per tree: the kernels write to it
     if fixed >= 0 and not subtask_mdp.is_available(envs[0], root, fixed):
         raise ValueError(f"current action {fixed} cannot be carried out in the remaining budget")
 
     def one(env: subtask_mdp.SubtaskEnv, tree_seed: int | np.random.Generator) -> SearchResult:
-        return search_mdp(env, root, problem.n_actions, problem.n_steps + 2,
-                          subtask_mdp.new_work(), iterations, time_limit, tree_seed,
-                          exploration, policy, fixed, start, backup, max_weight,
-                          weighted_root, common_rollouts)
+        return search_mdp(
+            env,
+            root,
+            problem.n_actions,
+            problem.n_steps + 2,
+            subtask_mdp.new_work(),
+            iterations,
+            time_limit,
+            tree_seed,
+            exploration,
+            policy,
+            fixed,
+            start,
+            backup,
+            max_weight,
+            weighted_root,
+            common_rollouts,
+        )
 
     if threads == 1:
         return one(envs[0], seed)
@@ -480,13 +534,17 @@ def _merged(results: list[SearchResult], fixed: int) -> SearchResult:
     after_find = merge_stats([r.after_find for r in results]) if fixed >= 0 else None
     after_miss = merge_stats([r.after_miss for r in results]) if fixed >= 0 else None
     return SearchResult(
-        best_action=root.best if fixed < 0 else results[0].best_action, root=root,
-        after_find=after_find, after_miss=after_miss,
-        simulations=sum(r.simulations for r in results), stopped_by=results[0].stopped_by,
+        best_action=root.best if fixed < 0 else results[0].best_action,
+        root=root,
+        after_find=after_find,
+        after_miss=after_miss,
+        simulations=sum(r.simulations for r in results),
+        stopped_by=results[0].stopped_by,
         elapsed=max(r.elapsed for r in results),
         state_nodes=sum(r.state_nodes for r in results),
         action_nodes=sum(r.action_nodes for r in results),
-        tree_bytes=sum(r.tree_bytes for r in results))
+        tree_bytes=sum(r.tree_bytes for r in results),
+    )
 
 
 def _backup_mode(backup: str) -> int:
@@ -506,7 +564,14 @@ def _result(tree: Tree, fixed: int, stopped_by: str, elapsed: float) -> SearchRe
         after_find = None if children[0] < 0 else node_stats(tree, int(children[0]))
         after_miss = None if children[1] < 0 else node_stats(tree, int(children[1]))
     return SearchResult(
-        best_action=root.best, root=root, after_find=after_find, after_miss=after_miss,
-        simulations=int(tree.counts[2]), stopped_by=stopped_by, elapsed=elapsed,
-        state_nodes=int(tree.counts[0]), action_nodes=int(tree.counts[1]),
-        tree_bytes=sum(array.nbytes for array in tree))
+        best_action=root.best,
+        root=root,
+        after_find=after_find,
+        after_miss=after_miss,
+        simulations=int(tree.counts[2]),
+        stopped_by=stopped_by,
+        elapsed=elapsed,
+        state_nodes=int(tree.counts[0]),
+        action_nodes=int(tree.counts[1]),
+        tree_bytes=sum(array.nbytes for array in tree),
+    )

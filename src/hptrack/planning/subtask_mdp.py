@@ -184,23 +184,34 @@ class PlanningProblem:
         means = _frozen(self.means, "means")
         n = means.shape[0] if means.ndim == 2 else 0
         if means.shape != (n, 4) or not 1 <= n <= MAX_TARGETS:
-            raise ValueError(f"means must have shape (n, 4) with 1 <= n <= {MAX_TARGETS}, "
-                             f"got {means.shape}")
+            raise ValueError(
+                f"means must have shape (n, 4) with 1 <= n <= {MAX_TARGETS}, got {means.shape}"
+            )
         checks = {
-            "agent_position": (2,), "covariances": (n, 4, 4), "process_noise": (n,),
+            "agent_position": (2,),
+            "covariances": (n, 4, 4),
+            "process_noise": (n,),
             "measurement_noise": (2, 2),
         }
         arrays = {name: _frozen(getattr(self, name), name) for name in checks}
         for name, shape in checks.items():
             if arrays[name].shape != shape:
                 raise ValueError(f"{name} must have shape {shape}, got {arrays[name].shape}")
-        available = (np.ones(n, dtype=bool) if self.available is None
-                     else np.array(self.available, dtype=bool))
+        available = (
+            np.ones(n, dtype=bool)
+            if self.available is None
+            else np.array(self.available, dtype=bool)
+        )
         if available.shape != (n,):
             raise ValueError(f"available must have shape ({n},), got {available.shape}")
         available.flags.writeable = False
-        for name in ("remaining_budget", "time_step", "agent_speed", "sensor_diameter",
-                     "c_per_step"):
+        for name in (
+            "remaining_budget",
+            "time_step",
+            "agent_speed",
+            "sensor_diameter",
+            "c_per_step",
+        ):
             value = float(getattr(self, name))
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
@@ -214,37 +225,54 @@ class PlanningProblem:
         if not (math.isfinite(dwell) and dwell >= 0.0):
             raise ValueError(f"dwell_time must be a non-negative finite number, got {dwell!r}")
         object.__setattr__(self, "dwell_time", dwell)
-        if self.last_found is not None and not (0 <= self.last_found < n
-                                                and available[self.last_found]):
+        if self.last_found is not None and not (
+            0 <= self.last_found < n and available[self.last_found]
+        ):
             raise ValueError(f"last_found={self.last_found} is not an available target")
         action = self.current_action
-        if action is not None and not ((0 <= action < n and available[action])
-                                       or (action == n and self.dwell_steps > 0
-                                           and self.last_found is not None)):
-            raise ValueError(f"current_action={action} is not an available target"
-                             + (" or the dwell" if self.dwell_steps > 0 else ""))
+        if action is not None and not (
+            (0 <= action < n and available[action])
+            or (action == n and self.dwell_steps > 0 and self.last_found is not None)
+        ):
+            raise ValueError(
+                f"current_action={action} is not an available target"
+                + (" or the dwell" if self.dwell_steps > 0 else "")
+            )
         object.__setattr__(self, "means", means)
         object.__setattr__(self, "available", available)
         for name, array in arrays.items():
             object.__setattr__(self, name, array)
 
     @classmethod
-    def from_mission(cls, mission: MissionSpec, observation: Observation,
-                     available: np.ndarray | None = None,
-                     last_found: int | None = None,
-                     current_action: int | None = None,
-                     estimator: str = "paper", dwell_time: float = 0.0) -> PlanningProblem:
+    def from_mission(
+        cls,
+        mission: MissionSpec,
+        observation: Observation,
+        available: np.ndarray | None = None,
+        last_found: int | None = None,
+        current_action: int | None = None,
+        estimator: str = "paper",
+        dwell_time: float = 0.0,
+    ) -> PlanningProblem:
         """The problem seen from an :class:`~hptrack.interface.Observation` of a mission
         described by a :class:`~hptrack.interface.MissionSpec`."""
         return cls(
-            agent_position=observation.agent_position, means=observation.means,
-            covariances=observation.covariances, process_noise=mission.process_noise,
-            remaining_budget=observation.remaining_budget, time_step=mission.time_step,
-            c_per_step=mission.c_per_step, agent_speed=mission.agent_speed,
+            agent_position=observation.agent_position,
+            means=observation.means,
+            covariances=observation.covariances,
+            process_noise=mission.process_noise,
+            remaining_budget=observation.remaining_budget,
+            time_step=mission.time_step,
+            c_per_step=mission.c_per_step,
+            agent_speed=mission.agent_speed,
             sensor_diameter=mission.sensor_diameter,
-            measurement_noise=mission.measurement_noise, available=available,
-            last_found=last_found, current_action=current_action, estimator=estimator,
-            dwell_time=dwell_time)
+            measurement_noise=mission.measurement_noise,
+            available=available,
+            last_found=last_found,
+            current_action=current_action,
+            estimator=estimator,
+            dwell_time=dwell_time,
+        )
 
     @property
     def n_targets(self) -> int:
@@ -273,24 +301,45 @@ class PlanningProblem:
     def model(self) -> Model:
         """The compiled kernels' view of the problem (builds the follow maps of every target)."""
         n_steps = self.n_steps
-        tables = [riccati_table(float(q), self.time_step, self.c_per_step,
-                                np.ascontiguousarray(self.measurement_noise), n_steps)
-                  for q in self.process_noise]
+        tables = [
+            riccati_table(
+                float(q),
+                self.time_step,
+                self.c_per_step,
+                np.ascontiguousarray(self.measurement_noise),
+                n_steps,
+            )
+            for q in self.process_noise
+        ]
         lengths = np.array([t[3] for t in tables], dtype=np.int64)
-        stacked = [np.stack([t[k][:lengths.max()] for t in tables]) for k in range(3)]
-        return Model(np.ascontiguousarray(self.means), np.ascontiguousarray(self.process_noise),
-                     np.ascontiguousarray(self.measurement_noise), self.time_step,
-                     self.c_per_step, self.agent_speed, self.sensor_diameter, n_steps,
-                     stacked[0], stacked[1], stacked[2], lengths, self.estimator == "sharp",
-                     self.dwell_steps)
+        stacked = [np.stack([t[k][: lengths.max()] for t in tables]) for k in range(3)]
+        return Model(
+            np.ascontiguousarray(self.means),
+            np.ascontiguousarray(self.process_noise),
+            np.ascontiguousarray(self.measurement_noise),
+            self.time_step,
+            self.c_per_step,
+            self.agent_speed,
+            self.sensor_diameter,
+            n_steps,
+            stacked[0],
+            stacked[1],
+            stacked[2],
+            lengths,
+            self.estimator == "sharp",
+            self.dwell_steps,
+        )
 
     def root_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Fresh state arrays ``(si, sf, base_cov, base_step)`` of the root (``base_step`` 0)."""
         last = -1 if self.last_found is None else self.last_found
         si = np.array([0, self.mask, last], dtype=np.int64)
-        return (si, np.array(self.agent_position, dtype=np.float64),
-                np.array(self.covariances, dtype=np.float64),
-                np.zeros(self.n_targets, dtype=np.int64))
+        return (
+            si,
+            np.array(self.agent_position, dtype=np.float64),
+            np.array(self.covariances, dtype=np.float64),
+            np.zeros(self.n_targets, dtype=np.int64),
+        )
 
 
 def steps_left(remaining_budget: float, time_step: float) -> int:
@@ -320,8 +369,11 @@ def new_work() -> np.ndarray:
 
 def new_memo(n_targets: int, n_steps: int) -> Memo:
     """An empty :class:`Memo` for ``n_targets`` targets and ``n_steps`` budget steps."""
-    return Memo(np.full((n_targets, n_steps + 1), -1, dtype=np.int64),
-                np.zeros((n_targets, n_steps + 1)), np.zeros((n_targets, n_steps + 1)))
+    return Memo(
+        np.full((n_targets, n_steps + 1), -1, dtype=np.int64),
+        np.zeros((n_targets, n_steps + 1)),
+        np.zeros((n_targets, n_steps + 1)),
+    )
 
 
 class SubtaskEnv(NamedTuple):
@@ -354,8 +406,17 @@ def intercept_of(model, sf, a, t):
     belief mean (``-1``: the target is faster than the agent)."""
     m = model.means[a]
     x, y = mean_position_at(m, t * model.time_step)
-    return intercept_steps(sf[0], sf[1], x, y, m[2], m[3], model.agent_speed, model.time_step,
-                           0.5 * model.sensor_diameter)
+    return intercept_steps(
+        sf[0],
+        sf[1],
+        x,
+        y,
+        m[2],
+        m[3],
+        model.agent_speed,
+        model.time_step,
+        0.5 * model.sensor_diameter,
+    )
 
 
 @numba.njit(cache=True, inline="always")
@@ -410,11 +471,23 @@ def expand_action(env, state, a, work):
         cutoff, p, expected = memo.cutoff[a, start], memo.p_find[a, start], memo.expected[a, start]
     else:
         cov = work[0]
-        predict_covariance(base_cov[a], model.process_noise[a], start - base_step[a],
-                           model.time_step, model.c_per_step, cov)
-        k, p, expected = coverage_outcome(cov, model.process_noise[a], model.time_step,
-                                          model.c_per_step, model.agent_speed,
-                                          model.sensor_diameter, left - ic)
+        predict_covariance(
+            base_cov[a],
+            model.process_noise[a],
+            start - base_step[a],
+            model.time_step,
+            model.c_per_step,
+            cov,
+        )
+        k, p, expected = coverage_outcome(
+            cov,
+            model.process_noise[a],
+            model.time_step,
+            model.c_per_step,
+            model.agent_speed,
+            model.sensor_diameter,
+            left - ic,
+        )
         cutoff = int(k)
         if base_step[a] == 0:
             memo.cutoff[a, start] = cutoff
@@ -433,14 +506,27 @@ def _expand_sharp(model, state, a, ic, cov):
     t = si[I_STEP]
     m = model.means[a]
     x, y = mean_position_at(m, t * model.time_step)
-    dx, dy = approach_step(sf[0], sf[1], x, y, m[2], m[3], model.agent_speed, model.time_step,
-                           ic)
-    predict_covariance(base_cov[a], model.process_noise[a], t + ic - base_step[a],
-                       model.time_step, model.c_per_step, cov)
-    cutoff, p, expected = sharp_coverage_outcome(cov, model.process_noise[a], model.time_step,
-                                                 model.c_per_step, model.agent_speed,
-                                                 model.sensor_diameter, model.n_steps - t - ic,
-                                                 ic, dx, dy)
+    dx, dy = approach_step(sf[0], sf[1], x, y, m[2], m[3], model.agent_speed, model.time_step, ic)
+    predict_covariance(
+        base_cov[a],
+        model.process_noise[a],
+        t + ic - base_step[a],
+        model.time_step,
+        model.c_per_step,
+        cov,
+    )
+    cutoff, p, expected = sharp_coverage_outcome(
+        cov,
+        model.process_noise[a],
+        model.time_step,
+        model.c_per_step,
+        model.agent_speed,
+        model.sensor_diameter,
+        model.n_steps - t - ic,
+        ic,
+        dx,
+        dy,
+    )
     return p, max(1, int(math.floor(expected + 0.5))), max(1, ic + int(cutoff))
 
 
@@ -465,15 +551,24 @@ def apply_outcome(env, state, a, found, payload, work):
         if a == si[I_LAST]:
             x1 = work[3]
             predict_covariance(base_cov[a], q, 1, model.time_step, model.c_per_step, x1)
-            measured_covariance(model.follow_a[a], model.follow_g[a], model.follow_h[a],
-                                model.follow_len[a], payload - 1, x1, model.measurement_noise,
-                                prior, work)
+            measured_covariance(
+                model.follow_a[a],
+                model.follow_g[a],
+                model.follow_h[a],
+                model.follow_len[a],
+                payload - 1,
+                x1,
+                model.measurement_noise,
+                prior,
+                work,
+            )
             for i in range(4):
                 for j in range(4):
                     base_cov[a, i, j] = prior[i, j]
         else:
-            predict_covariance(base_cov[a], q, end - base_step[a], model.time_step,
-                               model.c_per_step, prior)
+            predict_covariance(
+                base_cov[a], q, end - base_step[a], model.time_step, model.c_per_step, prior
+            )
             update_covariance(prior, model.measurement_noise, base_cov[a])
         base_step[a] = end
         si[I_LAST] = a
@@ -494,12 +589,17 @@ def terminal_value(env, state):
     base_cov, base_step = state[2], state[3]
     total = 0.0
     for i in range(base_cov.shape[0]):
-        sxx, sxy, syy = position_covariance_after(base_cov[i], model.process_noise[i],
-                                                  float(model.n_steps - base_step[i]),
-                                                  model.time_step, model.c_per_step)
+        sxx, sxy, syy = position_covariance_after(
+            base_cov[i],
+            model.process_noise[i],
+            float(model.n_steps - base_step[i]),
+            model.time_step,
+            model.c_per_step,
+        )
         total += logdet_xy(sxx, sxy, syy)
     return -total
 
 
-register_mdp(SubtaskEnv, MdpKernels(copy_state, is_available, expand_action, apply_outcome,
-                                    terminal_value))
+register_mdp(
+    SubtaskEnv, MdpKernels(copy_state, is_available, expand_action, apply_outcome, terminal_value)
+)

@@ -70,9 +70,13 @@ def epsilon_greedy(epsilon, env, state, rng, candidates, uncertainty):
             continue
         steps = intercept_of(model, sf, a, t)
         if uncertainty:
-            sxx, sxy, syy = position_covariance_after(base_cov[a], model.process_noise[a],
-                                                      float(t + steps - base_step[a]),
-                                                      model.time_step, model.c_per_step)
+            sxx, sxy, syy = position_covariance_after(
+                base_cov[a],
+                model.process_noise[a],
+                float(t + steps - base_step[a]),
+                model.time_step,
+                model.c_per_step,
+            )
             score = logdet_xy(sxx, sxy, syy)
         else:
             score = -float(steps)

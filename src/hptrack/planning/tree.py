@@ -73,11 +73,19 @@ class Tree(NamedTuple):
 
 
 _FILL = {
-    "s_first": (UNVISITED, np.int32), "s_count": (0, np.int8), "s_visits": (0, np.int32),
-    "s_value": (np.nan, np.float64), "s_mean": (0.0, np.float64), "a_target": (0, np.int8),
+    "s_first": (UNVISITED, np.int32),
+    "s_count": (0, np.int8),
+    "s_visits": (0, np.int32),
+    "s_value": (np.nan, np.float64),
+    "s_mean": (0.0, np.float64),
+    "a_target": (0, np.int8),
     "a_p": (-1.0, np.float64),
-    "a_find": (0, np.int32), "a_miss": (0, np.int32), "a_visits": (0, np.int32),
-    "a_value": (0.0, np.float64), "a_child": (-1, np.int32), "a_out_visits": (0, np.int32),
+    "a_find": (0, np.int32),
+    "a_miss": (0, np.int32),
+    "a_visits": (0, np.int32),
+    "a_value": (0.0, np.float64),
+    "a_child": (-1, np.int32),
+    "a_out_visits": (0, np.int32),
     "a_out_value": (0.0, np.float64),
 }
 """Initial value and dtype of each node array of :class:`Tree` (``a_child``, ``a_out_*``: one
@@ -90,19 +98,26 @@ PAIRED = ("a_child", "a_out_visits", "a_out_value")
 
 def new_tree(seed: int, capacity: int = 1024) -> Tree:
     """An empty tree holding only the root (state node 0), with the random stream seeded."""
-    arrays = {name: np.full((capacity, 2) if name in PAIRED else capacity, fill, dtype=dtype)
-              for name, (fill, dtype) in _FILL.items()}
-    return Tree(**arrays, counts=np.array([1, 0, 0], dtype=np.int64),
-                value_range=np.array([np.inf, -np.inf]),
-                rng=np.array([seed, seed], dtype=np.uint64))
+    arrays = {
+        name: np.full((capacity, 2) if name in PAIRED else capacity, fill, dtype=dtype)
+        for name, (fill, dtype) in _FILL.items()
+    }
+    return Tree(
+        **arrays,
+        counts=np.array([1, 0, 0], dtype=np.int64),
+        value_range=np.array([np.inf, -np.inf]),
+        rng=np.array([seed, seed], dtype=np.uint64),
+    )
 
 
 def grow_tree(tree: Tree, n_actions: int) -> Tree:
     """The tree with its state (action) arrays doubled if one more state node (``n_actions``
     more action nodes) might not fit: what one simulation can add at most."""
     arrays = tree._asdict()
-    for prefix, size, need in (("s_", tree.s_first.shape[0], tree.counts[0] + 1),
-                               ("a_", tree.a_target.shape[0], tree.counts[1] + n_actions)):
+    for prefix, size, need in (
+        ("s_", tree.s_first.shape[0], tree.counts[0] + 1),
+        ("a_", tree.a_target.shape[0], tree.counts[1] + n_actions),
+    ):
         if need <= size:
             continue
         extra = max(size, need - size)
@@ -110,7 +125,8 @@ def grow_tree(tree: Tree, n_actions: int) -> Tree:
             if name.startswith(prefix):
                 old = arrays[name]
                 arrays[name] = np.concatenate(
-                    [old, np.full((extra, *old.shape[1:]), fill, dtype=dtype)])
+                    [old, np.full((extra, *old.shape[1:]), fill, dtype=dtype)]
+                )
     return Tree(**arrays)
 
 
@@ -130,8 +146,7 @@ def select(tree, s, exploration):
     best = first
     best_score = -np.inf
     for x in range(first, first + count):
-        score = ((tree.a_value[x] - low) * scale
-                 + exploration * math.sqrt(log_n / tree.a_visits[x]))
+        score = (tree.a_value[x] - low) * scale + exploration * math.sqrt(log_n / tree.a_visits[x])
         if score > best_score:
             best_score = score
             best = x
@@ -253,8 +268,11 @@ def merge_stats(stats: list[ActionStats | None]) -> ActionStats | None:
         visits[at] += s.visits
         weighted[at] += s.visits * s.values
         new = np.isnan(p[at]) & ~np.isnan(s.p_find)
-        p[at[new]], find[at[new]], miss[at[new]] = (s.p_find[new], s.find_steps[new],
-                                                    s.miss_steps[new])
+        p[at[new]], find[at[new]], miss[at[new]] = (
+            s.p_find[new],
+            s.find_steps[new],
+            s.miss_steps[new],
+        )
     values = np.divide(weighted, visits, out=np.zeros(actions.size), where=visits > 0)
     return ActionStats(actions, visits, values, p, find, miss)
 
@@ -267,6 +285,11 @@ def node_stats(tree: Tree, s: int) -> ActionStats | None:
     xs = slice(first, first + int(tree.s_count[s]))
     p = tree.a_p[xs].copy()
     p[p < 0.0] = np.nan
-    return ActionStats(tree.a_target[xs].astype(np.int64), tree.a_visits[xs].astype(np.int64),
-                       tree.a_value[xs].copy(), p, tree.a_find[xs].astype(np.int64),
-                       tree.a_miss[xs].astype(np.int64))
+    return ActionStats(
+        tree.a_target[xs].astype(np.int64),
+        tree.a_visits[xs].astype(np.int64),
+        tree.a_value[xs].copy(),
+        p,
+        tree.a_find[xs].astype(np.int64),
+        tree.a_miss[xs].astype(np.int64),
+    )

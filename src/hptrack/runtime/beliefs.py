@@ -46,9 +46,15 @@ class BeliefTimeline:
         start_s: time of the priors, s (the mission start).
     """
 
-    def __init__(self, means: np.ndarray, covariances: np.ndarray, process_noise: np.ndarray,
-                 motion: ConstantVelocityModel, tolerance_s: float, start_s: float = 0.0
-                 ) -> None:
+    def __init__(
+        self,
+        means: np.ndarray,
+        covariances: np.ndarray,
+        process_noise: np.ndarray,
+        motion: ConstantVelocityModel,
+        tolerance_s: float,
+        start_s: float = 0.0,
+    ) -> None:
         n = len(means)
         self._q = np.asarray(process_noise, dtype=float)
         self._motion = motion
@@ -82,8 +88,14 @@ class BeliefTimeline:
         ``t >= horizon_s``."""
         key = (float(t), int(seq))
         pos = bisect.bisect_right(self._keys[i], key)
-        entry = _Entry(float(t), int(seq), np.array(z, dtype=float),
-                       np.ascontiguousarray(noise, dtype=float), np.empty(4), np.empty((4, 4)))
+        entry = _Entry(
+            float(t),
+            int(seq),
+            np.array(z, dtype=float),
+            np.ascontiguousarray(noise, dtype=float),
+            np.empty(4),
+            np.empty((4, 4)),
+        )
         self._keys[i].insert(pos, key)
         self._entries[i].insert(pos, entry)
         self._refilter(i, pos)
@@ -122,5 +134,6 @@ class BeliefTimeline:
         for i in range(n):
             pos = bisect.bisect_right(self._keys[i], (float(time_s), np.iinfo(np.int64).max))
             src_t[i], src_mean[i], src_cov[i] = self._state_before(i, pos)
-        return self._motion.predict(src_mean, src_cov, self._q,
-                                    np.maximum(float(time_s) - src_t, 0.0))
+        return self._motion.predict(
+            src_mean, src_cov, self._q, np.maximum(float(time_s) - src_t, 0.0)
+        )

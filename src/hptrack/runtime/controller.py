@@ -134,9 +134,12 @@ def _subtask_of(planner: Planner, target_ids: tuple[str, ...]) -> dict[str, Any]
     if "dwell" in last:
         return {"dwell": target_ids[int(last["dwell"])], "since_step": last.get("start_step")}
     if "target_index" in last:
-        return {"target": target_ids[int(last["target_index"])],
-                "since_step": last.get("start_step"), "p_find": last.get("p_find"),
-                "outcome": last.get("outcome")}
+        return {
+            "target": target_ids[int(last["target_index"])],
+            "since_step": last.get("start_step"),
+            "p_find": last.get("p_find"),
+            "outcome": last.get("outcome"),
+        }
     return None
 
 
@@ -154,9 +157,17 @@ class MissionController:
         header: extra fields for the log's header record (the adapter's options).
     """
 
-    def __init__(self, scenario: Scenario, planner: Planner, *, seed: int | None = None,
-                 settings: ControllerSettings | None = None, log: MissionLog | None = None,
-                 runner: PlannerRunner | None = None, header: dict | None = None) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        planner: Planner,
+        *,
+        seed: int | None = None,
+        settings: ControllerSettings | None = None,
+        log: MissionLog | None = None,
+        runner: PlannerRunner | None = None,
+        header: dict | None = None,
+    ) -> None:
         self.scenario = scenario
         self.mission = scenario.mission_spec()
         self.settings = settings or ControllerSettings()
@@ -166,9 +177,13 @@ class MissionController:
         self._rng = np.random.default_rng(np.random.SeedSequence(self.seed).spawn(4)[3])
         self._runner = runner if runner is not None else ThreadedRunner()
         self._ids = {tid: i for i, tid in enumerate(self.mission.target_ids)}
-        self._beliefs = BeliefTimeline(scenario.means(), scenario.covariances(),
-                                       self.mission.process_noise, self.mission.motion,
-                                       self.settings.reorder_tolerance_s)
+        self._beliefs = BeliefTimeline(
+            scenario.means(),
+            scenario.covariances(),
+            self.mission.process_noise,
+            self.mission.motion,
+            self.settings.reorder_tolerance_s,
+        )
         self._lock = threading.RLock()
         self._clock = 0.0
         self._odom: tuple[float, np.ndarray] | None = None
@@ -199,11 +214,18 @@ class MissionController:
         self.finished = False
         self.end: dict | None = None
         settings_json = getattr(getattr(planner, "settings", None), "as_json", None)
-        self._write({"kind": "header", "version": LOG_VERSION,
-                     "scenario": scenario.model_dump(mode="json"), "planner": planner.name,
-                     "planner_settings": settings_json() if settings_json else {},
-                     "seed": self.seed, "controller": self.settings.model_dump(),
-                     **(header or {})})
+        self._write(
+            {
+                "kind": "header",
+                "version": LOG_VERSION,
+                "scenario": scenario.model_dump(mode="json"),
+                "planner": planner.name,
+                "planner_settings": settings_json() if settings_json else {},
+                "seed": self.seed,
+                "controller": self.settings.model_dump(),
+                **(header or {}),
+            }
+        )
 
     # --- log ----------------------------------------------------------------------------
     def _write(self, record: dict) -> dict:
@@ -235,8 +257,10 @@ class MissionController:
             return None
         ahead = t - self._clock
         if ahead > self.settings.future_tolerance_s:
-            return "in the future", (f"stamped {ahead:.3f} s ahead of the controller's clock "
-                                     f"(tolerance {self.settings.future_tolerance_s:g} s)")
+            return "in the future", (
+                f"stamped {ahead:.3f} s ahead of the controller's clock "
+                f"(tolerance {self.settings.future_tolerance_s:g} s)"
+            )
         return None
 
     # --- events -------------------------------------------------------------------------
@@ -246,8 +270,11 @@ class MissionController:
         with self._lock:
             t = log_float(t)
             p = _vector(position, (2,))
-            record = {"kind": "odometry", "t": t,
-                      "position": p if p is not None else _raw(position)}
+            record = {
+                "kind": "odometry",
+                "t": t,
+                "position": p if p is not None else _raw(position),
+            }
             problem = self._check_odometry(t, p)
             if problem is not None:
                 return self._refuse("odometry", record, *problem)
@@ -273,20 +300,25 @@ class MissionController:
         distance = float(np.hypot(*(p - last_p)))
         speed = self.settings.max_speed_factor * self.mission.agent_speed
         if distance > speed * (t - last_t) + self.settings.jump_slack_m:
-            return "jump", (f"{distance:.1f} m in {t - last_t:.3f} s (more than {speed:g} m/s "
-                            f"+ {self.settings.jump_slack_m:g} m)")
+            return "jump", (
+                f"{distance:.1f} m in {t - last_t:.3f} s (more than {speed:g} m/s "
+                f"+ {self.settings.jump_slack_m:g} m)"
+            )
         return None
 
-    def detection(self, t: float, target_id: Any, position: Any, covariance: Any = None
-                  ) -> bool:
+    def detection(self, t: float, target_id: Any, position: Any, covariance: Any = None) -> bool:
         """Target ``target_id`` was measured at ``position`` (2,) m at mission time ``t`` s,
         with noise ``covariance`` (2, 2) m^2 (default the scenario's ``R``); ``False``
         (logged with the reason) if refused."""
         with self._lock:
             t = log_float(t)
             z = _vector(position, (2,))
-            record = {"kind": "detection", "t": t, "target": _raw(target_id),
-                      "position": z if z is not None else _raw(position)}
+            record = {
+                "kind": "detection",
+                "t": t,
+                "target": _raw(target_id),
+                "position": z if z is not None else _raw(position),
+            }
             if covariance is not None:
                 record["covariance"] = _raw(covariance)
             problem, index, noise = self._check_detection(t, target_id, z, covariance)
@@ -302,12 +334,20 @@ class MissionController:
             self._write({**record, "accepted": True})
             return True
 
-    def _check_detection(self, t: float, target_id: Any, z: np.ndarray | None, covariance: Any
-                         ) -> tuple[tuple[str, str] | None, int, np.ndarray]:
+    def _check_detection(
+        self, t: float, target_id: Any, z: np.ndarray | None, covariance: Any
+    ) -> tuple[tuple[str, str] | None, int, np.ndarray]:
         noise = self.mission.measurement_noise
         if not isinstance(target_id, str) or target_id not in self._ids:
-            return ("unknown target", f"target id {_raw(target_id)!r} is not in the mission "
-                    f"({', '.join(self.mission.target_ids)})"), -1, noise
+            return (
+                (
+                    "unknown target",
+                    f"target id {_raw(target_id)!r} is not in the mission "
+                    f"({', '.join(self.mission.target_ids)})",
+                ),
+                -1,
+                noise,
+            )
         if z is None:
             return ("malformed", "position is not two numbers"), -1, noise
         if not np.all(np.isfinite(z)):
@@ -326,11 +366,17 @@ class MissionController:
         index = self._ids[target_id]
         behind = self._beliefs.newest_s - t
         if behind > self.settings.reorder_tolerance_s:
-            return ("out of order", f"{behind:.3f} s older than the newest detection "
-                    f"(tolerance {self.settings.reorder_tolerance_s:g} s)"), index, noise
+            return (
+                (
+                    "out of order",
+                    f"{behind:.3f} s older than the newest detection "
+                    f"(tolerance {self.settings.reorder_tolerance_s:g} s)",
+                ),
+                index,
+                noise,
+            )
         if self._beliefs.is_duplicate(index, t, z):
-            return ("duplicate", f"the same measurement of {target_id} at {t:.3f} s"), index, \
-                noise
+            return ("duplicate", f"the same measurement of {target_id} at {t:.3f} s"), index, noise
         return None, index, noise
 
     # --- setpoints ----------------------------------------------------------------------
@@ -344,9 +390,12 @@ class MissionController:
             try:
                 t = log_float(t)
                 if not math.isfinite(t) or t < self._last_call:
-                    self._refuse("setpoint", {"kind": "setpoint", "t": t}, "bad time",
-                                 f"time {t} is not finite or before the last call "
-                                 f"({self._last_call:.3f} s)")
+                    self._refuse(
+                        "setpoint",
+                        {"kind": "setpoint", "t": t},
+                        "bad time",
+                        f"time {t} is not finite or before the last call ({self._last_call:.3f} s)",
+                    )
                     t = self._last_call
                 self._last_call = t
                 self._clock = max(self._clock, t)
@@ -371,9 +420,15 @@ class MissionController:
         time_k = k * tau
         means, covs = self._beliefs.at(time_k)
         recorded = self._take(self._for_record, time_k)
-        record: dict[str, Any] = {"kind": "tick", "t": t, "k": k, "time": time_k,
-                                  "agent": None if self._odom is None else self._odom[1],
-                                  "logdet": position_logdet(covs), "means": means}
+        record: dict[str, Any] = {
+            "kind": "tick",
+            "t": t,
+            "k": k,
+            "time": time_k,
+            "agent": None if self._odom is None else self._odom[1],
+            "logdet": position_logdet(covs),
+            "means": means,
+        }
         if missed:
             record["missed"] = missed
         if self._odom is None:
@@ -382,12 +437,21 @@ class MissionController:
             record.update(submitted=False, reason=f"planner busy with tick {self._in_flight[0]}")
         else:
             detected = self._take(self._for_planner, time_k)
-            record.update(submitted=True,
-                          detected=[self.mission.target_ids[i] for i in np.flatnonzero(detected)])
+            record.update(
+                submitted=True,
+                detected=[self.mission.target_ids[i] for i in np.flatnonzero(detected)],
+            )
             self._submit(k, time_k, self._odom[1], means, covs, detected, t)
         self._last_tick = record
-        self.history.append({"k": k, "agent": record["agent"], "means": means,
-                             "covariances": covs, "detected": recorded})
+        self.history.append(
+            {
+                "k": k,
+                "agent": record["agent"],
+                "means": means,
+                "covariances": covs,
+                "detected": recorded,
+            }
+        )
         self._write(record)
 
     def _take(self, pending: list[tuple[float, int]], time_s: float) -> np.ndarray:
@@ -402,8 +466,16 @@ class MissionController:
         pending[:] = keep
         return flags
 
-    def _submit(self, k: int, time_k: float, agent: np.ndarray, means: np.ndarray,
-                covs: np.ndarray, detected: np.ndarray, now: float) -> None:
+    def _submit(
+        self,
+        k: int,
+        time_k: float,
+        agent: np.ndarray,
+        means: np.ndarray,
+        covs: np.ndarray,
+        detected: np.ndarray,
+        now: float,
+    ) -> None:
         arrays = [agent.copy(), means, covs, detected]
         for a in arrays:
             a.flags.writeable = False
@@ -420,11 +492,13 @@ class MissionController:
 
         def job() -> PlanOutcome:
             waypoint, error, elapsed = timed(call)
-            if waypoint is not None and (waypoint.shape != (2,)
-                                         or not np.all(np.isfinite(waypoint))):
+            if waypoint is not None and (
+                waypoint.shape != (2,) or not np.all(np.isfinite(waypoint))
+            ):
                 error, waypoint = f"invalid waypoint {waypoint.tolist()}", None
-            return PlanOutcome(k, waypoint, error, elapsed,
-                               None if error else _subtask_of(planner, ids))
+            return PlanOutcome(
+                k, waypoint, error, elapsed, None if error else _subtask_of(planner, ids)
+            )
 
         self._in_flight = (k, now)
         self._late_logged = False
@@ -440,18 +514,30 @@ class MissionController:
             if not self._late_logged and t - since > self.settings.planner_deadline_s:
                 self._late_logged = True
                 self.rejected["plan: late"] += 1
-                self._write({"kind": "late", "t": t, "k": tick, "waited_s": t - since,
-                             "detail": "keeping the current waypoint"})
+                self._write(
+                    {
+                        "kind": "late",
+                        "t": t,
+                        "k": tick,
+                        "waited_s": t - since,
+                        "detail": "keeping the current waypoint",
+                    }
+                )
             return
         self._apply(outcome, t, late=t - since > self.settings.planner_deadline_s + _STEP_EPS)
 
-    def _apply(self, outcome: PlanOutcome, t: float, late: bool, after_end: bool = False
-               ) -> None:
+    def _apply(self, outcome: PlanOutcome, t: float, late: bool, after_end: bool = False) -> None:
         self._in_flight = None
         status = "error" if outcome.error else ("late" if late else "ok")
-        record: dict[str, Any] = {"kind": "plan", "t": t, "k": outcome.tick, "status": status,
-                                  "waypoint": outcome.waypoint, "compute_s": outcome.compute_s,
-                                  "subtask": outcome.subtask}
+        record: dict[str, Any] = {
+            "kind": "plan",
+            "t": t,
+            "k": outcome.tick,
+            "status": status,
+            "waypoint": outcome.waypoint,
+            "compute_s": outcome.compute_s,
+            "subtask": outcome.subtask,
+        }
         if outcome.error:
             record["error"] = outcome.error
             self.rejected["plan: error"] += 1
@@ -473,8 +559,10 @@ class MissionController:
             mode, detail = "no odometry yet", "holding at the scenario's start position"
         elif t - self._odom[0] > self.settings.stale_odometry_s:
             mode = "odometry stale"
-            detail = (f"no odometry for {t - self._odom[0]:.2f} s "
-                      f"(limit {self.settings.stale_odometry_s:g} s)")
+            detail = (
+                f"no odometry for {t - self._odom[0]:.2f} s "
+                f"(limit {self.settings.stale_odometry_s:g} s)"
+            )
         elif self._planner_error is not None:
             mode, detail = "planner error", self._planner_error
         elif self._waypoint is None:
@@ -486,8 +574,16 @@ class MissionController:
                 self._hold_at = self._odom[1].copy()
             self._mode = mode
             position = self._waypoint if mode == "tracking" else self._hold_at
-            self._write({"kind": "mode", "t": t, "mode": mode, "hold": mode != "tracking",
-                         "position": position, "detail": detail})
+            self._write(
+                {
+                    "kind": "mode",
+                    "t": t,
+                    "mode": mode,
+                    "hold": mode != "tracking",
+                    "position": position,
+                    "detail": detail,
+                }
+            )
         position = self._waypoint if mode == "tracking" else self._hold_at
         return Setpoint(position.copy(), mode != "tracking", mode, detail)
 
@@ -514,15 +610,28 @@ class MissionController:
         self.finished = True
         means, covs = self._beliefs.at(time_s)
         logdet = position_logdet(covs)
-        self.final = {"time": time_s, "means": means, "covariances": covs,
-                      "agent": None if self._odom is None else self._odom[1].copy(),
-                      "detected": self._take(self._for_record, time_s)}
-        self.end = self._write({
-            "kind": "end", "t": t, "time": time_s, "reason": reason, "U": float(logdet.sum()),
-            "per_target_logdet": dict(zip(self.mission.target_ids, logdet.tolist(),
-                                          strict=True)),
-            "accepted": dict(self.accepted), "rejected": dict(self.rejected),
-            "planner_info": info})
+        self.final = {
+            "time": time_s,
+            "means": means,
+            "covariances": covs,
+            "agent": None if self._odom is None else self._odom[1].copy(),
+            "detected": self._take(self._for_record, time_s),
+        }
+        self.end = self._write(
+            {
+                "kind": "end",
+                "t": t,
+                "time": time_s,
+                "reason": reason,
+                "U": float(logdet.sum()),
+                "per_target_logdet": dict(
+                    zip(self.mission.target_ids, logdet.tolist(), strict=True)
+                ),
+                "accepted": dict(self.accepted),
+                "rejected": dict(self.rejected),
+                "planner_info": info,
+            }
+        )
         self._runner.close()
 
     def close(self) -> None:
@@ -545,13 +654,25 @@ class MissionController:
         tick, the last detection and the refused inputs."""
         with self._lock:
             tick = self._last_tick
-            logdet = None if tick is None else dict(zip(
-                self.mission.target_ids, np.asarray(tick["logdet"]).tolist(), strict=True))
-            return {"t": self._last_call, "budget": self.mission.budget, "mode": self._mode,
-                    "subtask": self.subtask, "logdet": logdet,
-                    "last_detection": self.last_detection, "accepted": dict(self.accepted),
-                    "rejected": dict(self.rejected), "finished": self.finished,
-                    "end": self.end}
+            logdet = (
+                None
+                if tick is None
+                else dict(
+                    zip(self.mission.target_ids, np.asarray(tick["logdet"]).tolist(), strict=True)
+                )
+            )
+            return {
+                "t": self._last_call,
+                "budget": self.mission.budget,
+                "mode": self._mode,
+                "subtask": self.subtask,
+                "logdet": logdet,
+                "last_detection": self.last_detection,
+                "accepted": dict(self.accepted),
+                "rejected": dict(self.rejected),
+                "finished": self.finished,
+                "end": self.end,
+            }
 
     def episode_record(self, truth: np.ndarray | None = None) -> EpisodeRecord:
         """The mission as an :class:`~hptrack.sim.record.EpisodeRecord` (for the mission
@@ -581,9 +702,17 @@ class MissionController:
         if truth is None:
             truth = np.full((last + 1, n, 4), np.nan)
         return EpisodeRecord(
-            planner=self._planner.name, seed=self.seed, target_ids=self.mission.target_ids,
-            time_step=tau, sensor_diameter=self.mission.sensor_diameter, agent_path=agent_path,
-            true_states=np.asarray(truth)[: last + 1], belief_steps=np.asarray(steps),
-            belief_means=means, belief_covariances=covs, detections=detections,
+            planner=self._planner.name,
+            seed=self.seed,
+            target_ids=self.mission.target_ids,
+            time_step=tau,
+            sensor_diameter=self.mission.sensor_diameter,
+            agent_path=agent_path,
+            true_states=np.asarray(truth)[: last + 1],
+            belief_steps=np.asarray(steps),
+            belief_means=means,
+            belief_covariances=covs,
+            detections=detections,
             per_target_logdet=position_logdet(self.final["covariances"]),
-            info=dict(self.end.get("planner_info") or {}))
+            info=dict(self.end.get("planner_info") or {}),
+        )

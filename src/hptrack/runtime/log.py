@@ -78,8 +78,9 @@ class MissionLog:
         clock: wall clock for each record's ``wall`` field, s.
     """
 
-    def __init__(self, path: str | Path | None = None,
-                 clock: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self, path: str | Path | None = None, clock: Callable[[], float] = time.time
+    ) -> None:
         self.path = None if path is None else Path(path)
         self._clock = clock
         self._lock = threading.Lock()
@@ -140,8 +141,9 @@ def read_log(path: str | Path) -> LogContents:
     except OSError as err:
         raise InputError(f"{path}: cannot read the mission log ({err.strerror})") from None
     except UnicodeDecodeError as err:
-        raise InputError(f"{path}: not a mission log (not UTF-8 text at byte {err.start})"
-                         ) from None
+        raise InputError(
+            f"{path}: not a mission log (not UTF-8 text at byte {err.start})"
+        ) from None
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()
@@ -157,14 +159,18 @@ def read_log(path: str | Path) -> LogContents:
                 truncated = True
                 break
             if number == 1:
-                raise InputError(f"{path}: not a mission log (line 1 is not a JSON record)"
-                                 ) from None
-            raise InputError(f"{path}: line {number} is not a mission-log record: "
-                             f"{line[:80]!r}") from None
+                raise InputError(
+                    f"{path}: not a mission log (line 1 is not a JSON record)"
+                ) from None
+            raise InputError(
+                f"{path}: line {number} is not a mission-log record: {line[:80]!r}"
+            ) from None
         records.append(record)
     if not records or records[0]["kind"] != "header":
         raise InputError(f"{path}: not a mission log (no header record on line 1)")
     if records[0].get("version") != LOG_VERSION:
-        raise InputError(f"{path}: mission-log version {records[0].get('version')!r} is not "
-                         f"supported (this hptrack reads version {LOG_VERSION})")
+        raise InputError(
+            f"{path}: mission-log version {records[0].get('version')!r} is not "
+            f"supported (this hptrack reads version {LOG_VERSION})"
+        )
     return LogContents(records[0], records[1:], truncated)

@@ -122,8 +122,12 @@ class _Vehicle:
 
 
 def _route_mavsdk_logs() -> None:
-    levels = {LogLevel.DEBUG: logging.DEBUG, LogLevel.INFO: logging.INFO,
-              LogLevel.WARN: logging.WARNING, LogLevel.ERROR: logging.ERROR}
+    levels = {
+        LogLevel.DEBUG: logging.DEBUG,
+        LogLevel.INFO: logging.INFO,
+        LogLevel.WARN: logging.WARNING,
+        LogLevel.ERROR: logging.ERROR,
+    }
 
     def handler(level: LogLevel, message: str, _file: str | None, _line: int) -> bool:
         mavsdk_logger.log(levels.get(level, logging.INFO), "%s", message)
@@ -143,9 +147,14 @@ class _Detections(asyncio.DatagramProtocol):
 
 
 class _Flight:
-    def __init__(self, controller: MissionController, options: FlightOptions,
-                 on_status: Callable[[dict], None], on_message: Callable[[str], None],
-                 stop: asyncio.Event) -> None:
+    def __init__(
+        self,
+        controller: MissionController,
+        options: FlightOptions,
+        on_status: Callable[[dict], None],
+        on_message: Callable[[str], None],
+        stop: asyncio.Event,
+    ) -> None:
         self.controller, self.options = controller, options
         self.on_status, self.on_message, self.stop = on_status, on_message, stop
         self.vehicle = _Vehicle()
@@ -157,8 +166,9 @@ class _Flight:
         self.home: np.ndarray | None = None
 
     def say(self, message: str, **fields: Any) -> None:
-        self.controller.log.write({"kind": "status", "t": self.mission_time(),
-                                   "message": message, **fields})
+        self.controller.log.write(
+            {"kind": "status", "t": self.mission_time(), "message": message, **fields}
+        )
         self.on_message(message)
 
     def mission_time(self) -> float | None:
@@ -202,14 +212,20 @@ class _Flight:
     def on_datagram(self, data: bytes) -> None:
         received = self.mission_time()
         if received is None:
-            self._guard(lambda: self.controller.bad_input(
-                "detection", "before the start", "arrived before offboard started", data[:200]))
+            self._guard(
+                lambda: self.controller.bad_input(
+                    "detection", "before the start", "arrived before offboard started", data[:200]
+                )
+            )
             return
         try:
             text = data.decode("utf-8")
         except UnicodeDecodeError:
-            self._guard(lambda: self.controller.bad_input(
-                "detection", "malformed", "a datagram that is not UTF-8 text", data[:200]))
+            self._guard(
+                lambda: self.controller.bad_input(
+                    "detection", "malformed", "a datagram that is not UTF-8 text", data[:200]
+                )
+            )
             return
         for line in text.splitlines():
             if line.strip():
@@ -222,17 +238,20 @@ class _Flight:
             self.controller.bad_input("detection", "malformed", "not a JSON line", line[:200])
             return
         if not isinstance(message, dict) or not {"id", "x", "y"} <= message.keys():
-            self.controller.bad_input("detection", "malformed",
-                                      'expected {"id": ..., "x": ..., "y": ...}', line[:200])
+            self.controller.bad_input(
+                "detection", "malformed", 'expected {"id": ..., "x": ..., "y": ...}', line[:200]
+            )
             return
         stamp = message.get("t")
         t = received if stamp is None else log_float(stamp) - self.unix0
-        self.controller.detection(t, message["id"], [message["x"], message["y"]],
-                                  message.get("cov"))
+        self.controller.detection(
+            t, message["id"], [message["x"], message["y"]], message.get("cov")
+        )
 
     # --- the mission ----------------------------------------------------------------------
-    async def wait_for(self, check: Callable[[], bool], timeout_s: float,
-                       interruptible: bool = True) -> bool:
+    async def wait_for(
+        self, check: Callable[[], bool], timeout_s: float, interruptible: bool = True
+    ) -> bool:
         """Poll ``check`` every 50 ms for at most ``timeout_s`` (or until Ctrl-C)."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline and not (interruptible and self.stop.is_set()):
@@ -247,11 +266,15 @@ class _Flight:
             self.recent.popleft()
         ned = self.vehicle.position_ned
         east, north, up = ned_to_enu(*ned)
-        return {**self.controller.status(), "t": t,
-                "flight_mode": getattr(self.vehicle.flight_mode, "name", None),
-                "setpoint_rate_hz": len(self.recent) / 2.0, "altitude_m": up,
-                "distance_from_home_m": float(np.hypot(east - home[0], north - home[1])),
-                "link_age_s": now - self.vehicle.received_at}
+        return {
+            **self.controller.status(),
+            "t": t,
+            "flight_mode": getattr(self.vehicle.flight_mode, "name", None),
+            "setpoint_rate_hz": len(self.recent) / 2.0,
+            "altitude_m": up,
+            "distance_from_home_m": float(np.hypot(east - home[0], north - home[1])),
+            "link_age_s": now - self.vehicle.received_at,
+        }
 
     async def fly(self, system: Any) -> tuple[str, str]:
         """Stream setpoints until a safe end; returns its ``(reason, detail)``."""
@@ -266,8 +289,12 @@ class _Flight:
         except OffboardError as err:
             return "offboard error", f"offboard mode refused: {err}"
         self.mono0, self.unix0 = time.monotonic(), time.time()
-        self.say("offboard started: mission time 0", unix_time=self.unix0, home=home,
-                 altitude_m=options.altitude_m)
+        self.say(
+            "offboard started: mission time 0",
+            unix_time=self.unix0,
+            home=home,
+            altitude_m=options.altitude_m,
+        )
         self._guard(lambda: controller.odometry(0.0, home))
         period = 1.0 / options.setpoint_rate_hz
         next_at = self.mono0
@@ -281,8 +308,9 @@ class _Flight:
                 return "interrupted", "Ctrl-C or a termination signal"
             link_age = now - self.vehicle.received_at
             if link_age > options.lost_link_s:
-                return "lost link", (f"no telemetry for {link_age:.1f} s "
-                                     f"(limit {options.lost_link_s:g} s)")
+                return "lost link", (
+                    f"no telemetry for {link_age:.1f} s (limit {options.lost_link_s:g} s)"
+                )
             try:
                 setpoint = controller.setpoint(t)
             except Exception:  # noqa: BLE001 - a controller bug ends the mission safely
@@ -292,8 +320,10 @@ class _Flight:
                 return controller.end["reason"], f"mission time {t:.1f} s"
             distance = float(np.hypot(*(setpoint.position - home)))
             if distance > options.max_distance_m:
-                return "geofence", (f"setpoint {distance:.0f} m from home, beyond --max-distance "
-                                    f"{options.max_distance_m:g} m")
+                return "geofence", (
+                    f"setpoint {distance:.0f} m from home, beyond --max-distance "
+                    f"{options.max_distance_m:g} m"
+                )
             n, e, d = enu_to_ned(setpoint.position[0], setpoint.position[1], options.altitude_m)
             try:
                 await offboard.set_position_ned(PositionNedYaw(n, e, d, 0.0))
@@ -315,8 +345,11 @@ class _Flight:
         if self.home is not None:
             self.on_status(self.status(self.mission_time(), self.home))
         rtl = self.options.return_to_launch
-        action, wanted = ("return to launch", (FlightMode.RETURN_TO_LAUNCH, FlightMode.LAND)) \
-            if rtl else ("hold", (FlightMode.HOLD,))
+        action, wanted = (
+            ("return to launch", (FlightMode.RETURN_TO_LAUNCH, FlightMode.LAND))
+            if rtl
+            else ("hold", (FlightMode.HOLD,))
+        )
         self.say(f"mission ended ({reason}: {detail}); switching to {action}")
         error = None
         try:
@@ -330,23 +363,35 @@ class _Flight:
         except (ActionError, OffboardError) as err:
             error = str(err)
         # a refused or unanswered command leaves nothing to wait for
-        confirmed = await self.wait_for(lambda: self.vehicle.flight_mode in wanted,
-                                        0.0 if error else 5.0, interruptible=False)
+        confirmed = await self.wait_for(
+            lambda: self.vehicle.flight_mode in wanted, 0.0 if error else 5.0, interruptible=False
+        )
         mode = getattr(self.vehicle.flight_mode, "name", None)
-        record = {"kind": "safety", "t": self.mission_time(), "reason": reason,
-                  "detail": detail, "action": action, "confirmed": mode if confirmed else None}
+        record = {
+            "kind": "safety",
+            "t": self.mission_time(),
+            "reason": reason,
+            "detail": detail,
+            "action": action,
+            "confirmed": mode if confirmed else None,
+        }
         if error:
             record["error"] = error
         self.controller.log.write(record)
-        self.on_message(f"vehicle in {mode} ({'confirmed' if confirmed else 'NOT confirmed'}"
-                        f"{'; ' + error if error else ''})")
+        self.on_message(
+            f"vehicle in {mode} ({'confirmed' if confirmed else 'NOT confirmed'}"
+            f"{'; ' + error if error else ''})"
+        )
         return action, mode if confirmed else None
 
 
-async def fly_mission(controller: MissionController, options: FlightOptions,
-                      on_status: Callable[[dict], None] = lambda status: None,
-                      on_message: Callable[[str], None] = lambda text: None,
-                      stop: asyncio.Event | None = None) -> FlightResult:
+async def fly_mission(
+    controller: MissionController,
+    options: FlightOptions,
+    on_status: Callable[[dict], None] = lambda status: None,
+    on_message: Callable[[str], None] = lambda text: None,
+    stop: asyncio.Event | None = None,
+) -> FlightResult:
     """Fly ``controller``'s mission on the vehicle at ``options.connection`` (module
     docstring).
 
@@ -368,24 +413,33 @@ async def fly_mission(controller: MissionController, options: FlightOptions,
             await mavsdk.add_any_connection(options.connection)
             system = await mavsdk.first_autopilot(timeout_s=options.connect_timeout_s)
             if system is None:
-                raise FlightError(f"no autopilot found on {options.connection} within "
-                                  f"{options.connect_timeout_s:g} s")
+                raise FlightError(
+                    f"no autopilot found on {options.connection} within "
+                    f"{options.connect_timeout_s:g} s"
+                )
             telemetry = TelemetryAsync(system)
-            tasks = [asyncio.create_task(flight.watch_position(telemetry)),
-                     asyncio.create_task(flight.watch_state(telemetry))]
-            if not await flight.wait_for(lambda: flight.vehicle.position_ned is not None,
-                                         options.connect_timeout_s):
-                raise FlightError(f"no local position from the vehicle within "
-                                  f"{options.connect_timeout_s:g} s")
+            tasks = [
+                asyncio.create_task(flight.watch_position(telemetry)),
+                asyncio.create_task(flight.watch_state(telemetry)),
+            ]
+            if not await flight.wait_for(
+                lambda: flight.vehicle.position_ned is not None, options.connect_timeout_s
+            ):
+                raise FlightError(
+                    f"no local position from the vehicle within {options.connect_timeout_s:g} s"
+                )
             flight.say("vehicle found; local position received")
             transport, _ = await loop.create_datagram_endpoint(
-                lambda: _Detections(flight), local_addr=(host, port))
+                lambda: _Detections(flight), local_addr=(host, port)
+            )
             if options.takeoff:
                 await _take_off(flight, system)
-            elif not await flight.wait_for(lambda: flight.vehicle.armed
-                                           and flight.vehicle.in_air, 3.0):
-                raise FlightError("the vehicle is not armed and in the air; pass --takeoff to "
-                                  "arm and take off")
+            elif not await flight.wait_for(
+                lambda: flight.vehicle.armed and flight.vehicle.in_air, 3.0
+            ):
+                raise FlightError(
+                    "the vehicle is not armed and in the air; pass --takeoff to arm and take off"
+                )
             if stop.is_set():
                 raise FlightError("interrupted before the mission started")
             try:
@@ -404,8 +458,16 @@ async def fly_mission(controller: MissionController, options: FlightOptions,
                     await task
             controller.close()
     t = flight.mission_time() or 0.0
-    return FlightResult(reason, detail, action, confirmed, controller.end or {},
-                        flight.sent, flight.sent / t if t > 0 else 0.0, flight.error)
+    return FlightResult(
+        reason,
+        detail,
+        action,
+        confirmed,
+        controller.end or {},
+        flight.sent,
+        flight.sent / t if t > 0 else 0.0,
+        flight.error,
+    )
 
 
 async def _take_off(flight: _Flight, system: Any) -> None:
@@ -426,13 +488,18 @@ async def _take_off(flight: _Flight, system: Any) -> None:
     if not await flight.wait_for(high_enough, options.takeoff_timeout_s):
         with contextlib.suppress(ActionError):
             await action.hold()
-        raise FlightError(f"the vehicle did not reach {options.altitude_m:g} m within "
-                          f"{options.takeoff_timeout_s:g} s (switched to hold)")
+        raise FlightError(
+            f"the vehicle did not reach {options.altitude_m:g} m within "
+            f"{options.takeoff_timeout_s:g} s (switched to hold)"
+        )
 
 
-def run_flight(controller: MissionController, options: FlightOptions,
-               on_status: Callable[[dict], None] = lambda status: None,
-               on_message: Callable[[str], None] = lambda text: None) -> FlightResult:
+def run_flight(
+    controller: MissionController,
+    options: FlightOptions,
+    on_status: Callable[[dict], None] = lambda status: None,
+    on_message: Callable[[str], None] = lambda text: None,
+) -> FlightResult:
     """:func:`fly_mission` in its own event loop; Ctrl-C and SIGTERM end the mission safely
     (hold or return) instead of killing the program."""
 

@@ -30,7 +30,9 @@ def udp_address(url: str, option: str, loopback_only: bool = False) -> tuple[str
         except ValueError:
             loop = False
         if not loop:
-            raise InputError(f"{option} {url!r}: the vehicle stub uses loopback addresses only "
-                             "(127.0.0.1 or localhost)")
+            raise InputError(
+                f"{option} {url!r}: the vehicle stub uses loopback addresses only "
+                "(127.0.0.1 or localhost)"
+            )
         host = "127.0.0.1" if host == "localhost" else host
     return host, port

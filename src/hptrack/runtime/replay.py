@@ -60,15 +60,25 @@ def _differences(logged: list[dict], replayed: list[dict]) -> list[str]:
         return [f"records {kinds[0]} became {kinds[1]}"]
     for old, new in zip(logged, replayed, strict=True):
         kind = old["kind"]
-        keys = {"odometry": ("accepted", "reason"), "detection": ("accepted", "reason"),
-                "tick": ("k", "submitted", "detected"), "plan": ("k", "status"),
-                "late": ("k",), "mode": ("mode",), "end": ("reason",),
-                "setpoint": ("reason",)}.get(kind, ())
+        keys = {
+            "odometry": ("accepted", "reason"),
+            "detection": ("accepted", "reason"),
+            "tick": ("k", "submitted", "detected"),
+            "plan": ("k", "status"),
+            "late": ("k",),
+            "mode": ("mode",),
+            "end": ("reason",),
+            "setpoint": ("reason",),
+        }.get(kind, ())
         for key in keys:
             if old.get(key) != new.get(key):
                 out.append(f"{kind} {key}: {old.get(key)!r} became {new.get(key)!r}")
-        numbers = {"tick": ("logdet", "means", "agent"), "plan": ("waypoint",),
-                   "mode": ("position",), "end": ("U",)}.get(kind, ())
+        numbers = {
+            "tick": ("logdet", "means", "agent"),
+            "plan": ("waypoint",),
+            "mode": ("position",),
+            "end": ("U",),
+        }.get(kind, ())
         for key in numbers:
             if not _close(old.get(key), new.get(key)):
                 out.append(f"{kind} {key} differs")
@@ -91,13 +101,20 @@ def replay_log(path: str | Path) -> ReplayResult:
     except KeyError as err:
         raise InputError(f"{path}: the header has no {err.args[0]!r}") from None
     except ValidationError as err:
-        raise InputError(f"{path}: header controller settings: "
-                         f"{format_validation_error(err)}") from None
+        raise InputError(
+            f"{path}: header controller settings: {format_validation_error(err)}"
+        ) from None
     runner = ReplayRunner()
     log = MissionLog()
-    controller = MissionController(scenario, planner, seed=seed, settings=settings, log=log,
-                                   runner=runner, header={"source": "replay",
-                                                          "replay_of": str(path)})
+    controller = MissionController(
+        scenario,
+        planner,
+        seed=seed,
+        settings=settings,
+        log=log,
+        runner=runner,
+        header={"source": "replay", "replay_of": str(path)},
+    )
     records = contents.records
     mismatches: list[str] = []
     truth: dict[int, np.ndarray] = {}
@@ -125,15 +142,19 @@ def replay_log(path: str | Path) -> ReplayResult:
             kind = record["kind"]
             logged = [record]
             if kind in ("odometry", "detection") and "raw" in record:
-                controller.bad_input(kind, record.get("reason", ""), record.get("detail", ""),
-                                     record.get("raw"))
+                controller.bad_input(
+                    kind, record.get("reason", ""), record.get("detail", ""), record.get("raw")
+                )
             elif kind == "odometry":
                 controller.odometry(log_float(record["t"]), log_array(record["position"]))
             elif kind == "detection":
                 covariance = record.get("covariance")
-                controller.detection(log_float(record["t"]), record.get("target"),
-                                     log_array(record["position"]),
-                                     None if covariance is None else log_array(covariance))
+                controller.detection(
+                    log_float(record["t"]),
+                    record.get("target"),
+                    log_array(record["position"]),
+                    None if covariance is None else log_array(covariance),
+                )
             elif kind == "plan":
                 runner.release(record["k"])
                 logged = []
@@ -152,28 +173,41 @@ def replay_log(path: str | Path) -> ReplayResult:
         for problem in _differences(logged, replayed):
             mismatches.append(f"record {logged[0]['seq'] if logged else '?'}: {problem}")
     if not controller.finished:
-        last = max((log_float(r.get("t")) for r in records if r.get("t") is not None),
-                   default=0.0)
+        last = max((log_float(r.get("t")) for r in records if r.get("t") is not None), default=0.0)
         controller.finish(last if math.isfinite(last) else 0.0, "log ended")
     final_k = round(controller.final["time"] / scenario.time_step)
-    truth_array = (np.array([truth[k] for k in range(final_k + 1)])
-                   if all(k in truth for k in range(final_k + 1)) else None)
+    truth_array = (
+        np.array([truth[k] for k in range(final_k + 1)])
+        if all(k in truth for k in range(final_k + 1))
+        else None
+    )
     record = controller.episode_record(truth_array)
     summary = {
-        "log": str(path), "source": header.get("source"), "planner": header["planner"],
-        "seed": seed, "truncated": contents.truncated, "records": len(records) + 1,
+        "log": str(path),
+        "source": header.get("source"),
+        "planner": header["planner"],
+        "seed": seed,
+        "truncated": contents.truncated,
+        "records": len(records) + 1,
         "ticks": sum(r["kind"] == "tick" for r in records),
         "plans": sum(r["kind"] == "plan" for r in records),
-        "mismatches": len(mismatches), "first_mismatches": mismatches[:MAX_LISTED_MISMATCHES],
-        "U": controller.end["U"], "logged_U": None if logged_end is None else logged_end["U"],
-        "ended_by": controller.end["reason"], "time": controller.end["time"],
+        "mismatches": len(mismatches),
+        "first_mismatches": mismatches[:MAX_LISTED_MISMATCHES],
+        "U": controller.end["U"],
+        "logged_U": None if logged_end is None else logged_end["U"],
+        "ended_by": controller.end["reason"],
+        "time": controller.end["time"],
         "per_target_logdet": controller.end["per_target_logdet"],
-        "detections": dict(zip(scenario.target_ids, map(int, record.detection_counts()),
-                               strict=True)),
-        "accepted": controller.end["accepted"], "rejected": controller.end["rejected"],
-        "adapter": [{k: v for k, v in r.items() if k not in ("seq",)} for r in adapter
-                    if r["kind"] == "safety"],
+        "detections": dict(
+            zip(scenario.target_ids, map(int, record.detection_counts()), strict=True)
+        ),
+        "accepted": controller.end["accepted"],
+        "rejected": controller.end["rejected"],
+        "adapter": [
+            {k: v for k, v in r.items() if k not in ("seq",)}
+            for r in adapter
+            if r["kind"] == "safety"
+        ],
     }
     controller.close()
     return ReplayResult(controller, record, summary)
-

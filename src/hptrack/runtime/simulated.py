@@ -119,10 +119,15 @@ def _due(j: int, rate_hz: float, clock: _Clock) -> bool:
     return math.floor(clock(j) * rate_hz + 1e-9) > math.floor(clock(j - 1) * rate_hz + 1e-9)
 
 
-def run_simulated(scenario: Scenario, planner: Planner, seed: int | None = None,
-                  faults: SimulatedFaults | None = None,
-                  settings: ControllerSettings | None = None, log: MissionLog | None = None,
-                  on_step: Callable[[float], None] | None = None) -> SimulatedRun:
+def run_simulated(
+    scenario: Scenario,
+    planner: Planner,
+    seed: int | None = None,
+    faults: SimulatedFaults | None = None,
+    settings: ControllerSettings | None = None,
+    log: MissionLog | None = None,
+    on_step: Callable[[float], None] | None = None,
+) -> SimulatedRun:
     """Fly ``planner`` through ``scenario`` with a :class:`MissionController` on a simulated
     clock (module docstring).
 
@@ -135,8 +140,10 @@ def run_simulated(scenario: Scenario, planner: Planner, seed: int | None = None,
     tau = mission.time_step
     per_tau = round(tau * faults.setpoint_rate_hz)
     if per_tau < 1 or abs(per_tau - tau * faults.setpoint_rate_hz) > 1e-9:
-        raise InputError(f"setpoint_rate_hz {faults.setpoint_rate_hz:g}: time_step {tau:g} s "
-                         "is not a whole number of setpoint periods")
+        raise InputError(
+            f"setpoint_rate_hz {faults.setpoint_rate_hz:g}: time_step {tau:g} s "
+            "is not a whole number of setpoint periods"
+        )
     clock = _Clock(tau, per_tau)
     dt = tau / per_tau
     truth_seq, motion_seq, sensor_seq, _, fault_seq = np.random.SeedSequence(seed).spawn(5)
@@ -146,16 +153,23 @@ def run_simulated(scenario: Scenario, planner: Planner, seed: int | None = None,
 
     def planner_delay(_tick: int) -> float:
         delay = faults.planner_delay_s
-        if faults.planner_slow_probability > 0 and \
-                fault_rng.random() < faults.planner_slow_probability:
+        if (
+            faults.planner_slow_probability > 0
+            and fault_rng.random() < faults.planner_slow_probability
+        ):
             delay += faults.planner_slow_delay_s
         return delay
 
     log = log if log is not None else MissionLog()
     controller = MissionController(
-        scenario, planner, seed=seed, settings=settings, log=log,
+        scenario,
+        planner,
+        seed=seed,
+        settings=settings,
+        log=log,
         runner=InlineRunner(planner_delay),
-        header={"source": "simulated", "faults": faults.model_dump(mode="json")})
+        header={"source": "simulated", "faults": faults.model_dump(mode="json")},
+    )
     sensor = mission.sensor
     targets = TrueTargets(scenario, np.random.default_rng(truth_seq), motion_rng)
     agent = np.asarray(scenario.agent.position, dtype=float)
@@ -184,16 +198,20 @@ def run_simulated(scenario: Scenario, planner: Planner, seed: int | None = None,
         if _due(j, detection_rate, clock):
             seen = np.flatnonzero(sensor.in_footprint(agent, positions))
             for i, z in zip(seen, sensor.sample(positions[seen], sensor_rng), strict=True):
-                if faults.detection_drop_probability > 0 and \
-                        fault_rng.random() < faults.detection_drop_probability:
+                if (
+                    faults.detection_drop_probability > 0
+                    and fault_rng.random() < faults.detection_drop_probability
+                ):
                     continue
                 delay = faults.detection_latency_s
                 if faults.detection_jitter_s > 0:
                     delay += fault_rng.uniform(0.0, faults.detection_jitter_s)
                 schedule(t + delay, "detection", (t, mission.target_ids[i], z))
         if _due(j, faults.odometry_rate_hz, clock) and not in_outage(t):
-            if not (faults.odometry_drop_probability > 0
-                    and fault_rng.random() < faults.odometry_drop_probability):
+            if not (
+                faults.odometry_drop_probability > 0
+                and fault_rng.random() < faults.odometry_drop_probability
+            ):
                 schedule(t, "odometry", (t, agent.copy()))
         if faults.bad_input_rate_hz > 0 and fault_rng.random() < faults.bad_input_rate_hz * dt:
             schedule(t, "bad", (t, int(fault_rng.integers(9))))
@@ -218,8 +236,14 @@ def run_simulated(scenario: Scenario, planner: Planner, seed: int | None = None,
     return SimulatedRun(controller, controller.episode_record(truth_array), fed, wall)
 
 
-def _feed_bad(controller: MissionController, t: float, which: int, dt: float,
-              agent: np.ndarray, last_detection: tuple | None) -> None:
+def _feed_bad(
+    controller: MissionController,
+    t: float,
+    which: int,
+    dt: float,
+    agent: np.ndarray,
+    last_detection: tuple | None,
+) -> None:
     """One hostile input of kind ``which`` (0-8) at time ``t``."""
     ids = controller.mission.target_ids
     stale = controller.newest_detection_s - controller.settings.reorder_tolerance_s - 1.0

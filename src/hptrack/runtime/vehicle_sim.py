@@ -45,10 +45,15 @@ PX4_AUTO_SUB_MODE = {"ready": 1, "takeoff": 2, "hold": 3, "mission": 4, "rtl": 5
 
 _SYSTEM_ID = 1
 _COMPONENT_ID = mavlink.MAV_COMP_ID_AUTOPILOT1
-_SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-            | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-            | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_AHRS
-            | mavlink.MAV_SYS_STATUS_PREARM_CHECK)
+_SENSORS = (
+    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    | mavlink.MAV_SYS_STATUS_AHRS
+    | mavlink.MAV_SYS_STATUS_PREARM_CHECK
+)
 _HOME_LAT_DEG, _HOME_LON_DEG, _HOME_ALT_M = 47.397742, 8.545594, 488.0
 _EARTH_RADIUS_M = 6_378_137.0
 
@@ -87,11 +92,21 @@ class VehicleStats:
 
     def as_json(self, final_mode: str, armed: bool, position_ned: np.ndarray) -> dict:
         """Summary: setpoint count and rates while in offboard, modes, detections."""
-        offboard = [t for t in self.setpoint_times
-                    if self.mission_started_at is not None and t >= self.mission_started_at]
-        end = next((t for t, m in self.modes if m != "offboard"
-                    and self.mission_started_at is not None and t > self.mission_started_at),
-                   None)
+        offboard = [
+            t
+            for t in self.setpoint_times
+            if self.mission_started_at is not None and t >= self.mission_started_at
+        ]
+        end = next(
+            (
+                t
+                for t, m in self.modes
+                if m != "offboard"
+                and self.mission_started_at is not None
+                and t > self.mission_started_at
+            ),
+            None,
+        )
         inside = [t for t in offboard if end is None or t <= end]
         gaps = np.diff(inside) if len(inside) > 1 else np.zeros(0)
         span = inside[-1] - inside[0] if len(inside) > 1 else 0.0
@@ -101,9 +116,13 @@ class VehicleStats:
             "offboard_setpoint_rate_hz": (len(inside) - 1) / span if span > 0 else 0.0,
             "offboard_max_gap_s": float(gaps.max()) if gaps.size else None,
             "modes": [{"t": t, "mode": m} for t, m in self.modes],
-            "final_mode": final_mode, "armed": armed, "armed_at": self.armed_at,
-            "mission_started_at": self.mission_started_at, "commands": self.commands,
-            "detections_sent": self.detections_sent, "max_speed_m_s": self.max_speed_m_s,
+            "final_mode": final_mode,
+            "armed": armed,
+            "armed_at": self.armed_at,
+            "mission_started_at": self.mission_started_at,
+            "commands": self.commands,
+            "detections_sent": self.detections_sent,
+            "max_speed_m_s": self.max_speed_m_s,
             "position_ned": position_ned.tolist(),
         }
 
@@ -123,9 +142,15 @@ class VehicleSim:
         InputError: a malformed or non-loopback address.
     """
 
-    def __init__(self, scenario: Scenario, mavlink_url: str = "udpout://127.0.0.1:14540",
-                 detections_url: str = "udp://127.0.0.1:5005", seed: int | None = None,
-                 detection_rate_hz: float | None = None, climb_rate_m_s: float = 5.0) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        mavlink_url: str = "udpout://127.0.0.1:14540",
+        detections_url: str = "udp://127.0.0.1:5005",
+        seed: int | None = None,
+        detection_rate_hz: float | None = None,
+        climb_rate_m_s: float = 5.0,
+    ) -> None:
         self.scenario = scenario
         self.mission = scenario.mission_spec()
         self._gcs = udp_address(mavlink_url, "--mavlink", loopback_only=True)
@@ -134,8 +159,9 @@ class VehicleSim:
         self._climb = float(climb_rate_m_s)
         seed = scenario.seed if seed is None else int(seed)
         truth_seq, motion_seq, sensor_seq, _ = np.random.SeedSequence(seed).spawn(4)
-        self._targets = TrueTargets(scenario, np.random.default_rng(truth_seq),
-                                    np.random.default_rng(motion_seq))
+        self._targets = TrueTargets(
+            scenario, np.random.default_rng(truth_seq), np.random.default_rng(motion_seq)
+        )
         self._sensor_rng = np.random.default_rng(sensor_seq)
         x, y = scenario.agent.position
         self.home = np.array(enu_to_ned(x, y, 0.0))
@@ -146,9 +172,13 @@ class VehicleSim:
         self._target: np.ndarray | None = None
         self._hold = self.position.copy()
         self._last_setpoint: float = -math.inf
-        self._params: dict[str, float] = {"MIS_TAKEOFF_ALT": 2.5, "MPC_XY_CRUISE": 10.0,
-                                          "RTL_RETURN_ALT": 30.0, "NAV_RCL_ACT": 0.0,
-                                          "COM_RCL_EXCEPT": 4.0}
+        self._params: dict[str, float] = {
+            "MIS_TAKEOFF_ALT": 2.5,
+            "MPC_XY_CRUISE": 10.0,
+            "RTL_RETURN_ALT": 30.0,
+            "NAV_RCL_ACT": 0.0,
+            "COM_RCL_EXCEPT": 4.0,
+        }
         self.stats = VehicleStats()
         self._start = time.monotonic()
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -206,13 +236,19 @@ class VehicleSim:
             if msg.target_system in (0, _SYSTEM_ID) and msg.target_component in (0, _COMPONENT_ID):
                 self._command(msg)
         elif kind == "PARAM_SET":
-            name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else \
-                msg.param_id.decode().rstrip("\x00")
+            name = (
+                msg.param_id.rstrip("\x00")
+                if isinstance(msg.param_id, str)
+                else msg.param_id.decode().rstrip("\x00")
+            )
             self._params[name] = float(msg.param_value)
             self._send_param(name)
         elif kind == "PARAM_REQUEST_READ":
-            name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else \
-                msg.param_id.decode().rstrip("\x00")
+            name = (
+                msg.param_id.rstrip("\x00")
+                if isinstance(msg.param_id, str)
+                else msg.param_id.decode().rstrip("\x00")
+            )
             names = list(self._params)
             if name in self._params:
                 self._send_param(name)
@@ -226,8 +262,13 @@ class VehicleSim:
 
     def _send_param(self, name: str) -> None:
         names = list(self._params)
-        self._mav.param_value_send(name.encode(), self._params[name],
-                                   mavlink.MAV_PARAM_TYPE_REAL32, len(names), names.index(name))
+        self._mav.param_value_send(
+            name.encode(),
+            self._params[name],
+            mavlink.MAV_PARAM_TYPE_REAL32,
+            len(names),
+            names.index(name),
+        )
 
     def _command(self, msg: Any) -> None:
         cmd = msg.command
@@ -263,10 +304,15 @@ class VehicleSim:
         elif cmd == mavlink.MAV_CMD_NAV_LAND:
             self._set_mode("land")
             self._ack(cmd, accepted)
-        elif cmd in (mavlink.MAV_CMD_REQUEST_MESSAGE,
-                     mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            wanted = int(msg.param1) if cmd == mavlink.MAV_CMD_REQUEST_MESSAGE else \
-                mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+        elif cmd in (
+            mavlink.MAV_CMD_REQUEST_MESSAGE,
+            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+        ):
+            wanted = (
+                int(msg.param1)
+                if cmd == mavlink.MAV_CMD_REQUEST_MESSAGE
+                else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            )
             if wanted == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
                 self._ack(cmd, accepted)
                 self._send_version()
@@ -282,35 +328,49 @@ class VehicleSim:
 
     # --- telemetry --------------------------------------------------------------------------
     def _send_version(self) -> None:
-        capabilities = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-                        | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                        | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                        | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT)
-        self._mav.autopilot_version_send(capabilities, (1 << 24) | (15 << 16), 0, 0, 0,
-                                         [0] * 8, [0] * 8, [0] * 8, 0, 0, 1)
+        capabilities = (
+            mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+            | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+            | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+            | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+        )
+        self._mav.autopilot_version_send(
+            capabilities, (1 << 24) | (15 << 16), 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 1
+        )
 
     def _geodetic(self, ned: np.ndarray) -> tuple[int, int, int]:
         lat = _HOME_LAT_DEG + math.degrees(ned[0] / _EARTH_RADIUS_M)
         lon = _HOME_LON_DEG + math.degrees(
-            ned[1] / (_EARTH_RADIUS_M * math.cos(math.radians(_HOME_LAT_DEG))))
+            ned[1] / (_EARTH_RADIUS_M * math.cos(math.radians(_HOME_LAT_DEG)))
+        )
         return int(lat * 1e7), int(lon * 1e7), int((_HOME_ALT_M - ned[2]) * 1000)
 
     def _send_home(self) -> None:
         lat, lon, alt = self._geodetic(self.home)
-        self._mav.home_position_send(lat, lon, alt, *self.home.tolist(), [1.0, 0.0, 0.0, 0.0],
-                                     0.0, 0.0, 0.0)
+        self._mav.home_position_send(
+            lat, lon, alt, *self.home.tolist(), [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0
+        )
 
     def _send_status(self) -> None:
         base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         if self.armed:
             base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         state = mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
-        self._mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base,
-                                 _custom_mode(self.mode), state)
-        self._mav.sys_status_send(_SENSORS, _SENSORS, _SENSORS, 100, 16000, 500, 90,
-                                  0, 0, 0, 0, 0, 0)
-        landed = (mavlink.MAV_LANDED_STATE_IN_AIR if self._airborne()
-                  else mavlink.MAV_LANDED_STATE_ON_GROUND)
+        self._mav.heartbeat_send(
+            mavlink.MAV_TYPE_QUADROTOR,
+            mavlink.MAV_AUTOPILOT_PX4,
+            base,
+            _custom_mode(self.mode),
+            state,
+        )
+        self._mav.sys_status_send(
+            _SENSORS, _SENSORS, _SENSORS, 100, 16000, 500, 90, 0, 0, 0, 0, 0, 0
+        )
+        landed = (
+            mavlink.MAV_LANDED_STATE_IN_AIR
+            if self._airborne()
+            else mavlink.MAV_LANDED_STATE_ON_GROUND
+        )
         self._mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, landed)
         self._send_home()
 
@@ -319,8 +379,9 @@ class VehicleSim:
         vn, ve, vd = self.velocity.tolist()
         self._mav.local_position_ned_send(boot_ms, n, e, d, vn, ve, vd)
         lat, lon, alt = self._geodetic(self.position)
-        self._mav.global_position_int_send(boot_ms, lat, lon, alt, int(-d * 1000),
-                                           int(vn * 100), int(ve * 100), int(vd * 100), 0)
+        self._mav.global_position_int_send(
+            boot_ms, lat, lon, alt, int(-d * 1000), int(vn * 100), int(ve * 100), int(vd * 100), 0
+        )
 
     # --- physics ----------------------------------------------------------------------------
     def _airborne(self) -> bool:
@@ -357,8 +418,9 @@ class VehicleSim:
         rise = float(np.clip(goal[2] - self.position[2], -self._climb * dt, self._climb * dt))
         self.position[2] = min(self.position[2] + rise, self.home[2])
         self.velocity = (self.position - before) / dt if dt > 0 else np.zeros(3)
-        self.stats.max_speed_m_s = max(self.stats.max_speed_m_s,
-                                       float(np.hypot(*self.velocity[:2])))
+        self.stats.max_speed_m_s = max(
+            self.stats.max_speed_m_s, float(np.hypot(*self.velocity[:2]))
+        )
 
     def _sense(self) -> None:
         start = self.stats.mission_started_at
@@ -374,8 +436,7 @@ class VehicleSim:
         lines = []
         for i, z in zip(seen, sensor.sample(truth[seen], self._sensor_rng), strict=True):
             tid = self.mission.target_ids[i]
-            lines.append(json.dumps({"t": stamp, "id": tid, "x": float(z[0]),
-                                     "y": float(z[1])}))
+            lines.append(json.dumps({"t": stamp, "id": tid, "x": float(z[0]), "y": float(z[1])}))
             self.stats.detections_sent[tid] = self.stats.detections_sent.get(tid, 0) + 1
         try:
             self._out.sendto("\n".join(lines).encode(), self._detections)
@@ -383,8 +444,9 @@ class VehicleSim:
             logger.debug("detection send failed: %s", err)
 
     # --- main loop --------------------------------------------------------------------------
-    def run(self, duration_s: float, stop: threading.Event | None = None,
-            loop_hz: float = 50.0) -> dict:
+    def run(
+        self, duration_s: float, stop: threading.Event | None = None, loop_hz: float = 50.0
+    ) -> dict:
         """Fly for at most ``duration_s`` wall seconds or until ``stop`` is set; returns the
         stats (:meth:`VehicleStats.as_json`)."""
         period = 1.0 / loop_hz

@@ -116,8 +116,7 @@ class InlineRunner:
 
     def drain(self, timeout_s: float) -> PlanOutcome | None:
         """The pending outcome whatever its simulated compute time."""
-        outcome, self._pending = (None, None) if self._pending is None else (
-            self._pending[1], None)
+        outcome, self._pending = (None, None) if self._pending is None else (self._pending[1], None)
         return outcome
 
     def close(self) -> None:

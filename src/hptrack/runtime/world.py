@@ -19,11 +19,15 @@ class TrueTargets:
         motion_rng: draws the motion noise, one call per step in order (as the simulator).
     """
 
-    def __init__(self, scenario: Scenario, truth_rng: np.random.Generator,
-                 motion_rng: np.random.Generator) -> None:
+    def __init__(
+        self, scenario: Scenario, truth_rng: np.random.Generator, motion_rng: np.random.Generator
+    ) -> None:
         mission = scenario.mission_spec()
-        self._motion, self._q, self.time_step = mission.motion, mission.process_noise, \
-            mission.time_step
+        self._motion, self._q, self.time_step = (
+            mission.motion,
+            mission.process_noise,
+            mission.time_step,
+        )
         self._rng = motion_rng
         self.states: list[np.ndarray] = [initial_true_states(scenario, truth_rng)]
         """True states ``(n, 4)`` at steps ``0, 1, ...`` drawn so far."""

@@ -31,7 +31,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
             if duplicated:
                 mark = key_node.start_mark
                 raise yaml.constructor.ConstructorError(
-                    None, None, f"duplicated key {key!r} at line {mark.line + 1}", mark)
+                    None, None, f"duplicated key {key!r} at line {mark.line + 1}", mark
+                )
             seen.add(key)
         return super().construct_mapping(node, deep=deep)
 
@@ -47,8 +48,9 @@ def read_yaml(path: str | Path, what: str = "file") -> object:
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
-        raise ScenarioError(f"{path}: not a UTF-8 text file (byte {err.start}); is it a "
-                            f"{what}?") from None
+        raise ScenarioError(
+            f"{path}: not a UTF-8 text file (byte {err.start}); is it a {what}?"
+        ) from None
     if "\x00" in text:
         raise ScenarioError(f"{path}: a binary file, not a {what}")
     try:

@@ -67,8 +67,10 @@ class AgentSpec(BaseModel):
                 raise ValueError(f"measurement_noise_covariance is not symmetric: {r.tolist()}")
             eig = np.linalg.eigvalsh(r)
             if eig[0] <= 1e-12 or eig[1] > 1e8:
-                raise ValueError("measurement_noise_covariance must be positive definite with "
-                                 f"eigenvalues in (1e-12, 1e8] m^2, got {r.tolist()}")
+                raise ValueError(
+                    "measurement_noise_covariance must be positive definite with "
+                    f"eigenvalues in (1e-12, 1e8] m^2, got {r.tolist()}"
+                )
         return self
 
     def noise_covariance(self) -> np.ndarray:
@@ -104,8 +106,10 @@ class TargetSpec(BaseModel):
             raise ValueError(f"covariance is not positive definite: {cov.tolist()}")
         pos = np.linalg.eigvalsh(cov[:2, :2])
         if pos[0] < MIN_POSITION_CONDITION * pos[1]:
-            raise ValueError(f"the position block {cov[:2, :2].tolist()} is degenerate (its "
-                             "ellipse is flatter than 1e-12)")
+            raise ValueError(
+                f"the position block {cov[:2, :2].tolist()} is degenerate (its "
+                "ellipse is flatter than 1e-12)"
+            )
         return value
 
 
@@ -125,15 +129,20 @@ class Scenario(BaseModel):
     def _consistent(self) -> Self:
         steps = self.budget / self.time_step
         if self.budget < self.time_step:
-            raise ValueError(f"budget {self.budget:g} s is shorter than time_step "
-                             f"{self.time_step:g} s")
+            raise ValueError(
+                f"budget {self.budget:g} s is shorter than time_step {self.time_step:g} s"
+            )
         if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
-            raise ValueError(f"budget {self.budget!r} s is not a whole number of time steps of "
-                             f"{self.time_step:g} s (use e.g. {round(steps) * self.time_step:g})")
+            raise ValueError(
+                f"budget {self.budget!r} s is not a whole number of time steps of "
+                f"{self.time_step:g} s (use e.g. {round(steps) * self.time_step:g})"
+            )
         if round(steps) > MAX_STEPS:
-            raise ValueError(f"budget {self.budget:g} s is {round(steps):,} steps of "
-                             f"{self.time_step:g} s; at most {MAX_STEPS:,} steps are supported "
-                             "(use a larger time_step or a shorter budget)")
+            raise ValueError(
+                f"budget {self.budget:g} s is {round(steps):,} steps of "
+                f"{self.time_step:g} s; at most {MAX_STEPS:,} steps are supported "
+                "(use a larger time_step or a shorter budget)"
+            )
         seen: set[str] = set()
         for i, target in enumerate(self.targets):
             if target.id in seen:
@@ -143,16 +152,20 @@ class Scenario(BaseModel):
             if speed >= self.agent.speed:
                 raise ValueError(
                     f"targets.{i}.mean: target {target.id!r} mean speed {speed:g} m/s is not "
-                    f"below agent.speed {self.agent.speed:g} m/s")
+                    f"below agent.speed {self.agent.speed:g} m/s"
+                )
         with np.errstate(all="ignore"):
-            _, covs = self.motion_model().predict(self.means(), self.covariances(),
-                                                  self.process_noise(), self.budget)
+            _, covs = self.motion_model().predict(
+                self.means(), self.covariances(), self.process_noise(), self.budget
+            )
             logdets = position_logdet(covs)
         for i, value in enumerate(logdets):
             if not math.isfinite(value) or not np.all(np.isfinite(covs[i])):
-                raise ValueError(f"targets.{i}.covariance: the position log det is not finite "
-                                 f"by the end of the budget ({value}); use smaller variances "
-                                 "or process noise")
+                raise ValueError(
+                    f"targets.{i}.covariance: the position log det is not finite "
+                    f"by the end of the budget ({value}); use smaller variances "
+                    "or process noise"
+                )
         return self
 
     # --- arrays for the library -------------------------------------------------------------
@@ -198,8 +211,9 @@ class Scenario(BaseModel):
 
     def never_observed_uncertainty(self) -> float:
         """``U`` of a mission that measures nothing: every prior grown to the budget's end."""
-        _, covs = self.motion_model().predict(self.means(), self.covariances(),
-                                              self.process_noise(), self.n_steps * self.time_step)
+        _, covs = self.motion_model().predict(
+            self.means(), self.covariances(), self.process_noise(), self.n_steps * self.time_step
+        )
         return float(position_logdet(covs).sum())
 
     def with_seed(self, seed: int) -> Scenario:

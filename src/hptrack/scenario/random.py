@@ -33,12 +33,18 @@ def random_prior(rng: np.random.Generator) -> tuple[np.ndarray, float]:
 
 def random_mean(rng: np.random.Generator) -> np.ndarray:
     """One prior mean ``[x, y, vx, vy]``."""
-    return np.concatenate([rng.uniform(*POSITION_RANGE_M, size=2),
-                           rng.uniform(*VELOCITY_RANGE_MPS, size=2)])
+    return np.concatenate(
+        [rng.uniform(*POSITION_RANGE_M, size=2), rng.uniform(*VELOCITY_RANGE_MPS, size=2)]
+    )
 
 
-def random_scenario(n_targets: int, seed: int, homogeneous: bool = False,
-                    agent: AgentSpec | None = None, **scenario_fields) -> Scenario:
+def random_scenario(
+    n_targets: int,
+    seed: int,
+    homogeneous: bool = False,
+    agent: AgentSpec | None = None,
+    **scenario_fields,
+) -> Scenario:
     """The paper's random scenario with ``n_targets`` targets, fully determined by ``seed``.
 
     True initial states are left out: the simulator draws them from the prior with the seed.
@@ -51,6 +57,9 @@ def random_scenario(n_targets: int, seed: int, homogeneous: bool = False,
     for i in range(n_targets):
         mean = random_mean(rng)
         cov, q = shared if shared is not None else random_prior(rng)
-        targets.append(TargetSpec(id=f"t{i + 1}", mean=tuple(mean),
-                                  covariance=tuple(map(tuple, cov)), process_noise=q))
+        targets.append(
+            TargetSpec(
+                id=f"t{i + 1}", mean=tuple(mean), covariance=tuple(map(tuple, cov)), process_noise=q
+            )
+        )
     return Scenario(seed=seed, agent=agent or AgentSpec(), targets=targets, **scenario_fields)

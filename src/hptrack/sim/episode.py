@@ -22,9 +22,13 @@ from hptrack.sim.record import EpisodeRecord
 from hptrack.sim.step import World
 
 
-def run_episode(scenario: Scenario, planner: Planner, seed: int | None = None,
-                belief_stride: int = 1,
-                on_step: Callable[[int, int], None] | None = None) -> EpisodeRecord:
+def run_episode(
+    scenario: Scenario,
+    planner: Planner,
+    seed: int | None = None,
+    belief_stride: int = 1,
+    on_step: Callable[[int, int], None] | None = None,
+) -> EpisodeRecord:
     """Simulate one mission of ``scenario`` flown by ``planner``.
 
     Args:
@@ -64,11 +68,20 @@ def run_episode(scenario: Scenario, planner: Planner, seed: int | None = None,
         if on_step is not None:
             on_step(k, n_steps)
     return EpisodeRecord(
-        planner=planner.name, seed=world.seed, target_ids=mission.target_ids,
-        time_step=mission.time_step, sensor_diameter=mission.sensor_diameter,
-        agent_path=agent_path, true_states=true_states, belief_steps=np.asarray(stored),
-        belief_means=belief_means, belief_covariances=belief_covs, detections=detections,
-        per_target_logdet=world.logdets.copy(), info=dict(planner.episode_info()))
+        planner=planner.name,
+        seed=world.seed,
+        target_ids=mission.target_ids,
+        time_step=mission.time_step,
+        sensor_diameter=mission.sensor_diameter,
+        agent_path=agent_path,
+        true_states=true_states,
+        belief_steps=np.asarray(stored),
+        belief_means=belief_means,
+        belief_covariances=belief_covs,
+        detections=detections,
+        per_target_logdet=world.logdets.copy(),
+        info=dict(planner.episode_info()),
+    )
 
 
 def record_bytes(n_targets: int, n_steps: int, belief_stride: int = 1) -> int:

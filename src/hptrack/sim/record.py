@@ -67,10 +67,12 @@ class EpisodeRecord:
         """JSON-ready summary: ``U``, per-target log det and detections, planner, seed."""
         return {
             "U": self.uncertainty,
-            "per_target_logdet": dict(zip(self.target_ids, map(float, self.per_target_logdet),
-                                          strict=True)),
-            "detections": dict(zip(self.target_ids, map(int, self.detection_counts()),
-                                   strict=True)),
+            "per_target_logdet": dict(
+                zip(self.target_ids, map(float, self.per_target_logdet), strict=True)
+            ),
+            "detections": dict(
+                zip(self.target_ids, map(int, self.detection_counts()), strict=True)
+            ),
             "planner": self.planner,
             "seed": self.seed,
             "time_step": self.time_step,
@@ -80,15 +82,26 @@ class EpisodeRecord:
 
     def save(self, path: str | Path) -> None:
         """Write the record to one compressed ``.npz`` file."""
-        meta = {"planner": self.planner, "seed": self.seed, "target_ids": list(self.target_ids),
-                "time_step": self.time_step, "sensor_diameter": self.sensor_diameter,
-                "info": self.info}
+        meta = {
+            "planner": self.planner,
+            "seed": self.seed,
+            "target_ids": list(self.target_ids),
+            "time_step": self.time_step,
+            "sensor_diameter": self.sensor_diameter,
+            "info": self.info,
+        }
         with open(path, "wb") as fh:
             np.savez_compressed(
-                fh, meta=np.array(json.dumps(meta)), agent_path=self.agent_path,
-                true_states=self.true_states, belief_steps=self.belief_steps,
-                belief_means=self.belief_means, belief_covariances=self.belief_covariances,
-                detections=self.detections, per_target_logdet=self.per_target_logdet)
+                fh,
+                meta=np.array(json.dumps(meta)),
+                agent_path=self.agent_path,
+                true_states=self.true_states,
+                belief_steps=self.belief_steps,
+                belief_means=self.belief_means,
+                belief_covariances=self.belief_covariances,
+                detections=self.detections,
+                per_target_logdet=self.per_target_logdet,
+            )
 
     @classmethod
     def load(cls, path: str | Path) -> EpisodeRecord:
@@ -96,6 +109,12 @@ class EpisodeRecord:
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
             arrays = {k: data[k] for k in data.files if k != "meta"}
-        return cls(planner=meta["planner"], seed=meta["seed"],
-                   target_ids=tuple(meta["target_ids"]), time_step=meta["time_step"],
-                   sensor_diameter=meta["sensor_diameter"], info=meta["info"], **arrays)
+        return cls(
+            planner=meta["planner"],
+            seed=meta["seed"],
+            target_ids=tuple(meta["target_ids"]),
+            time_step=meta["time_step"],
+            sensor_diameter=meta["sensor_diameter"],
+            info=meta["info"],
+            **arrays,
+        )

@@ -99,8 +99,27 @@ def sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, log
 
 
 @numba.njit(cache=True)
-def world_step(agent, waypoint, max_step, truth, z_motion, sqrt_q, means, covs, q, tau,
-               c_per_step, radius2, noise, factor, e, e_pos, seen, logdets, z):
+def world_step(
+    agent,
+    waypoint,
+    max_step,
+    truth,
+    z_motion,
+    sqrt_q,
+    means,
+    covs,
+    q,
+    tau,
+    c_per_step,
+    radius2,
+    noise,
+    factor,
+    e,
+    e_pos,
+    seen,
+    logdets,
+    z,
+):
     """One simulator step in place (module docstring): move, true motion with the unit normals
     ``z_motion`` ``(n, 4)``, predict one step, sense. Returns the new ``e_pos`` and ``U``."""
     move_agent(agent, waypoint, max_step)
@@ -131,7 +150,7 @@ class NormalBlock:
     def ensure(self, count: int) -> None:
         """Make at least ``count`` unused values available from ``pos``."""
         if self.pos + count > self.values.shape[0]:
-            rest = self.values[self.pos:]
+            rest = self.values[self.pos :]
             self.values = np.concatenate([rest, self.rng.standard_normal(self.pos)])
             self.pos = 0
 
@@ -159,14 +178,16 @@ class World:
     def __init__(self, scenario: Scenario, seed: int | None = None) -> None:
         seed = scenario.seed if seed is None else seed
         self.seed = int(seed)
-        truth_seq, motion_seq, sensor_seq, self.planner_seed = (
-            np.random.SeedSequence(self.seed).spawn(4))
+        truth_seq, motion_seq, sensor_seq, self.planner_seed = np.random.SeedSequence(
+            self.seed
+        ).spawn(4)
         mission = scenario.mission_spec()
         self.mission: MissionSpec = mission
         n = mission.n_targets
         self.n_steps = mission.n_steps
         self.truth = np.ascontiguousarray(
-            initial_true_states(scenario, np.random.default_rng(truth_seq)))
+            initial_true_states(scenario, np.random.default_rng(truth_seq))
+        )
         self.agent = np.array(scenario.agent.position, dtype=float)
         self.means = np.ascontiguousarray(scenario.means())
         self.covariances = np.ascontiguousarray(scenario.covariances())
@@ -207,8 +228,19 @@ class World:
         n = self.n_targets
         self._sensor.ensure(2 * n)
         self._sensor.pos, self.uncertainty = sense(
-            self.agent, self.truth, self.means, self.covariances, self._radius2, self._noise,
-            self._factor, self._sensor.values, self._sensor.pos, self.seen, self.logdets, self._z)
+            self.agent,
+            self.truth,
+            self.means,
+            self.covariances,
+            self._radius2,
+            self._noise,
+            self._factor,
+            self._sensor.values,
+            self._sensor.pos,
+            self.seen,
+            self.logdets,
+            self._z,
+        )
 
     def step(self, waypoint_x: float, waypoint_y: float) -> float:
         """Advance one step with the agent flying towards ``(waypoint_x, waypoint_y)`` m;
@@ -223,23 +255,39 @@ class World:
         motion, sensor = self._motion, self._sensor
         motion.ensure(4 * n)
         sensor.ensure(2 * n)
-        z = motion.values[motion.pos:motion.pos + 4 * n].reshape(n, 4)
+        z = motion.values[motion.pos : motion.pos + 4 * n].reshape(n, 4)
         motion.pos += 4 * n
         wp = self._waypoint
         wp[0] = waypoint_x
         wp[1] = waypoint_y
         m = self.mission
         sensor.pos, self.uncertainty = world_step(
-            self.agent, wp, m.step_length, self.truth, z, self._sqrt_q, self.means,
-            self.covariances, self.q, m.time_step, m.c_per_step, self._radius2, self._noise,
-            self._factor, sensor.values, sensor.pos, self.seen, self.logdets, self._z)
+            self.agent,
+            wp,
+            m.step_length,
+            self.truth,
+            z,
+            self._sqrt_q,
+            self.means,
+            self.covariances,
+            self.q,
+            m.time_step,
+            m.c_per_step,
+            self._radius2,
+            self._noise,
+            self._factor,
+            sensor.values,
+            sensor.pos,
+            self.seen,
+            self.logdets,
+            self._z,
+        )
         self.step_index += 1
         return self.uncertainty
 
     def observation(self) -> Observation:
         """What a planner sees now (read-only copies)."""
-        arrays = [self.agent.copy(), self.means.copy(), self.covariances.copy(),
-                  self.seen.copy()]
+        arrays = [self.agent.copy(), self.means.copy(), self.covariances.copy(), self.seen.copy()]
         for a in arrays:
             a.flags.writeable = False
         return Observation(self.step_index, self.time, self.remaining_budget, *arrays)

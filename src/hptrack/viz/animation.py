@@ -58,8 +58,9 @@ def stored_belief_index(belief_steps: np.ndarray, steps: np.ndarray) -> np.ndarr
     return np.maximum(np.searchsorted(belief_steps, steps, side="right") - 1, 0)
 
 
-def detection_flash(detections: np.ndarray, steps: np.ndarray,
-                    flash_frames: int = FLASH_FRAMES) -> np.ndarray:
+def detection_flash(
+    detections: np.ndarray, steps: np.ndarray, flash_frames: int = FLASH_FRAMES
+) -> np.ndarray:
     """Ring strength ``(frames, n)`` in ``[0, 1]``: 1 in a frame whose steps (after the previous
     frame's step, up to its own) hold a detection of the target, then fading linearly to 0 over
     ``flash_frames`` frames."""
@@ -71,8 +72,9 @@ def detection_flash(detections: np.ndarray, steps: np.ndarray,
     return np.clip(1.0 - (frames - last) / flash_frames, 0.0, 1.0)
 
 
-def subtask_at(info: dict, target_ids: Sequence[str], steps: np.ndarray
-               ) -> tuple[list[str], np.ndarray]:
+def subtask_at(
+    info: dict, target_ids: Sequence[str], steps: np.ndarray
+) -> tuple[list[str], np.ndarray]:
     """What the planner was doing at each step, from its sub-task log (``info["subtasks"]``).
 
     Returns a label per step (``"pursuing t2"``, ``"following t1"``, ``"dwelling on t1"``,
@@ -92,8 +94,11 @@ def subtask_at(info: dict, target_ids: Sequence[str], steps: np.ndarray
             focus[f] = entry["target_index"]
             tid = target_ids[entry["target_index"]]
             end = entry.get("end_step")
-            labels.append(f"pursued {tid}: {entry.get('outcome', 'ended')}"
-                          if end is not None and step >= end else f"pursuing {tid}")
+            labels.append(
+                f"pursued {tid}: {entry.get('outcome', 'ended')}"
+                if end is not None and step >= end
+                else f"pursuing {tid}"
+            )
         elif entry.get("follow") is not None:
             focus[f] = entry["follow"]
             labels.append(f"following {target_ids[entry['follow']]}")
@@ -107,8 +112,13 @@ def subtask_at(info: dict, target_ids: Sequence[str], steps: np.ndarray
 
 def _view_limits(record: EpisodeRecord) -> tuple[tuple[float, float], tuple[float, float]]:
     """Square view around the agent, the truth and the belief means, with a footprint margin."""
-    points = np.concatenate([record.agent_path, record.true_states[..., :2].reshape(-1, 2),
-                             record.belief_means[..., :2].reshape(-1, 2)])
+    points = np.concatenate(
+        [
+            record.agent_path,
+            record.true_states[..., :2].reshape(-1, 2),
+            record.belief_means[..., :2].reshape(-1, 2),
+        ]
+    )
     low, high = points.min(axis=0), points.max(axis=0)
     half = 0.5 * float(np.max(high - low)) + record.sensor_diameter
     center = 0.5 * (low + high)
@@ -119,11 +129,15 @@ def check_format(path: Path, option: str = "output") -> None:
     """Refuse an output whose suffix is not a known format, or an MP4 without ffmpeg."""
     suffix = path.suffix.lower()
     if suffix not in FORMATS:
-        raise InputError(f"{option} {str(path)!r}: unknown animation format "
-                         f"{path.suffix or '(none)'!r}; use one of {', '.join(FORMATS)}")
+        raise InputError(
+            f"{option} {str(path)!r}: unknown animation format "
+            f"{path.suffix or '(none)'!r}; use one of {', '.join(FORMATS)}"
+        )
     if suffix == ".mp4" and not writers.is_available("ffmpeg"):
-        raise InputError(f"{option} {str(path)!r}: ffmpeg is not installed, so MP4 cannot be "
-                         f"written; use a .gif file")
+        raise InputError(
+            f"{option} {str(path)!r}: ffmpeg is not installed, so MP4 cannot be "
+            f"written; use a .gif file"
+        )
 
 
 def _writer(path: Path, fps: int):
@@ -131,10 +145,17 @@ def _writer(path: Path, fps: int):
     return PillowWriter(fps=fps) if path.suffix.lower() == ".gif" else FFMpegWriter(fps=fps)
 
 
-def animate_mission(record: EpisodeRecord, path: str | Path, stride: int = 5, fps: int = 20,
-                    trail_s: float = 30.0,
-                    progress: Callable[[int, int], None] | None = None, *,
-                    dpi: int = 80, size_in: float = 6.0) -> int:
+def animate_mission(
+    record: EpisodeRecord,
+    path: str | Path,
+    stride: int = 5,
+    fps: int = 20,
+    trail_s: float = 30.0,
+    progress: Callable[[int, int], None] | None = None,
+    *,
+    dpi: int = 80,
+    size_in: float = 6.0,
+) -> int:
     """Animate ``record`` into ``path`` (``.gif``, or ``.mp4`` with ffmpeg); returns the
     number of frames written.
 
@@ -189,49 +210,84 @@ def animate_mission(record: EpisodeRecord, path: str | Path, stride: int = 5, fp
 
     (history,) = ax.plot([], [], color="0.82", lw=0.6, zorder=1)
     (trail,) = ax.plot([], [], color="k", lw=1.4, zorder=4)
-    footprint = ax.add_patch(Circle((0.0, 0.0), radius, facecolor=(0, 0, 0, 0.06),
-                                    edgecolor="k", lw=0.6, zorder=4))
+    footprint = ax.add_patch(
+        Circle((0.0, 0.0), radius, facecolor=(0, 0, 0, 0.06), edgecolor="k", lw=0.6, zorder=4)
+    )
     (agent,) = ax.plot([], [], marker="^", color="k", ms=7, ls="none", zorder=6)
     truth_trails, truths, means, ellipses, rings = [], [], [], [], []
     for color in colors:
         truth_trails.append(ax.plot([], [], color=color, lw=0.8, alpha=0.6, zorder=2)[0])
-        truths.append(ax.plot([], [], marker="o", color=color, mec="k", mew=0.5, ms=6,
-                              ls="none", zorder=5)[0])
+        truths.append(
+            ax.plot([], [], marker="o", color=color, mec="k", mew=0.5, ms=6, ls="none", zorder=5)[0]
+        )
         means.append(ax.plot([], [], marker="+", color=color, ms=7, ls="none", zorder=3)[0])
-        ellipses.append(ax.add_patch(Ellipse((0.0, 0.0), 0.0, 0.0, fill=False,
-                                             edgecolor=color, ls="--", zorder=3)))
+        ellipses.append(
+            ax.add_patch(
+                Ellipse((0.0, 0.0), 0.0, 0.0, fill=False, edgecolor=color, ls="--", zorder=3)
+            )
+        )
         rings.append(ax.plot([], [], marker="o", mfc="none", ls="none", zorder=5)[0])
     header = ax.set_title("", fontsize="medium", loc="left")
     status = ax.set_title("", fontsize="medium", loc="right", fontweight="bold")
-    targets = [Line2D([], [], color=c, marker="o", mec="k", mew=0.5, ms=6, ls="none",
-                      label=tid) for tid, c in zip(record.target_ids, colors, strict=True)]
+    targets = [
+        Line2D([], [], color=c, marker="o", mec="k", mew=0.5, ms=6, ls="none", label=tid)
+        for tid, c in zip(record.target_ids, colors, strict=True)
+    ]
     elements = [
         Line2D([], [], color="k", marker="^", ms=7, lw=1.4, label=f"agent, last {trail_s:g} s"),
         Line2D([], [], color="0.35", ls="--", lw=1.0, label="95 % belief ellipse"),
-        Line2D([], [], color="0.35", marker="o", mfc="none", ms=RING_POINTS, mew=2.0,
-               ls="none", label="detection"),
-        Line2D([], [], color="k", marker="o", mfc=(0, 0, 0, 0.06), ms=11, ls="none", mew=0.6,
-               label="sensor footprint"),
+        Line2D(
+            [],
+            [],
+            color="0.35",
+            marker="o",
+            mfc="none",
+            ms=RING_POINTS,
+            mew=2.0,
+            ls="none",
+            label="detection",
+        ),
+        Line2D(
+            [],
+            [],
+            color="k",
+            marker="o",
+            mfc=(0, 0, 0, 0.06),
+            ms=11,
+            ls="none",
+            mew=0.6,
+            label="sensor footprint",
+        ),
         Line2D([], [], color="0.35", marker="+", ms=7, ls="none", label="belief mean"),
         Line2D([], [], color="0.82", lw=0.8, label="agent path so far"),
     ]
-    legend_style = {"fontsize": "small", "frameon": False, "columnspacing": 1.0,
-                    "handletextpad": 0.4}
+    legend_style = {
+        "fontsize": "small",
+        "frameon": False,
+        "columnspacing": 1.0,
+        "handletextpad": 0.4,
+    }
     fig.legend(handles=elements, loc="lower center", ncol=3, **legend_style)
-    fig.legend(handles=targets, loc="lower center", bbox_to_anchor=(0.5, _ELEMENTS_IN / height),
-               ncol=min(n, TARGET_COLUMNS), title="true targets", title_fontsize="small",
-               **legend_style)
+    fig.legend(
+        handles=targets,
+        loc="lower center",
+        bbox_to_anchor=(0.5, _ELEMENTS_IN / height),
+        ncol=min(n, TARGET_COLUMNS),
+        title="true targets",
+        title_fontsize="small",
+        **legend_style,
+    )
 
     def draw(f: int) -> list:
         k = int(steps[f])
         j = int(belief_at[f])
         first = max(0, k - trail_steps)
         history.set_data(record.agent_path[: k + 1, 0], record.agent_path[: k + 1, 1])
-        trail.set_data(record.agent_path[first: k + 1, 0], record.agent_path[first: k + 1, 1])
+        trail.set_data(record.agent_path[first : k + 1, 0], record.agent_path[first : k + 1, 1])
         agent.set_data([record.agent_path[k, 0]], [record.agent_path[k, 1]])
         footprint.center = tuple(record.agent_path[k])
         for i in range(n):
-            truth = record.true_states[first: k + 1, i, :2]
+            truth = record.true_states[first : k + 1, i, :2]
             truth_trails[i].set_data(truth[:, 0], truth[:, 1])
             truths[i].set_data([truth[-1, 0]], [truth[-1, 1]])
             means[i].set_data([record.belief_means[j, i, 0]], [record.belief_means[j, i, 1]])
@@ -248,8 +304,10 @@ def animate_mission(record: EpisodeRecord, path: str | Path, stride: int = 5, fp
             ring.set_markersize(RING_POINTS * (1.8 - 0.8 * strength))
             ring.set_markeredgewidth(1.0 + 1.5 * strength)
             ring.set_markeredgecolor((*colors[i], strength))
-        header.set_text(f"{record.planner}   t = {k * record.time_step:.0f} s / {duration:g} s"
-                        f"   U = {total_u[j]:.1f}")
+        header.set_text(
+            f"{record.planner}   t = {k * record.time_step:.0f} s / {duration:g} s"
+            f"   U = {total_u[j]:.1f}"
+        )
         status.set_text(labels[f])
         return []
 
@@ -257,8 +315,15 @@ def animate_mission(record: EpisodeRecord, path: str | Path, stride: int = 5, fp
         if progress is not None:
             progress(frame + 1, len(steps))
 
-    animation = FuncAnimation(fig, draw, frames=len(steps), init_func=lambda: draw(0),
-                              blit=False, repeat=False, cache_frame_data=False)
+    animation = FuncAnimation(
+        fig,
+        draw,
+        frames=len(steps),
+        init_func=lambda: draw(0),
+        blit=False,
+        repeat=False,
+        cache_frame_data=False,
+    )
     animation.save(str(path), writer=writer, dpi=dpi, progress_callback=report)
     log.info("animation of %d frames written to %s", len(steps), path)
     return len(steps)

@@ -36,13 +36,15 @@ def plot_trajectories(fig: Figure, records: list[EpisodeRecord], titles: list[st
     The figure gets the compressed layout engine (do not call ``tight_layout`` on it).
     """
     if len(records) != len(titles) or not records:
-        raise ValueError(f"need one title per record, got {len(records)} records and "
-                         f"{len(titles)} titles")
+        raise ValueError(
+            f"need one title per record, got {len(records)} records and {len(titles)} titles"
+        )
     fig.set_layout_engine("compressed")
     axes = fig.subplots(1, len(records), sharex=True, sharey=True, squeeze=False)[0]
     norm = Normalize(0.0, max(float(r.times[-1]) for r in records))
-    drawn = [plot_mission(ax, r, norm=norm, legend=False) for ax, r in zip(axes, records,
-                                                                           strict=True)]
+    drawn = [
+        plot_mission(ax, r, norm=norm, legend=False) for ax, r in zip(axes, records, strict=True)
+    ]
     low = [min(ax.dataLim.x0 for ax in axes), min(ax.dataLim.y0 for ax in axes)]
     high = [max(ax.dataLim.x1 for ax in axes), max(ax.dataLim.y1 for ax in axes)]
     pad = [0.03 * (h - lo) for lo, h in zip(low, high, strict=True)]
@@ -53,6 +55,10 @@ def plot_trajectories(fig: Figure, records: list[EpisodeRecord], titles: list[st
     axes[0].set_xlim(low[0] - pad[0], high[0] + pad[0])
     axes[0].set_ylim(low[1] - pad[1], high[1] + pad[1])
     fig.colorbar(drawn[0]["agent"], ax=list(axes), label="agent time (s)", shrink=0.8)
-    fig.legend(handles=drawn[0]["legend_handles"], loc="outside lower center",
-               ncol=min(6, len(drawn[0]["legend_handles"])), fontsize="small")
+    fig.legend(
+        handles=drawn[0]["legend_handles"],
+        loc="outside lower center",
+        ncol=min(6, len(drawn[0]["legend_handles"])),
+        fontsize="small",
+    )
     fig.draw_without_rendering()  # the layout settles on the second pass; this is the first

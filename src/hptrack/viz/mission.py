@@ -22,11 +22,11 @@ from hptrack.sim.record import EpisodeRecord
 CONFIDENCE_SCALE_95 = float(np.sqrt(-2.0 * np.log(0.05)))  # chi-squared, 2 dof, 95 %
 
 TARGET_COLORS: tuple[tuple[float, float, float], ...] = tuple(
-    c for k, c in enumerate(mpl.colormaps["tab10"].colors) if k != 7)
+    c for k, c in enumerate(mpl.colormaps["tab10"].colors) if k != 7
+)
 """Target palette: ``tab10`` without its grey (index 7), which the agent's colours use."""
 
-AGENT_TIME_CMAP: Colormap = LinearSegmentedColormap.from_list("agent_time",
-                                                              ["#c4c4c4", "#000000"])
+AGENT_TIME_CMAP: Colormap = LinearSegmentedColormap.from_list("agent_time", ["#c4c4c4", "#000000"])
 """Agent time colours: light grey (mission start) to black (budget's end)."""
 
 
@@ -35,8 +35,9 @@ def target_color(i: int) -> tuple[float, float, float]:
     return TARGET_COLORS[i % len(TARGET_COLORS)]
 
 
-def ellipse_axes(cov_xy: np.ndarray, scale: float = CONFIDENCE_SCALE_95
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def ellipse_axes(
+    cov_xy: np.ndarray, scale: float = CONFIDENCE_SCALE_95
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Full width and height (m) and angle (degrees, of the width axis from +x) of the
     ``scale``-sigma ellipse of 2x2 position covariances ``(..., 2, 2)`` (m^2)."""
     values, vectors = np.linalg.eigh(cov_xy)
@@ -45,16 +46,22 @@ def ellipse_axes(cov_xy: np.ndarray, scale: float = CONFIDENCE_SCALE_95
     return 2.0 * scale * np.sqrt(values[..., 1]), 2.0 * scale * np.sqrt(values[..., 0]), angle
 
 
-def covariance_ellipse(center: np.ndarray, cov_xy: np.ndarray,
-                       scale: float = CONFIDENCE_SCALE_95, **kwargs) -> Ellipse:
+def covariance_ellipse(
+    center: np.ndarray, cov_xy: np.ndarray, scale: float = CONFIDENCE_SCALE_95, **kwargs
+) -> Ellipse:
     """Ellipse patch of ``scale`` standard deviations of a 2x2 position covariance (m^2)."""
     width, height, angle = ellipse_axes(cov_xy, scale)
     return Ellipse(tuple(center), float(width), float(height), angle=float(angle), **kwargs)
 
 
-def plot_mission(ax: Axes, record: EpisodeRecord, n_ellipses: int = 4,
-                 cmap: str | Colormap = AGENT_TIME_CMAP, norm: Normalize | None = None,
-                 legend: bool = True) -> dict:
+def plot_mission(
+    ax: Axes,
+    record: EpisodeRecord,
+    n_ellipses: int = 4,
+    cmap: str | Colormap = AGENT_TIME_CMAP,
+    norm: Normalize | None = None,
+    legend: bool = True,
+) -> dict:
     """Draw one mission on ``ax``; returns the artists by role (``"agent"`` is the
     time-coloured path, the mappable for a colour bar).
 
@@ -70,8 +77,9 @@ def plot_mission(ax: Axes, record: EpisodeRecord, n_ellipses: int = 4,
     times = record.times
     path = record.agent_path
     segments = np.stack([path[:-1], path[1:]], axis=1)
-    agent = LineCollection(segments, cmap=cmap, norm=norm or Normalize(0.0, times[-1]),
-                           linewidths=1.8, zorder=3)
+    agent = LineCollection(
+        segments, cmap=cmap, norm=norm or Normalize(0.0, times[-1]), linewidths=1.8, zorder=3
+    )
     agent.set_array(times[1:])
     ax.add_collection(agent)
     colors = [target_color(i) for i in range(len(record.target_ids))]
@@ -84,17 +92,32 @@ def plot_mission(ax: Axes, record: EpisodeRecord, n_ellipses: int = 4,
         artists["targets"].append(line)
         seen = record.detections[:, i]
         if seen.any():
-            artists["detections"].append(ax.scatter(
-                truth[seen, 0], truth[seen, 1], s=14, marker="o", facecolors="none",
-                edgecolors=[color], linewidths=0.7, zorder=4))
+            artists["detections"].append(
+                ax.scatter(
+                    truth[seen, 0],
+                    truth[seen, 1],
+                    s=14,
+                    marker="o",
+                    facecolors="none",
+                    edgecolors=[color],
+                    linewidths=0.7,
+                    zorder=4,
+                )
+            )
     n_stored = len(record.belief_steps)
     picks = np.unique(np.linspace(0, n_stored - 1, n_ellipses).round().astype(int))
     for j in picks:
         alpha = 0.25 + 0.6 * j / max(n_stored - 1, 1)
         for i, color in enumerate(colors):
-            patch = covariance_ellipse(record.belief_means[j, i, :2],
-                                       record.belief_covariances[j, i, :2, :2],
-                                       fill=False, edgecolor=color, lw=0.9, alpha=alpha, ls="--")
+            patch = covariance_ellipse(
+                record.belief_means[j, i, :2],
+                record.belief_covariances[j, i, :2, :2],
+                fill=False,
+                edgecolor=color,
+                lw=0.9,
+                alpha=alpha,
+                ls="--",
+            )
             ax.add_patch(patch)
             artists["ellipses"].append(patch)
     ax.plot(*path[0], marker="^", color="k", ms=9, ls="none", zorder=5)
@@ -106,19 +129,41 @@ def plot_mission(ax: Axes, record: EpisodeRecord, n_ellipses: int = 4,
     ax.set_title(f"{record.planner}: U = {record.uncertainty:.2f}")
     ellipse_times = ", ".join(f"{t:.0f}" for t in record.belief_steps[picks] * record.time_step)
     proxies = [
-        Line2D([], [], color="0.35", lw=0.9, ls="--",
-               label=f"95 % belief ellipse (t = {ellipse_times} s)"),
+        Line2D(
+            [],
+            [],
+            color="0.35",
+            lw=0.9,
+            ls="--",
+            label=f"95 % belief ellipse (t = {ellipse_times} s)",
+        ),
         Line2D([], [], color="k", marker="^", ms=8, ls="none", label="agent start"),
-        Line2D([], [], color="k", marker="D", mfc="white", mew=1.5, ms=6, ls="none",
-               label="agent end"),
+        Line2D(
+            [], [], color="k", marker="D", mfc="white", mew=1.5, ms=6, ls="none", label="agent end"
+        ),
         Line2D([], [], color="0.4", marker="o", ms=5, ls="none", label="target start"),
         Line2D([], [], color="0.4", marker="s", ms=5, ls="none", label="target end"),
-        Line2D([], [], color="0.4", marker="o", mfc="none", ms=5, mew=0.7, ls="none",
-               label="target measured")]
+        Line2D(
+            [],
+            [],
+            color="0.4",
+            marker="o",
+            mfc="none",
+            ms=5,
+            mew=0.7,
+            ls="none",
+            label="target measured",
+        ),
+    ]
     artists["legend_handles"] = artists["targets"] + proxies
     if legend:
-        artists["legend"] = ax.legend(handles=artists["legend_handles"], loc="upper center",
-                                      bbox_to_anchor=(0.5, -0.1), ncol=3, fontsize="small")
+        artists["legend"] = ax.legend(
+            handles=artists["legend_handles"],
+            loc="upper center",
+            bbox_to_anchor=(0.5, -0.1),
+            ncol=3,
+            fontsize="small",
+        )
     return artists
 
 
