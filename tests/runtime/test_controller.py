@@ -208,24 +208,80 @@ def test_stale_odometry_holds_and_says_so_then_resumes(flight_scenario):
     assert modes == ["tracking", "odometry stale", "tracking"]
 
 
-def test_a_late_plan_keeps_the_current_waypoint_and_is_logged(flight_scenario):
+def test_a_late_plan_is_replaced_by_the_greedy_fallback_at_once(flight_scenario):
     ctrl, _ = _controller(
         flight_scenario, delay=lambda tick: 2.0 if tick == 2 else 0.0, planner_deadline_s=1.0
     )
-    waypoints = {}
+    out = {}
     t = 0.0
     while t <= 3.5:
         ctrl.odometry(t, [t, 0.0])
-        waypoints[t] = ctrl.setpoint(t).position
+        out[t] = ctrl.setpoint(t)
         t = round(t + 0.25, 10)
-    np.testing.assert_array_equal(waypoints[0.5], [1.5, 0.0])
-    for when in (1.0, 1.5, 2.0, 2.75):  # tick 2's plan is out until 3.0 s: keep tick 1's
-        np.testing.assert_array_equal(waypoints[when], [1.5, 0.0])
-    np.testing.assert_array_equal(waypoints[3.0], [2.0, 0.0])  # tick 2's, late
+    np.testing.assert_array_equal(out[0.5].position, [1.5, 0.0])
+    for when in (1.0, 1.5, 2.0):  # tick 2's plan is out until 3.0 s: tick 1's until the deadline
+        np.testing.assert_array_equal(out[when].position, [1.5, 0.0])
+    # deadline missed at 2.25 s: greedy on the beliefs then (p1, whose mean walks east at
+    # 3 m/s from x = 30; p2 ties and comes second), re-decided at each tick while late
+    for when, x in ((2.25, 36.75), (2.75, 37.5), (3.0, 39.0)):
+        assert out[when].reason == "fallback" and not out[when].hold
+        np.testing.assert_allclose(out[when].position, [x, 10.0], atol=1e-12)
+    np.testing.assert_array_equal(out[3.5].position, [4.5, 0.0])  # the planner again
+    assert out[3.5].reason == "tracking"
     late = [r for r in ctrl.log.records if r["kind"] == "late"]
     assert [(r["k"], r["t"]) for r in late] == [(2, 2.25)]
-    plans = {r["k"]: r["status"] for r in ctrl.log.records if r["kind"] == "plan"}
-    assert plans[2] == "late" and plans[1] == "ok"
+    fallbacks = [(r["k"], r["t"]) for r in ctrl.log.records if r["kind"] == "fallback"]
+    assert fallbacks == [(4, 2.25), (5, 2.5), (6, 3.0)]
+    plans = {r["k"]: r for r in ctrl.log.records if r["kind"] == "plan"}
+    assert plans[2]["status"] == "late" and "not flown" in plans[2]["detail"]
+    assert plans[1]["status"] == "ok"
+
+
+def test_the_reference_leaves_the_odometry_at_the_planned_speed(flight_scenario):
+    class Far(Recorder):
+        def act(self, observation):
+            return observation.agent_position + np.array([30.0, 40.0])
+
+    ctrl, _ = _controller(flight_scenario, planner=Far())
+    ctrl.odometry(0.0, [1.0, 2.0])
+    sp = ctrl.setpoint(0.0)
+    np.testing.assert_array_equal(sp.reference, [1.0, 2.0])
+    np.testing.assert_allclose(sp.velocity, [8.0 * 0.6, 8.0 * 0.8])  # 8 m/s towards it
+    ctrl.odometry(0.25, [2.0, 3.0])
+    sp = ctrl.setpoint(0.25)
+    np.testing.assert_allclose(sp.reference, [1.0 + 1.2, 2.0 + 1.6])
+    np.testing.assert_array_equal(sp.position, [31.0, 42.0])
+    ctrl.odometry(0.5, [3.0, 4.0])  # tick 1: a new leg from this odometry
+    sp = ctrl.setpoint(0.5)
+    np.testing.assert_array_equal(sp.reference, [3.0, 4.0])
+    assert [r["speed_m_s"] for r in ctrl.log.records if r["kind"] == "plan"] == [8.0, 8.0]
+
+
+def test_a_short_leg_stops_at_its_waypoint(flight_scenario):
+    ctrl, _ = _controller(flight_scenario)  # steps 1 m east: there after 0.125 s at 8 m/s
+    ctrl.odometry(0.0, [0.0, 0.0])
+    ctrl.setpoint(0.0)
+    ctrl.odometry(0.25, [0.5, 0.0])
+    sp = ctrl.setpoint(0.25)
+    np.testing.assert_array_equal(sp.reference, [1.0, 0.0])
+    np.testing.assert_array_equal(sp.velocity, [0.0, 0.0])
+
+
+def test_detections_outside_the_area_or_with_absurd_noise_are_refused(flight_scenario):
+    from hptrack.runtime.controller import mission_area
+
+    centre, radius = mission_area(flight_scenario)
+    assert radius == pytest.approx(8.0 * 60.0 + 10.0 + 10.0)  # v_a B + w/2 + 10 sigma
+    ctrl, _ = _controller(flight_scenario)
+    ctrl.odometry(0.0, [0.0, 0.0])
+    ctrl.setpoint(0.0)
+    assert not ctrl.detection(0.0, "p1", [1e300, 1e300])
+    assert not ctrl.detection(0.0, "p1", [centre[0] + radius + 1.0, centre[1]])
+    assert not ctrl.detection(0.0, "p1", [30.0, 10.0], 1e308 * np.eye(2) / 1e300 * 1e9)
+    assert not ctrl.detection(0.0, "p1", [30.0, 10.0], 1e-300 * np.eye(2))
+    assert ctrl.detection(0.0, "p1", [30.0, 10.0], 1e8 * np.eye(2))
+    assert ctrl.rejected == {"detection: outside the area": 2, "detection: bad covariance": 2}
+    assert not ctrl.finished
 
 
 def test_a_failing_planner_holds_and_recovers(flight_scenario):

@@ -1,5 +1,7 @@
-"""``hptrack fly`` against ``hptrack vehicle-sim``: two processes talking MAVLink through MAVSDK
-on loopback, a short real-time mission, its safe ends, and the replay of its log."""
+"""``hptrack fly`` against ``hptrack vehicle-sim`` (the PX4-like stub): two processes talking
+MAVLink through MAVSDK on loopback, a real-time mission with its first plan before offboard and
+the planned speed flown, its safe ends, the replay of its log, and ``hptrack targets-sim`` fed by
+the stub's second telemetry link."""
 
 import json
 import signal
@@ -21,6 +23,8 @@ from hptrack.scenario import load_scenario  # noqa: E402
 pytestmark = pytest.mark.slow
 
 BUDGET_S = 15.0
+LONG_BUDGET_S = 30.0
+"""Long enough for straight legs at full speed (a first plan that stalled would show)."""
 CLI = [sys.executable, "-m", "hptrack.cli.flight"]
 
 
@@ -30,11 +34,11 @@ def _free_udp_port():
         return sock.getsockname()[1]
 
 
-@pytest.fixture
-def dry_run(tmp_path, example_path):
-    """A short copy of the paper-flight example, free ports, and the vehicle stub running."""
+def _start_dry_run(tmp_path, example_path, budget, stub_args=()):
+    """A copy of the paper-flight example with ``budget``, free ports, and the vehicle stub
+    running."""
     data = yaml.safe_load(example_path.read_text())
-    data["budget"] = BUDGET_S
+    data["budget"] = budget
     scenario = tmp_path / "flight.yaml"
     scenario.write_text(yaml.safe_dump(data))
     mav, det = _free_udp_port(), _free_udp_port()
@@ -49,9 +53,10 @@ def dry_run(tmp_path, example_path):
             "--detections",
             f"udp://127.0.0.1:{det}",
             "--duration",
-            "120",
+            "150",
             "--stats",
             str(stats),
+            *stub_args,
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -72,44 +77,99 @@ def dry_run(tmp_path, example_path):
         "--connect-timeout",
         "20",
     ]
-    run = {
+    return {
         "scenario": scenario,
         "fly": fly,
         "stub": stub,
         "stats": stats,
         "log": tmp_path / "flight.jsonl",
+        "detections_port": det,
     }
-    yield run
-    if stub.poll() is None:
-        stub.send_signal(signal.SIGINT)
+
+
+def _end(process):
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
         try:
-            stub.wait(10)
+            process.wait(10)
         except subprocess.TimeoutExpired:
-            stub.kill()
-            stub.wait()
+            process.kill()
+            process.wait()
+
+
+@pytest.fixture
+def dry_run(tmp_path, example_path):
+    """A short copy of the paper-flight example, free ports, and the vehicle stub running."""
+    run = _start_dry_run(tmp_path, example_path, BUDGET_S)
+    yield run
+    _end(run["stub"])
+
+
+@pytest.fixture
+def long_dry_run(tmp_path, example_path):
+    """The same with a budget long enough for straight legs."""
+    run = _start_dry_run(tmp_path, example_path, LONG_BUDGET_S)
+    yield run
+    _end(run["stub"])
 
 
 def _stop_stub(run):
     run["stub"].send_signal(signal.SIGINT)
     out, err = run["stub"].communicate(timeout=10)
     assert run["stub"].returncode == 0, err
-    return json.loads(run["stats"].read_text())
+    stats = json.loads(run["stats"].read_text())
+    stats["stdout"] = out
+    return stats
 
 
 def _records(path, kind):
     return [r for r in read_log(path).records if r["kind"] == kind]
 
 
-def test_a_dry_run_flies_offboard_detects_ends_in_hold_and_replays(dry_run, tmp_path):
+def _straight_leg_speeds(records, min_run_s=3.0, heading_tolerance_deg=3.0):
+    """``(planned, flown)`` speeds (m/s) between consecutive plans that continue a straight run
+    of at least ``min_run_s`` at full planned speed (the leg at least one step long, its heading
+    within the tolerance of the run's), flown speed from the odometry."""
+    odometry = np.array(
+        [[r["t"], *r["position"]] for r in records if r["kind"] == "odometry" and r["accepted"]]
+    )
+    ticks = {r["k"]: r for r in records if r["kind"] == "tick"}
+    plans = [r for r in records if r["kind"] == "plan" and r["status"] == "ok"]
+    out = []
+    run_start, run_heading = None, None
+    for plan, following in zip(plans, plans[1:], strict=False):
+        leg = np.asarray(plan["waypoint"]) - np.asarray(ticks[plan["k"]]["agent"])
+        heading = np.degrees(np.arctan2(leg[1], leg[0]))
+        full = np.hypot(*leg) >= plan["speed_m_s"] * 0.5
+        if not full or run_heading is None or abs(heading - run_heading) > heading_tolerance_deg:
+            run_start, run_heading = (plan["t"], heading) if full else (None, None)
+            continue
+        if plan["t"] - run_start < min_run_s:
+            continue
+        inside = odometry[(odometry[:, 0] >= plan["t"]) & (odometry[:, 0] <= following["t"])]
+        if len(inside) >= 2:
+            flown = np.hypot(*(inside[-1, 1:] - inside[0, 1:])) / (inside[-1, 0] - inside[0, 0])
+            out.append((plan["speed_m_s"], float(flown)))
+    return out
+
+
+def test_a_dry_run_plans_before_offboard_flies_the_planned_speed_ends_in_hold_and_replays(
+    long_dry_run, tmp_path
+):
     start = time.monotonic()
     fly = subprocess.run(
-        [*dry_run["fly"], "--log", str(dry_run["log"])], capture_output=True, text=True, timeout=60
+        [*long_dry_run["fly"], "--log", str(long_dry_run["log"])],
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     elapsed = time.monotonic() - start
     assert fly.returncode == 0, fly.stdout + fly.stderr
     assert "ended by budget" in fly.stdout
-    stats = _stop_stub(dry_run)
-    log = dry_run["log"]
+    assert "first plan ready before offboard" in fly.stdout
+    assert "planning with 8 m/s" in fly.stdout
+    stats = _stop_stub(long_dry_run)
+    log = long_dry_run["log"]
 
     # offboard started, and setpoints arrived at the promised rate (>= 10 Hz; 20 Hz is sent)
     assert any(r["message"].startswith("offboard started") for r in _records(log, "status"))
@@ -118,15 +178,30 @@ def test_a_dry_run_flies_offboard_detects_ends_in_hold_and_replays(dry_run, tmp_
     assert stats["offboard_setpoint_rate_hz"] >= 15.0
     assert stats["offboard_max_gap_s"] < 0.5
 
+    # the first plan was made before offboard started, the vehicle never waited for a plan
+    records = read_log(log).records
+    first = next(r for r in records if r["kind"] == "plan")
+    offboard = next(r for r in records if r.get("message", "").startswith("offboard started"))
+    assert first["k"] == 0 and first["status"] == "ok" and first["seq"] < offboard["seq"]
+    modes = [r["mode"] for r in records if r["kind"] == "mode" and r["seq"] > offboard["seq"]]
+    assert "waiting for the first plan" not in modes and "fallback" not in modes
+    assert not _records(log, "late")
+
+    # flown speed within 10 % of the planned 8 m/s on straight legs
+    straight = _straight_leg_speeds(records)
+    assert len(straight) >= 3, straight
+    for planned, flown in straight:
+        assert flown == pytest.approx(planned, rel=0.10), straight
+
     # at least one target detected and its belief updated
     accepted = [r for r in _records(log, "detection") if r["accepted"]]
     assert accepted
     end = _records(log, "end")[0]
-    assert end["reason"] == "budget" and end["time"] == BUDGET_S
-    scenario = load_scenario(dry_run["scenario"])
+    assert end["reason"] == "budget" and end["time"] == LONG_BUDGET_S
+    scenario = load_scenario(long_dry_run["scenario"])
     mission = scenario.mission_spec()
     _, unseen = mission.motion.predict(
-        scenario.means(), scenario.covariances(), mission.process_noise, BUDGET_S
+        scenario.means(), scenario.covariances(), mission.process_noise, LONG_BUDGET_S
     )
     seen = {r["target"] for r in accepted}
     for i, tid in enumerate(scenario.target_ids):
@@ -139,6 +214,7 @@ def test_a_dry_run_flies_offboard_detects_ends_in_hold_and_replays(dry_run, tmp_
     assert [(s["reason"], s["action"], s["confirmed"]) for s in safety] == [
         ("budget", "hold", "HOLD")
     ]
+    assert stats["final_mode"] == "hold" and "mode HOLD (commanded)" in stats["stdout"]
 
     # the log replays with the same beliefs and decisions
     summary_path, figure = tmp_path / "replay.json", tmp_path / "replay.png"
@@ -153,7 +229,7 @@ def test_a_dry_run_flies_offboard_detects_ends_in_hold_and_replays(dry_run, tmp_
     assert summary["mismatches"] == 0, summary["first_mismatches"]
     assert summary["U"] == end["U"] and summary["ended_by"] == "budget"
     assert figure.read_bytes()[:4] == b"\x89PNG"
-    assert elapsed < BUDGET_S + 30.0
+    assert elapsed < LONG_BUDGET_S + 40.0
 
 
 def _wait_for_offboard(path, timeout_s=30.0):

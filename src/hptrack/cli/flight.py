@@ -1,5 +1,7 @@
-"""``hptrack fly``, ``hptrack vehicle-sim`` and ``hptrack replay``: a mission on a PX4 vehicle
-through MAVSDK, a MAVLink vehicle stub for dry runs, and the replay of a mission log.
+"""``hptrack fly``, ``hptrack vehicle-sim``, ``hptrack targets-sim`` and ``hptrack replay``: a
+mission on a PX4 vehicle through MAVSDK, a PX4-like MAVLink vehicle stub for dry runs, simulated
+targets and detections for any autopilot in software-in-the-loop, and the replay of a mission
+log.
 
 Also runnable as ``python3 -m hptrack.cli.flight COMMAND ...``.
 """
@@ -33,7 +35,7 @@ from hptrack.cli.common import (
 from hptrack.interface import InputError
 from hptrack.registry import PLANNERS, make_planner
 from hptrack.scenario import load_scenario
-from hptrack.scenario.io import format_validation_error
+from hptrack.scenario.io import format_validation_error, parse_scenario
 
 FLY_ITERATIONS = 2000
 """Tree-search simulations per decision in ``fly`` when neither effort flag is given (a
@@ -117,6 +119,18 @@ def fly(
     detections: Annotated[
         str, typer.Option(help="UDP address where detections arrive as JSON lines.")
     ] = "udp://127.0.0.1:5005",
+    cap_speed: Annotated[
+        bool,
+        typer.Option(
+            "--cap-speed",
+            help="Plan with the vehicle's MPC_XY_VEL_MAX when the scenario's agent speed is "
+            "higher (else such a flight is refused).",
+        ),
+    ] = False,
+    first_plan_timeout: Annotated[
+        float,
+        typer.Option(help="Wait this long for the planner's first plan before offboard, s."),
+    ] = 600.0,
     altitude: Annotated[
         float, typer.Option(help="Mission altitude above the local origin, m.")
     ] = 30.0,
@@ -173,6 +187,7 @@ def fly(
         raise InputError(f"--rate must be 10 to 1000 setpoints per second, got {rate}")
     _positive(lost_link, "--lost-link", 0.0, 600.0)
     _positive(connect_timeout, "--connect-timeout", 0.0, 3600.0)
+    _positive(first_plan_timeout, "--first-plan-timeout", 0.0, 86400.0)
     settings = _controller_settings(deadline, stale_after)
     scenario = load_scenario(scenario_path)
     if iterations is None and time_limit is None and planner == "mcts":
@@ -183,11 +198,18 @@ def fly(
     check_output_path(log_path, "--log")
 
     from hptrack.runtime.controller import MissionController
+    from hptrack.runtime.links import bind_check, check_connection
     from hptrack.runtime.log import MissionLog
-    from hptrack.runtime.mavsdk_adapter import FlightError, FlightOptions, run_flight
+    from hptrack.runtime.mavsdk_adapter import (
+        FlightError,
+        FlightOptions,
+        VehicleLimits,
+        run_flight,
+    )
     from hptrack.runtime.network import udp_address
 
-    udp_address(detections, "--detections")
+    check_connection(connection)
+    bind_check(*udp_address(detections, "--detections"), "--detections", detections)
     options = FlightOptions(
         connection=connection,
         detections=detections,
@@ -198,15 +220,7 @@ def fly(
         setpoint_rate_hz=rate,
         lost_link_s=lost_link,
         connect_timeout_s=connect_timeout,
-    )
-    log = MissionLog(log_path)
-    controller = MissionController(
-        scenario,
-        make_planner(planner, planner_settings),
-        seed=seed,
-        settings=settings,
-        log=log,
-        header={"source": "fly", "flight": options.__dict__},
+        first_plan_timeout_s=first_plan_timeout,
     )
     use_live = console.is_terminal if live is None else live
     view = Live(console=console, refresh_per_second=4, transient=False) if use_live else None
@@ -218,11 +232,35 @@ def fly(
     def on_message(text: str) -> None:
         (view.console if view is not None else console).print(escape(text), highlight=False)
 
+    def build(limits: VehicleLimits) -> MissionController:
+        speed = planned_speed(scenario.agent.speed, limits, cap_speed)
+        on_message(
+            f"vehicle limits: {limits.detail}; planning with {speed:g} m/s "
+            f"(the scenario's agent speed is {scenario.agent.speed:g} m/s)"
+        )
+        data = scenario.model_dump(mode="json")
+        data["agent"]["speed"] = speed
+        flown = parse_scenario(data, f"{scenario_path} with the vehicle's speed")
+        return MissionController(
+            flown,
+            make_planner(planner, planner_settings),
+            seed=seed,
+            settings=settings,
+            log=log,
+            header={
+                "source": "fly",
+                "flight": options.__dict__,
+                "vehicle_limits": limits.__dict__,
+                "scenario_agent_speed": scenario.agent.speed,
+            },
+        )
+
+    log = MissionLog(log_path)
     console.print(f"mission log: {escape(str(log_path))}")
     try:
         if view is not None:
             view.start()
-        result = run_flight(controller, options, on_status, on_message)
+        result = run_flight(build, log, options, on_status, on_message)
     except FlightError as err:
         error_console.print(f"[bold red]error:[/] {escape(str(err))}", highlight=False)
         sys.exit(EXIT_ABORTED)
@@ -249,6 +287,45 @@ def fly(
         sys.exit(EXIT_ABORTED)
 
 
+def planned_speed(scenario_speed: float, limits: Any, cap: bool) -> float:
+    """The speed to plan with: the scenario's, unless the vehicle's limit (``limits``, a
+    :class:`~hptrack.runtime.mavsdk_adapter.VehicleLimits`) is lower, m/s.
+
+    Raises:
+        InputError: the scenario asks for more than the vehicle's limit and ``cap`` is off.
+    """
+    limit = limits.speed_m_s
+    if limit is None or scenario_speed <= limit:
+        return scenario_speed
+    if not cap:
+        raise InputError(
+            f"agent.speed {scenario_speed:g} m/s is above the vehicle's MPC_XY_VEL_MAX "
+            f"{limit:g} m/s: pass --cap-speed to plan with {limit:g} m/s, or raise "
+            "MPC_XY_VEL_MAX on the vehicle"
+        )
+    return limit
+
+
+def _parameters(pairs: list[str] | None) -> dict[str, float]:
+    from hptrack.runtime.vehicle_sim import PX4_PARAMETERS
+
+    out = {}
+    for pair in pairs or []:
+        name, sep, text = pair.partition("=")
+        if not sep or name not in PX4_PARAMETERS:
+            raise InputError(
+                f"--param {pair[:60]!r}: expected NAME=VALUE with NAME one of "
+                f"{', '.join(PX4_PARAMETERS)}"
+            )
+        try:
+            value = float(text)
+        except ValueError:
+            raise InputError(f"--param {pair[:60]!r}: {text[:20]!r} is not a number") from None
+        _positive(value, f"--param {name}", 0.0, 1e4)
+        out[name] = value
+    return out
+
+
 def vehicle_sim(
     scenario_path: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario YAML file.")],
     mavlink: Annotated[str, typer.Option(help="Where MAVSDK listens (loopback).")] = (
@@ -257,6 +334,22 @@ def vehicle_sim(
     detections: Annotated[
         str, typer.Option(help="Where to send detections (loopback).")
     ] = "udp://127.0.0.1:5005",
+    targets: Annotated[
+        bool,
+        typer.Option(
+            "--targets/--no-targets",
+            help="Simulate the scenario's targets here (--no-targets: run hptrack targets-sim "
+            "on the --gcs link instead).",
+        ),
+    ] = True,
+    gcs: Annotated[
+        str | None,
+        typer.Option(help="A second telemetry link, as PX4's ground-station port (loopback)."),
+    ] = None,
+    param: Annotated[
+        list[str] | None,
+        typer.Option("--param", help="A PX4 parameter NAME=VALUE other than its default."),
+    ] = None,
     seed: Annotated[
         int | None,
         typer.Option(help="Seed of the true targets and the noise (default the scenario's)."),
@@ -274,25 +367,40 @@ def vehicle_sim(
         ),
     ] = None,
 ) -> None:
-    """A MAVLink vehicle stub for dry runs: a PX4-like quadrotor that flies the offboard
-    setpoints and sends detections of the scenario's simulated targets."""
+    """A MAVLink vehicle stub for dry runs: a quadrotor that flies as PX4 does (take-off,
+    position loop, speed and acceleration limits, offboard-loss failsafe, parameters) and
+    sends detections of the scenario's simulated targets; it prints its mode changes."""
     check_seed(seed)
     scenario = load_scenario(scenario_path)
     duration = scenario.budget + 300.0 if duration is None else duration
     _positive(duration, "--duration", 0.0, 86400.0)
     if detection_rate is not None:
         _positive(detection_rate, "--detection-rate", 0.0, 1000.0)
+    parameters = _parameters(param)
     check_output_path(stats, "--stats")
     from hptrack.runtime.vehicle_sim import VehicleSim
 
-    vehicle = VehicleSim(scenario, mavlink, detections, seed=seed, detection_rate_hz=detection_rate)
+    def on_event(text: str) -> None:
+        console.print(escape(f"vehicle stub {text}"), highlight=False)
+
+    vehicle = VehicleSim(
+        scenario,
+        mavlink,
+        detections if targets else None,
+        seed=seed,
+        detection_rate_hz=detection_rate,
+        gcs_url=gcs,
+        parameters=parameters,
+        on_event=on_event,
+    )
     stop = threading.Event()
     previous = {
         sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)
     }
     console.print(
         escape(
-            f"vehicle stub: MAVLink to {mavlink}, detections to {detections}; "
+            f"vehicle stub: MAVLink to {mavlink}{f' and {gcs}' if gcs else ''}, "
+            f"{f'detections to {detections}' if targets else 'no targets'}; "
             f"running for at most {duration:g} s (Ctrl-C stops)"
         ),
         highlight=False,
@@ -306,11 +414,77 @@ def vehicle_sim(
         write_json(stats, summary)
     console.print(
         escape(
-            f"vehicle stub stopped in {summary['final_mode']}: {summary['setpoints']} setpoints "
-            f"({summary['offboard_setpoint_rate_hz']:.1f} Hz in offboard), detections sent "
-            f"{json.dumps(summary['detections_sent'])}"
+            f"vehicle stub stopped in {summary['final_mode'].upper()}: {summary['setpoints']} "
+            f"setpoints ({summary['offboard_setpoint_rate_hz']:.1f} Hz in offboard), "
+            f"detections sent {json.dumps(summary['detections_sent'])}"
         ),
         highlight=False,
+    )
+
+
+def targets_sim(
+    scenario_path: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario YAML file.")],
+    mavlink: Annotated[
+        str,
+        typer.Option(
+            help="Where the autopilot's telemetry arrives (PX4's ground-station port 14550)."
+        ),
+    ] = "udpin://127.0.0.1:14550",
+    detections: Annotated[
+        str, typer.Option(help="Where hptrack fly reads detections.")
+    ] = "udp://127.0.0.1:5005",
+    seed: Annotated[
+        int | None,
+        typer.Option(help="Seed of the true targets and the noise (default the scenario's)."),
+    ] = None,
+    duration: Annotated[
+        float | None, typer.Option(help="Stop after this many seconds (default budget + 600 s).")
+    ] = None,
+    detection_rate: Annotated[
+        float | None, typer.Option(help="Sensing per second (default one per time step).")
+    ] = None,
+    stats: Annotated[
+        Path | None, typer.Option(help="Write what was seen and sent as JSON at exit.")
+    ] = None,
+) -> None:
+    """Simulated targets and a footprint detector for any autopilot in software-in-the-loop:
+    reads the vehicle's position from its MAVLink telemetry, starts the targets when it enters
+    offboard, and sends detections to hptrack fly."""
+    check_seed(seed)
+    scenario = load_scenario(scenario_path)
+    duration = scenario.budget + 600.0 if duration is None else duration
+    _positive(duration, "--duration", 0.0, 86400.0)
+    rate = 1.0 / scenario.time_step if detection_rate is None else detection_rate
+    _positive(rate, "--detection-rate", 0.0, 1000.0)
+    check_output_path(stats, "--stats")
+    from hptrack.runtime.links import bind_check
+    from hptrack.runtime.network import udp_address
+    from hptrack.runtime.targets import TargetDetector, run_targets_sim
+
+    bind_check(*udp_address(mavlink, "--mavlink"), "--mavlink", mavlink)
+    detector = TargetDetector(scenario, detections, seed)
+    stop = threading.Event()
+    previous = {
+        sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)
+    }
+
+    def on_event(text: str) -> None:
+        console.print(escape(f"targets-sim: {text}"), highlight=False)
+
+    on_event(
+        f"listening to {mavlink}, detections to {detections}, {rate:g} per second; "
+        f"at most {duration:g} s (Ctrl-C stops)"
+    )
+    try:
+        summary = run_targets_sim(detector, mavlink, duration, rate, stop, on_event=on_event)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if stats is not None:
+        write_json(stats, summary)
+    on_event(
+        f"stopped: {summary['heartbeats']} heartbeats, {summary['positions']} positions, "
+        f"detections sent {json.dumps(summary['detections_sent'])}"
     )
 
 
@@ -368,9 +542,10 @@ def replay(
 
 
 def register(app: typer.Typer) -> None:
-    """Add ``fly``, ``vehicle-sim`` and ``replay`` to ``app``."""
+    """Add ``fly``, ``vehicle-sim``, ``targets-sim`` and ``replay`` to ``app``."""
     app.command("fly")(fly)
     app.command("vehicle-sim")(vehicle_sim)
+    app.command("targets-sim")(targets_sim)
     app.command("replay")(replay)
 
 

@@ -46,6 +46,7 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.interface import Observation, Planner
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import check_noise_covariance
@@ -84,22 +85,64 @@ class ControllerSettings(BaseModel):
     jump_slack_m: Annotated[float, Field(ge=0.0, le=1e4)] = 3.0
 
 
+NOISE_RANGE_M2 = (1e-12, 1e8)
+"""A detection's noise covariance must have its eigenvalues in ``(low, high]`` m^2 (the range
+a scenario's ``R`` may take: beyond it the Kalman update loses its precision)."""
+
+
+def mission_area(scenario: Scenario) -> tuple[np.ndarray, float]:
+    """Centre (the agent's start, m) and radius (m) of the area where a detection can be: the
+    vehicle flies at most ``v_a B`` from its start and measures only within ``w/2`` of itself,
+    with an error under 10 standard deviations of ``R``."""
+    mission = scenario.mission_spec()
+    sigma = math.sqrt(float(np.max(np.linalg.eigvalsh(mission.measurement_noise))))
+    radius = mission.agent_speed * mission.budget + mission.sensor_radius + 10.0 * sigma
+    return np.asarray(scenario.agent.position, dtype=float), radius
+
+
 @dataclass(frozen=True)
 class Setpoint:
     """Where the vehicle should be now.
 
     Attributes:
-        position: ``(2,)`` m (``x`` east, ``y`` north).
+        position: ``(2,)`` m (``x`` east, ``y`` north): the decision's waypoint, or the hold.
         hold: the position is a hold, not the planner's waypoint.
         reason: ``"tracking"``, ``"no odometry yet"``, ``"waiting for the first plan"``,
             ``"odometry stale"``, ``"planner error"`` or ``"mission over"``.
         detail: one line with the figures behind ``reason``.
+        reference: ``(2,)`` m, where the vehicle should be now on its way to ``position``: it
+            leaves the odometry of the moment the decision arrived at the planned speed.
+        velocity: ``(2,)`` m/s, the planned velocity at ``reference`` (0 once it reaches
+            ``position``, and in a hold): the feed-forward of a position controller.
     """
 
     position: np.ndarray
     hold: bool
     reason: str
     detail: str
+    reference: np.ndarray
+    velocity: np.ndarray
+
+
+@dataclass(frozen=True)
+class Leg:
+    """The straight flight to a decision's waypoint: from ``start`` (m) at ``start_s`` (mission
+    s) at ``speed`` m/s towards ``end`` (m)."""
+
+    start: np.ndarray
+    start_s: float
+    end: np.ndarray
+    speed: float
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Reference position (m) and velocity (m/s) at mission time ``t`` s."""
+        step = self.end - self.start
+        length = float(np.hypot(*step))
+        along = self.speed * max(t - self.start_s, 0.0)
+        if length <= 0.0 or along >= length:
+            return self.end.copy(), np.zeros(2)
+        unit = step / length
+        return self.start + along * unit, self.speed * unit
 
 
 def _vector(value: Any, shape: tuple[int, ...]) -> np.ndarray | None:
@@ -196,6 +239,10 @@ class MissionController:
         self._planner_started = False
         self._first_in_flight = False
         self._waypoint: np.ndarray | None = None
+        self._leg: Leg | None = None
+        self._fallback = GreedyPlanner()
+        self._fallback_active = False
+        self._area = mission_area(scenario)
         self._planner_error: str | None = None
         self._for_planner: list[tuple[float, int]] = []
         self._for_record: list[tuple[float, int]] = []
@@ -213,6 +260,8 @@ class MissionController:
         """Refused inputs by ``"kind: reason"``."""
         self.finished = False
         self.end: dict | None = None
+        self.first_plan_s: float | None = None
+        """Compute time of tick 0's plan (s) once it is flown."""
         settings_json = getattr(getattr(planner, "settings", None), "as_json", None)
         self._write(
             {
@@ -352,6 +401,17 @@ class MissionController:
             return ("malformed", "position is not two numbers"), -1, noise
         if not np.all(np.isfinite(z)):
             return ("non-finite", f"position {z.tolist()}"), -1, noise
+        centre, radius = self._area
+        distance = float(np.hypot(*(z - centre)))
+        if not distance <= radius:
+            return (
+                (
+                    "outside the area",
+                    f"{distance:.3g} m from the start, beyond the mission's {radius:.0f} m",
+                ),
+                -1,
+                noise,
+            )
         if covariance is not None:
             r = _vector(covariance, (2, 2))
             if r is None:
@@ -360,6 +420,17 @@ class MissionController:
                 noise = check_noise_covariance(r)
             except ValueError as err:
                 return ("bad covariance", str(err)), -1, noise
+            low, high = NOISE_RANGE_M2
+            eig = np.linalg.eigvalsh(noise)
+            if not (eig[0] > low and eig[1] <= high):
+                return (
+                    (
+                        "bad covariance",
+                        f"eigenvalues {eig[0]:.3g}, {eig[1]:.3g} m^2 outside ({low:g}, {high:g}]",
+                    ),
+                    -1,
+                    noise,
+                )
         problem = self._check_time(t, clock_source=False)
         if problem is not None:
             return problem, -1, noise
@@ -431,10 +502,12 @@ class MissionController:
         }
         if missed:
             record["missed"] = missed
+        fall_back = False
         if self._odom is None:
             record.update(submitted=False, reason="no odometry yet")
         elif self._in_flight is not None:
             record.update(submitted=False, reason=f"planner busy with tick {self._in_flight[0]}")
+            fall_back = self._fallback_active
         else:
             detected = self._take(self._for_planner, time_k)
             record.update(
@@ -446,13 +519,15 @@ class MissionController:
         self.history.append(
             {
                 "k": k,
-                "agent": record["agent"],
+                "agent": None if self._odom is None else self._odom[1],
                 "means": means,
                 "covariances": covs,
                 "detected": recorded,
             }
         )
         self._write(record)
+        if fall_back:
+            self._fall_back(t, f"planner late with tick {self._in_flight[0]}")
 
     def _take(self, pending: list[tuple[float, int]], time_s: float) -> np.ndarray:
         """Flags of the targets measured at or before ``time_s`` in ``pending`` (removed)."""
@@ -520,9 +595,10 @@ class MissionController:
                         "t": t,
                         "k": tick,
                         "waited_s": t - since,
-                        "detail": "keeping the current waypoint",
+                        "detail": "flying the fallback decision meanwhile",
                     }
                 )
+                self._fall_back(t, f"planner late with tick {tick}")
             return
         self._apply(outcome, t, late=t - since > self.settings.planner_deadline_s + _STEP_EPS)
 
@@ -537,6 +613,7 @@ class MissionController:
             "waypoint": outcome.waypoint,
             "compute_s": outcome.compute_s,
             "subtask": outcome.subtask,
+            "speed_m_s": self.mission.agent_speed,
         }
         if outcome.error:
             record["error"] = outcome.error
@@ -544,10 +621,16 @@ class MissionController:
             self._planner_error = outcome.error
             if self._first_in_flight:
                 self._planner_started = False
+        elif late and self._fallback_active:
+            record["detail"] = "not flown: the fallback flies until the next tick's plan"
+            self.subtask = outcome.subtask
         elif not after_end:
-            self._waypoint = outcome.waypoint
+            self._fallback_active = False
+            self._fly(outcome.waypoint, t)
             self._planner_error = None
             self.subtask = outcome.subtask
+            if outcome.tick == 0 and self.first_plan_s is None:
+                self.first_plan_s = outcome.compute_s
         if after_end:
             record["after_end"] = True
         self._write(record)
@@ -567,25 +650,80 @@ class MissionController:
             mode, detail = "planner error", self._planner_error
         elif self._waypoint is None:
             mode, detail = "waiting for the first plan", "holding until the planner answers"
+        elif self._fallback_active:
+            mode, detail = "fallback", "the planner is late: flying a greedy decision"
         else:
             mode, detail = "tracking", "flying the planner's waypoint"
+        hold = mode not in ("tracking", "fallback")
         if mode != self._mode:
             if self._odom is not None:
                 self._hold_at = self._odom[1].copy()
             self._mode = mode
-            position = self._waypoint if mode == "tracking" else self._hold_at
+            position = self._hold_at if hold else self._waypoint
             self._write(
                 {
                     "kind": "mode",
                     "t": t,
                     "mode": mode,
-                    "hold": mode != "tracking",
+                    "hold": hold,
                     "position": position,
                     "detail": detail,
                 }
             )
-        position = self._waypoint if mode == "tracking" else self._hold_at
-        return Setpoint(position.copy(), mode != "tracking", mode, detail)
+        if hold:
+            return Setpoint(
+                self._hold_at.copy(), True, mode, detail, self._hold_at.copy(), np.zeros(2)
+            )
+        reference, velocity = self._leg.at(t)
+        return Setpoint(self._waypoint.copy(), False, mode, detail, reference, velocity)
+
+    def _fly(self, waypoint: np.ndarray, t: float) -> None:
+        """Make ``waypoint`` the decision flown from the latest odometry at time ``t``."""
+        self._waypoint = waypoint
+        start = self._hold_at if self._odom is None else self._odom[1]
+        self._leg = Leg(start.copy(), t, waypoint.copy(), self.mission.agent_speed)
+
+    def _fall_back(self, t: float, why: str) -> None:
+        """A greedy decision on the beliefs at ``t`` from the latest odometry, flown at once
+        while the planner is late (logged as ``fallback``)."""
+        means, covs = self._beliefs.at(t)
+        agent = self._odom[1].copy()
+        arrays = [agent, means, covs, np.zeros(self.mission.n_targets, dtype=bool)]
+        for a in arrays:
+            a.flags.writeable = False
+        obs = Observation(max(self._tick, 0), t, self.mission.budget - t, *arrays)
+        if not self._fallback_active:
+            self._fallback.reset(self.mission, obs, np.random.default_rng(self.seed))
+        waypoint = np.asarray(self._fallback.act(obs), dtype=float)
+        self._fallback_active = True
+        self._fly(waypoint, t)
+        self.accepted["fallback"] += 1
+        self._write(
+            {
+                "kind": "fallback",
+                "t": t,
+                "k": self._tick,
+                "waypoint": waypoint,
+                "planner": self._fallback.name,
+                "reason": why,
+            }
+        )
+
+    # --- before the mission ---------------------------------------------------------------
+    def prepare(self, position: Any) -> None:
+        """Before the mission starts (during take-off): the vehicle will start at
+        ``position`` (2,) m; hands tick 0 to the planner (its kernels compile or load in that
+        first call). Follow with :meth:`first_plan`."""
+        self.odometry(0.0, position)
+        self.setpoint(0.0)
+
+    def first_plan(self, timeout_s: float) -> float | None:
+        """Wait up to ``timeout_s`` s (without holding the controller) for tick 0's plan and
+        take it; returns its compute time, s, or ``None`` if it did not come."""
+        if self._in_flight is None or not self._runner.wait(timeout_s):
+            return self.first_plan_s
+        self.setpoint(0.0)
+        return self.first_plan_s
 
     # --- the end --------------------------------------------------------------------------
     def finish(self, t: float, reason: str) -> dict:
@@ -643,6 +781,11 @@ class MissionController:
     def last_odometry(self) -> tuple[float, np.ndarray] | None:
         """Time (s) and position (m) of the last accepted odometry."""
         return self._odom
+
+    @property
+    def planner_error(self) -> str | None:
+        """The planner's last failure while no later call succeeded, or ``None``."""
+        return self._planner_error
 
     @property
     def newest_detection_s(self) -> float:

@@ -1,30 +1,44 @@
-"""A small MAVLink vehicle for dry runs without a drone or a PX4 simulator (pymavlink).
+"""A small MAVLink vehicle for dry runs without a drone or a PX4 simulator (pymavlink), made to
+behave like PX4 with its SIH quadrotor (figures measured on PX4 main of early 2025; see
+docs/flight.md).
 
 It speaks enough of PX4's protocol for MAVSDK: a PX4 quadrotor heartbeat whose custom mode
 shows the flight mode (offboard, hold, takeoff, return, land), ``COMMAND_ACK`` for arming, mode
-changes, takeoff, return and land (offboard is refused, as PX4 does, unless setpoints are
-streaming), ``PARAM_VALUE`` for parameter reads and writes, ``AUTOPILOT_VERSION`` on request,
+changes, takeoff, return and land, the parameter protocol (``PARAM_REQUEST_READ`` by name or
+index, ``PARAM_REQUEST_LIST``, ``PARAM_SET``, each answered by ``PARAM_VALUE``) over PX4's
+parameters that matter here (:data:`PX4_PARAMETERS`), ``AUTOPILOT_VERSION`` on request,
 ``TIMESYNC`` replies, and ``SYS_STATUS``, ``EXTENDED_SYS_STATE``, ``LOCAL_POSITION_NED``,
-``GLOBAL_POSITION_INT`` and ``HOME_POSITION`` telemetry. In offboard mode it flies straight
-towards the last ``SET_POSITION_TARGET_LOCAL_NED`` at the scenario's speed (climbing at
-``climb_rate_m_s``).
+``GLOBAL_POSITION_INT`` and ``HOME_POSITION`` telemetry, to MAVSDK and optionally to a second
+link (a ground station, such as ``hptrack targets-sim``).
 
-It also simulates the scenario's true targets (from the first switch to offboard, the mission's
-start) and, while airborne, sends every target within the sensor footprint as a JSON line to the
-detection port: ``{"t": unix_s, "id": ..., "x": east_m, "y": north_m}`` (the scenario's ``R``
-as noise). The vehicle starts on the ground at the scenario's agent position.
+Flight as PX4 flies it:
+
+* take-off: the motors spool up for ``COM_SPOOLUP_TIME``, the climb rate ramps up to
+  ``MPC_TKO_SPEED`` over ``MPC_TKO_RAMP_T`` and slows in the last metres; then HOLD;
+* horizontal motion (offboard, hold, return): PX4's position loop, a commanded velocity
+  ``v_ff + MPC_XY_P (p_sp - p)`` (``v_ff`` the setpoint's velocity when it carries one; the
+  approach no faster than a stop at the setpoint allows), capped at ``MPC_XY_VEL_MAX`` and at
+  the airframe's top speed (the SIH quadrotor's drag holds it near 10 m/s at its 45 degree tilt
+  limit), reached with at most ``MPC_ACC_HOR``;
+* offboard is refused unless setpoints are streaming, and left for HOLD when they stop for
+  ``COM_OF_LOSS_T`` (PX4's offboard-loss failsafe, also when ``hptrack fly`` dies).
+
+Every mode change is reported through ``on_event`` (the CLI prints it). The scenario's targets
+are simulated and detected by :class:`~hptrack.runtime.targets.TargetDetector`, the component
+``hptrack targets-sim`` uses against a real SITL, fed here with the stub's own position.
+The vehicle starts on the ground at the scenario's agent position.
 
 Loopback addresses only; every loop is bounded by the run's duration.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import socket
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,7 +47,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from hptrack.runtime.frames import enu_to_ned, ned_to_enu
 from hptrack.runtime.network import udp_address
-from hptrack.runtime.world import TrueTargets
+from hptrack.runtime.targets import TargetDetector
 from hptrack.scenario.model import Scenario
 
 logger = logging.getLogger(__name__)
@@ -42,6 +56,29 @@ PX4_MAIN_MODE = {"manual": 1, "posctl": 3, "auto": 4, "offboard": 6}
 """PX4 main modes (``custom_mode`` bits 16-23)."""
 PX4_AUTO_SUB_MODE = {"ready": 1, "takeoff": 2, "hold": 3, "mission": 4, "rtl": 5, "land": 6}
 """PX4 auto sub-modes (``custom_mode`` bits 24-31)."""
+
+PX4_PARAMETERS: dict[str, float] = {
+    "MPC_XY_VEL_MAX": 12.0,
+    "MPC_ACC_HOR": 3.0,
+    "MPC_XY_P": 0.95,
+    "MPC_XY_CRUISE": 5.0,
+    "MPC_TILTMAX_AIR": 45.0,
+    "MPC_Z_VEL_MAX_UP": 3.0,
+    "MPC_Z_VEL_MAX_DN": 1.5,
+    "MPC_TKO_SPEED": 1.5,
+    "MPC_TKO_RAMP_T": 3.0,
+    "COM_SPOOLUP_TIME": 1.0,
+    "COM_OF_LOSS_T": 1.0,
+    "MIS_TAKEOFF_ALT": 2.5,
+    "RTL_RETURN_ALT": 30.0,
+    "NAV_RCL_ACT": 0.0,
+    "COM_RCL_EXCEPT": 4.0,
+}
+"""PX4's defaults (as read over MAVLink from PX4 SITL with the SIH quadrotor): speeds m/s,
+accelerations m/s^2, gains 1/s, times s, altitudes m, tilt degrees."""
+
+AIRFRAME_SPEED_M_S = 10.0
+"""Top horizontal speed of PX4's SIH quadrotor (its drag at the 45 degree tilt limit), m/s."""
 
 _SYSTEM_ID = 1
 _COMPONENT_ID = mavlink.MAV_COMP_ID_AUTOPILOT1
@@ -56,6 +93,10 @@ _SENSORS = (
 )
 _HOME_LAT_DEG, _HOME_LON_DEG, _HOME_ALT_M = 47.397742, 8.545594, 488.0
 _EARTH_RADIUS_M = 6_378_137.0
+_STREAM_S = 0.5
+"""Offboard is accepted only with a setpoint received within this, s (PX4 wants >= 2 Hz)."""
+_VELOCITY_IGNORED = 0b111000
+"""``type_mask`` bits of ``SET_POSITION_TARGET_LOCAL_NED`` that ignore vx, vy, vz."""
 
 
 def _custom_mode(mode: str) -> int:
@@ -78,6 +119,27 @@ def _mode_of(main: int, sub: int) -> str | None:
     return None
 
 
+def _param_name(raw: str | bytes) -> str:
+    return (raw if isinstance(raw, str) else raw.decode(errors="replace")).rstrip("\x00")
+
+
+def _limit(vector: np.ndarray, size: float) -> np.ndarray:
+    """``vector`` scaled down to length ``size`` if it is longer."""
+    norm = float(np.hypot(*vector))
+    return vector if norm <= size else vector * (size / norm)
+
+
+def _approach(error: np.ndarray, gain: float, acceleration: float) -> np.ndarray:
+    """Velocity towards a position ``error`` (m) away: PX4's proportional approach
+    (``gain`` 1/s), no faster than a stop at the setpoint allows with ``acceleration`` m/s^2
+    (PX4 stops at a position setpoint without overshoot), m/s."""
+    distance = float(np.hypot(*error))
+    if distance <= 0.0:
+        return np.zeros(2)
+    speed = min(gain * distance, math.sqrt(2.0 * acceleration * distance))
+    return error * (speed / distance)
+
+
 @dataclass
 class VehicleStats:
     """What the stub saw and did (JSON-ready through :meth:`as_json`)."""
@@ -85,13 +147,16 @@ class VehicleStats:
     setpoint_times: list[float] = field(default_factory=list)
     modes: list[tuple[float, str]] = field(default_factory=list)
     commands: dict[str, int] = field(default_factory=dict)
-    detections_sent: dict[str, int] = field(default_factory=dict)
     armed_at: float | None = None
     mission_started_at: float | None = None
     max_speed_m_s: float = 0.0
+    track: list[tuple[float, float, float, float, float]] = field(default_factory=list)
+    """``(t s, north m, east m, v_north m/s, v_east m/s)`` at 10 Hz while in offboard."""
 
-    def as_json(self, final_mode: str, armed: bool, position_ned: np.ndarray) -> dict:
-        """Summary: setpoint count and rates while in offboard, modes, detections."""
+    def as_json(
+        self, final_mode: str, armed: bool, position_ned: np.ndarray, detections: dict
+    ) -> dict:
+        """Summary: setpoint count and rates while in offboard, modes, detections, track."""
         offboard = [
             t
             for t in self.setpoint_times
@@ -121,9 +186,10 @@ class VehicleStats:
             "armed_at": self.armed_at,
             "mission_started_at": self.mission_started_at,
             "commands": self.commands,
-            "detections_sent": self.detections_sent,
+            "detections_sent": detections,
             "max_speed_m_s": self.max_speed_m_s,
             "position_ned": position_ned.tolist(),
+            "track": [list(row) for row in self.track],
         }
 
 
@@ -131,12 +197,17 @@ class VehicleSim:
     """The stub vehicle (module docstring).
 
     Args:
-        scenario: the mission (agent start, speed, footprint, ``R``, targets).
+        scenario: the mission (agent start, footprint, ``R``, targets).
         mavlink_url: where MAVSDK listens, ``udpout://127.0.0.1:PORT``.
-        detections_url: where to send detections, ``udp://127.0.0.1:PORT``.
+        detections_url: where to send detections, ``udp://127.0.0.1:PORT``; ``None``: no
+            targets (fly them with ``hptrack targets-sim`` on ``gcs_url``).
         seed: drives the true targets and the measurement noise (default the scenario's).
         detection_rate_hz: sensing per second (default one per ``tau``).
-        climb_rate_m_s: vertical speed, m/s.
+        gcs_url: a second telemetry link, ``udpout://127.0.0.1:PORT`` (PX4's ground-station
+            port is 14550), or ``None``.
+        airframe_speed_m_s: the airframe's top horizontal speed, m/s.
+        parameters: PX4 parameters that differ from :data:`PX4_PARAMETERS`.
+        on_event: called with one line at each mode change and failsafe.
 
     Raises:
         InputError: a malformed or non-loopback address.
@@ -146,66 +217,75 @@ class VehicleSim:
         self,
         scenario: Scenario,
         mavlink_url: str = "udpout://127.0.0.1:14540",
-        detections_url: str = "udp://127.0.0.1:5005",
+        detections_url: str | None = "udp://127.0.0.1:5005",
         seed: int | None = None,
         detection_rate_hz: float | None = None,
-        climb_rate_m_s: float = 5.0,
+        gcs_url: str | None = None,
+        airframe_speed_m_s: float = AIRFRAME_SPEED_M_S,
+        parameters: dict[str, float] | None = None,
+        on_event: Callable[[str], None] | None = None,
     ) -> None:
         self.scenario = scenario
         self.mission = scenario.mission_spec()
-        self._gcs = udp_address(mavlink_url, "--mavlink", loopback_only=True)
-        self._detections = udp_address(detections_url, "--detections", loopback_only=True)
+        self._links = [udp_address(mavlink_url, "--mavlink", loopback_only=True)]
+        if gcs_url is not None:
+            self._links.append(udp_address(gcs_url, "--gcs", loopback_only=True))
+        self._detector = None
+        if detections_url is not None:
+            udp_address(detections_url, "--detections", loopback_only=True)
+            self._detector = TargetDetector(scenario, detections_url, seed)
         self._rate = detection_rate_hz or 1.0 / self.mission.time_step
-        self._climb = float(climb_rate_m_s)
-        seed = scenario.seed if seed is None else int(seed)
-        truth_seq, motion_seq, sensor_seq, _ = np.random.SeedSequence(seed).spawn(4)
-        self._targets = TrueTargets(
-            scenario, np.random.default_rng(truth_seq), np.random.default_rng(motion_seq)
-        )
-        self._sensor_rng = np.random.default_rng(sensor_seq)
+        self._airframe_speed = float(airframe_speed_m_s)
+        self._on_event = on_event or (lambda text: None)
         x, y = scenario.agent.position
         self.home = np.array(enu_to_ned(x, y, 0.0))
         self.position = self.home.copy()
         self.velocity = np.zeros(3)
         self.armed = False
         self.mode = "hold"
+        self._mode_since = 0.0
         self._target: np.ndarray | None = None
+        self._target_velocity = np.zeros(3)
         self._hold = self.position.copy()
         self._last_setpoint: float = -math.inf
-        self._params: dict[str, float] = {
-            "MIS_TAKEOFF_ALT": 2.5,
-            "MPC_XY_CRUISE": 10.0,
-            "RTL_RETURN_ALT": 30.0,
-            "NAV_RCL_ACT": 0.0,
-            "COM_RCL_EXCEPT": 4.0,
-        }
+        self._params = {**PX4_PARAMETERS, **(parameters or {})}
         self.stats = VehicleStats()
         self._start = time.monotonic()
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", 0))
         self._sock.setblocking(False)
-        self._out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._mav = mavlink.MAVLink(self, srcSystem=_SYSTEM_ID, srcComponent=_COMPONENT_ID)
         self._mav.robust_parsing = True
 
     # --- link -------------------------------------------------------------------------------
     def write(self, buffer: bytes) -> None:
-        """MAVLink output (the pymavlink file interface): one datagram to MAVSDK."""
-        try:
-            self._sock.sendto(buffer, self._gcs)
-        except OSError as err:  # nobody listening yet: MAVSDK will hear the next one
-            logger.debug("send failed: %s", err)
+        """MAVLink output (the pymavlink file interface): one datagram to each link."""
+        for address in self._links:
+            try:
+                self._sock.sendto(buffer, address)
+            except OSError as err:  # nobody listening yet: the next one may arrive
+                logger.debug("send failed: %s", err)
 
     def _now(self) -> float:
         return time.monotonic() - self._start
 
-    def _set_mode(self, mode: str) -> None:
+    def _say(self, text: str) -> None:
+        logger.info("%s", text)
+        self._on_event(f"[{self._now():7.2f} s] {text}")
+
+    def _set_mode(self, mode: str, why: str = "") -> None:
         if mode != self.mode or not self.stats.modes:
             self.stats.modes.append((self._now(), mode))
-            logger.info("mode %s", mode)
+            self._say(f"mode {mode.upper()}{f' ({why})' if why else ''}")
+            if self.stats.modes[1:]:
+                self._send_heartbeat()  # as PX4 does, the new mode shows at once
+        if mode != self.mode:
+            self._mode_since = self._now()
         self.mode = mode
         if mode == "offboard" and self.stats.mission_started_at is None:
             self.stats.mission_started_at = self._now()
+            if self._detector is not None:
+                self._detector.start(time.time())
         if mode in ("hold", "takeoff"):
             self._hold = self.position.copy()
 
@@ -228,27 +308,26 @@ class VehicleSim:
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
             if msg.coordinate_frame == mavlink.MAV_FRAME_LOCAL_NED and not msg.type_mask & 0b111:
                 values = np.array([msg.x, msg.y, msg.z], dtype=float)
-                if np.all(np.isfinite(values)):
-                    self._target = values
+                velocity = (
+                    np.zeros(3)
+                    if msg.type_mask & _VELOCITY_IGNORED
+                    else np.array([msg.vx, msg.vy, msg.vz], dtype=float)
+                )
+                if np.all(np.isfinite(values)) and np.all(np.isfinite(velocity)):
+                    self._target, self._target_velocity = values, velocity
                     self._last_setpoint = self._now()
                     self.stats.setpoint_times.append(self._last_setpoint)
         elif kind in ("COMMAND_LONG", "COMMAND_INT"):
             if msg.target_system in (0, _SYSTEM_ID) and msg.target_component in (0, _COMPONENT_ID):
                 self._command(msg)
         elif kind == "PARAM_SET":
-            name = (
-                msg.param_id.rstrip("\x00")
-                if isinstance(msg.param_id, str)
-                else msg.param_id.decode().rstrip("\x00")
-            )
-            self._params[name] = float(msg.param_value)
-            self._send_param(name)
+            name = _param_name(msg.param_id)
+            if name in self._params and math.isfinite(msg.param_value):
+                self._params[name] = float(msg.param_value)
+                self._say(f"parameter {name} = {msg.param_value:g}")
+                self._send_param(name)
         elif kind == "PARAM_REQUEST_READ":
-            name = (
-                msg.param_id.rstrip("\x00")
-                if isinstance(msg.param_id, str)
-                else msg.param_id.decode().rstrip("\x00")
-            )
+            name = _param_name(msg.param_id)
             names = list(self._params)
             if name in self._params:
                 self._send_param(name)
@@ -270,6 +349,9 @@ class VehicleSim:
             names.index(name),
         )
 
+    def _streaming(self) -> bool:
+        return self._now() - self._last_setpoint <= _STREAM_S
+
     def _command(self, msg: Any) -> None:
         cmd = msg.command
         name = mavlink.enums["MAV_CMD"][cmd].name if cmd in mavlink.enums["MAV_CMD"] else str(cmd)
@@ -279,30 +361,32 @@ class VehicleSim:
             arm = msg.param1 > 0.5
             if arm and not self.armed:
                 self.stats.armed_at = self._now()
+                self._say("armed")
             self.armed = arm
             self._ack(cmd, accepted)
         elif cmd == mavlink.MAV_CMD_DO_SET_MODE:
             mode = _mode_of(int(msg.param2), int(msg.param3))
             if mode is None:
                 self._ack(cmd, mavlink.MAV_RESULT_UNSUPPORTED)
-            elif mode == "offboard" and self._now() - self._last_setpoint > 0.5:
-                self._ack(cmd, denied)  # PX4: no offboard without a setpoint stream
+            elif mode == "offboard" and not self._streaming():
+                self._say("offboard refused: no setpoint stream")
+                self._ack(cmd, denied)
             elif mode in ("takeoff", "offboard") and not self.armed:
                 self._ack(cmd, denied)
             else:
-                self._set_mode(mode)
+                self._set_mode(mode, "commanded")
                 self._ack(cmd, accepted)
         elif cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
             if self.armed:
-                self._set_mode("takeoff")
+                self._set_mode("takeoff", f"to {self._params['MIS_TAKEOFF_ALT']:g} m")
                 self._ack(cmd, accepted)
             else:
                 self._ack(cmd, denied)
         elif cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            self._set_mode("rtl")
+            self._set_mode("rtl", "commanded")
             self._ack(cmd, accepted)
         elif cmd == mavlink.MAV_CMD_NAV_LAND:
-            self._set_mode("land")
+            self._set_mode("land", "commanded")
             self._ack(cmd, accepted)
         elif cmd in (
             mavlink.MAV_CMD_REQUEST_MESSAGE,
@@ -351,7 +435,7 @@ class VehicleSim:
             lat, lon, alt, *self.home.tolist(), [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0
         )
 
-    def _send_status(self) -> None:
+    def _send_heartbeat(self) -> None:
         base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         if self.armed:
             base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
@@ -363,6 +447,9 @@ class VehicleSim:
             _custom_mode(self.mode),
             state,
         )
+
+    def _send_status(self) -> None:
+        self._send_heartbeat()
         self._mav.sys_status_send(
             _SENSORS, _SENSORS, _SENSORS, 100, 16000, 500, 90, 0, 0, 0, 0, 0, 0
         )
@@ -387,72 +474,89 @@ class VehicleSim:
     def _airborne(self) -> bool:
         return self.home[2] - self.position[2] > 0.5
 
-    def _fly(self, dt: float) -> None:
-        before = self.position.copy()
-        if not self.armed:
-            goal = self.position.copy()
-        elif self.mode == "offboard" and self._target is not None:
-            goal = self._target
-        elif self.mode == "takeoff":
-            goal = self._hold.copy()
-            goal[2] = self.home[2] - self._params["MIS_TAKEOFF_ALT"]
-            if abs(self.position[2] - goal[2]) < 0.05:
-                self._set_mode("hold")
-        elif self.mode == "rtl":
+    def _takeoff_climb_rate(self) -> float:
+        """PX4's take-off: spool-up, then a climb rate ramped up to ``MPC_TKO_SPEED`` that
+        slows near the take-off altitude, m/s (up)."""
+        p = self._params
+        since = self._now() - self._mode_since - p["COM_SPOOLUP_TIME"]
+        if since <= 0.0:
+            return 0.0
+        ramp = min(1.0, since / p["MPC_TKO_RAMP_T"]) if p["MPC_TKO_RAMP_T"] > 0 else 1.0
+        to_go = self.position[2] - (self.home[2] - p["MIS_TAKEOFF_ALT"])
+        return min(ramp * p["MPC_TKO_SPEED"], max(to_go, 0.0))
+
+    def _goal(self) -> tuple[np.ndarray, np.ndarray]:
+        """The position setpoint and feed-forward velocity of the current mode (NED)."""
+        if self.mode == "offboard" and self._target is not None:
+            return self._target, self._target_velocity
+        goal = self._hold.copy()
+        if self.mode == "rtl":
             goal = self.home.copy()
             if np.hypot(*(self.position[:2] - self.home[:2])) > 0.5:
-                goal[2] = self.position[2]
-            elif not self._airborne():
-                self.armed = False
+                goal[2] = min(self.position[2], self.home[2] - self._params["RTL_RETURN_ALT"])
         elif self.mode == "land":
             goal = self.position.copy()
             goal[2] = self.home[2]
-            if not self._airborne():
-                self.armed = False
+        return goal, np.zeros(3)
+
+    def _fly(self, dt: float) -> None:
+        if dt <= 0.0:
+            return
+        p = self._params
+        if not self.armed:
+            self.velocity = np.zeros(3)
+            return
+        if self.mode == "offboard" and self._now() - self._last_setpoint > p["COM_OF_LOSS_T"]:
+            self._set_mode(
+                "hold", f"offboard lost: no setpoint for {p['COM_OF_LOSS_T']:g} s, failsafe"
+            )
+        goal, feed_forward = self._goal()
+        command = feed_forward[:2] + _approach(
+            goal[:2] - self.position[:2], p["MPC_XY_P"], p["MPC_ACC_HOR"]
+        )
+        command = _limit(command, min(p["MPC_XY_VEL_MAX"], self._airframe_speed))
+        if self.mode == "takeoff":
+            command = np.zeros(2)
+        change = _limit(command - self.velocity[:2], p["MPC_ACC_HOR"] * dt)
+        self.velocity[:2] += change
+        # vertical: the take-off profile, else a proportional climb or descent within limits
+        if self.mode == "takeoff":
+            climb = self._takeoff_climb_rate()
+            if self.position[2] - (self.home[2] - p["MIS_TAKEOFF_ALT"]) < 0.05:
+                self._set_mode("hold", "take-off altitude reached")
+                climb = 0.0
+            self.velocity[2] = -climb
         else:
-            goal = self._hold.copy()
-        step = goal[:2] - self.position[:2]
-        dist = float(np.hypot(*step))
-        reach = self.mission.agent_speed * dt
-        self.position[:2] += step if dist <= reach else step * (reach / dist)
-        rise = float(np.clip(goal[2] - self.position[2], -self._climb * dt, self._climb * dt))
-        self.position[2] = min(self.position[2] + rise, self.home[2])
-        self.velocity = (self.position - before) / dt if dt > 0 else np.zeros(3)
+            self.velocity[2] = float(
+                np.clip(goal[2] - self.position[2], -p["MPC_Z_VEL_MAX_UP"], p["MPC_Z_VEL_MAX_DN"])
+            )
+        self.position += self.velocity * dt
+        if self.position[2] >= self.home[2]:
+            self.position[2] = self.home[2]
+            self.velocity[2] = 0.0
+            if self.mode in ("land", "rtl") and np.hypot(*self.velocity[:2]) < 0.1:
+                self.armed = False
+                self._say("landed and disarmed")
         self.stats.max_speed_m_s = max(
             self.stats.max_speed_m_s, float(np.hypot(*self.velocity[:2]))
         )
 
-    def _sense(self) -> None:
-        start = self.stats.mission_started_at
-        if start is None or not self._airborne():
-            return
-        truth = self._targets.positions_at(self._now() - start)
-        east, north, _ = ned_to_enu(*self.position)
-        sensor = self.mission.sensor
-        seen = np.flatnonzero(sensor.in_footprint(np.array([east, north]), truth))
-        if not len(seen):
-            return
-        stamp = time.time()
-        lines = []
-        for i, z in zip(seen, sensor.sample(truth[seen], self._sensor_rng), strict=True):
-            tid = self.mission.target_ids[i]
-            lines.append(json.dumps({"t": stamp, "id": tid, "x": float(z[0]), "y": float(z[1])}))
-            self.stats.detections_sent[tid] = self.stats.detections_sent.get(tid, 0) + 1
-        try:
-            self._out.sendto("\n".join(lines).encode(), self._detections)
-        except OSError as err:
-            logger.debug("detection send failed: %s", err)
+    def close(self) -> None:
+        """Close the stub's sockets."""
+        self._sock.close()
+        if self._detector is not None:
+            self._detector.close()
 
     # --- main loop --------------------------------------------------------------------------
     def run(
-        self, duration_s: float, stop: threading.Event | None = None, loop_hz: float = 50.0
+        self, duration_s: float, stop: threading.Event | None = None, loop_hz: float = 100.0
     ) -> dict:
         """Fly for at most ``duration_s`` wall seconds or until ``stop`` is set; returns the
         stats (:meth:`VehicleStats.as_json`)."""
         period = 1.0 / loop_hz
         self._set_mode(self.mode)
         last = self._now()
-        next_status = next_position = next_sense = last
+        next_status = next_position = next_sense = next_track = last
         end = last + float(duration_s)
         try:
             while self._now() < end and not (stop is not None and stop.is_set()):
@@ -467,10 +571,15 @@ class VehicleSim:
                     self._send_position(int(now * 1000))
                     next_position = now + 1.0 / 30.0
                 if now >= next_sense:
-                    self._sense()
+                    if self._detector is not None and self._airborne():
+                        east, north, _ = ned_to_enu(*self.position)
+                        self._detector.sense(time.time(), np.array([east, north]))
                     next_sense = now + 1.0 / self._rate
+                if now >= next_track and self.mode == "offboard":
+                    self.stats.track.append((now, *self.position[:2], *self.velocity[:2]))
+                    next_track = now + 0.1
                 time.sleep(max(0.0, min(period, end - self._now())))
         finally:
-            self._sock.close()
-            self._out.close()
-        return self.stats.as_json(self.mode, self.armed, self.position)
+            self.close()
+        detections = {} if self._detector is None else self._detector.stats.detections
+        return self.stats.as_json(self.mode, self.armed, self.position, detections)

@@ -55,6 +55,10 @@ class PlannerRunner(Protocol):
     def drain(self, timeout_s: float) -> PlanOutcome | None:
         """At the mission's end: the running job's outcome, waiting at most ``timeout_s``."""
 
+    def wait(self, timeout_s: float) -> bool:
+        """Block (the caller holds no lock) until the running job's outcome is ready, at most
+        ``timeout_s`` s; whether it is (it stays for the next ``poll``)."""
+
     def close(self) -> None:
         """Stop accepting jobs (a running job is abandoned)."""
 
@@ -66,6 +70,7 @@ class ThreadedRunner:
     def __init__(self) -> None:
         self._jobs: queue.Queue[Job | None] = queue.Queue()
         self._done: queue.Queue[PlanOutcome] = queue.Queue()
+        self._ready = threading.Event()
         self._thread = threading.Thread(target=self._work, name="hptrack-planner", daemon=True)
         self._thread.start()
 
@@ -75,8 +80,10 @@ class ThreadedRunner:
             if job is None:
                 return
             self._done.put(job())
+            self._ready.set()
 
     def submit(self, tick: int, job: Job, now_s: float) -> None:
+        self._ready.clear()
         self._jobs.put(job)
 
     def poll(self, now_s: float) -> PlanOutcome | None:
@@ -91,6 +98,9 @@ class ThreadedRunner:
             return self._done.get(timeout=timeout_s)
         except queue.Empty:
             return None
+
+    def wait(self, timeout_s: float) -> bool:
+        return self._ready.wait(timeout_s)
 
     def close(self) -> None:
         self._jobs.put(None)
@@ -118,6 +128,10 @@ class InlineRunner:
         """The pending outcome whatever its simulated compute time."""
         outcome, self._pending = (None, None) if self._pending is None else (self._pending[1], None)
         return outcome
+
+    def wait(self, timeout_s: float) -> bool:
+        """Whether a job is pending (its simulated compute time is not waited for)."""
+        return self._pending is not None
 
     def close(self) -> None:
         self._pending = None
@@ -150,6 +164,10 @@ class ReplayRunner:
     def drain(self, timeout_s: float) -> PlanOutcome | None:
         """The job's outcome if the log released it, else ``None`` (it never arrived)."""
         return self.poll(math.inf)
+
+    def wait(self, timeout_s: float) -> bool:
+        """Whether the log released the running job."""
+        return self._job is not None and self._job[0] in self._released
 
     def close(self) -> None:
         self._job = None

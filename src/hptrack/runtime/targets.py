@@ -1,0 +1,201 @@
+"""Synthetic targets and a footprint detector for flights without real targets: the scenario's
+true targets move from the mission's start (the vehicle's first switch to offboard), and every
+target within the sensor footprint of the vehicle is measured with the scenario's ``R`` and sent
+as a detection datagram to ``hptrack fly``.
+
+One component, two uses: the vehicle stub (:mod:`hptrack.runtime.vehicle_sim`) feeds it its own
+position, and ``hptrack targets-sim`` (:func:`run_targets_sim`) feeds it the position an
+autopilot reports on its MAVLink telemetry (a second link, such as PX4's ground-station port
+14550), so that any SITL flies with synthetic targets.
+
+Detection datagram: JSON lines ``{"t": unix_s, "id": ..., "x": east_m, "y": north_m}``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hptrack.interface import InputError
+from hptrack.runtime.frames import ned_to_enu
+from hptrack.runtime.network import udp_address
+from hptrack.runtime.world import TrueTargets
+from hptrack.scenario.model import Scenario
+
+logger = logging.getLogger(__name__)
+
+PX4_OFFBOARD_MAIN_MODE = 6
+"""PX4's main mode number of offboard (``custom_mode`` bits 16-23)."""
+
+
+def detection_datagram(stamp_unix_s: float, detections: list[tuple[str, np.ndarray]]) -> bytes:
+    """The detection datagram of measurements ``(id, (x east, y north) m)`` taken at
+    ``stamp_unix_s`` (module docstring)."""
+    lines = [
+        json.dumps({"t": stamp_unix_s, "id": tid, "x": float(z[0]), "y": float(z[1])})
+        for tid, z in detections
+    ]
+    return "\n".join(lines).encode()
+
+
+@dataclass
+class DetectorStats:
+    """What the detector sent: datagrams and detections per target."""
+
+    datagrams: int = 0
+    detections: dict[str, int] = field(default_factory=dict)
+    started_at_unix_s: float | None = None
+
+
+class TargetDetector:
+    """The scenario's true targets and the footprint sensor (module docstring).
+
+    Args:
+        scenario: the mission (targets, motion, footprint, ``R``).
+        detections_url: where detections go, ``udp://HOST:PORT``.
+        seed: drives the true targets and the noise (default the scenario's); the streams are
+            the simulator's (truth, motion, sensor).
+        option: the option that gave ``detections_url``, for error messages.
+
+    Raises:
+        InputError: a malformed address.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        detections_url: str,
+        seed: int | None = None,
+        option: str = "--detections",
+    ) -> None:
+        self.mission = scenario.mission_spec()
+        self._address = udp_address(detections_url, option)
+        seed = scenario.seed if seed is None else int(seed)
+        truth_seq, motion_seq, sensor_seq, _ = np.random.SeedSequence(seed).spawn(4)
+        self._targets = TrueTargets(
+            scenario, np.random.default_rng(truth_seq), np.random.default_rng(motion_seq)
+        )
+        self._sensor_rng = np.random.default_rng(sensor_seq)
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.stats = DetectorStats()
+
+    @property
+    def started(self) -> bool:
+        return self.stats.started_at_unix_s is not None
+
+    def start(self, unix_s: float) -> None:
+        """The mission starts (targets at their initial states) at ``unix_s``; later calls do
+        nothing."""
+        if self.stats.started_at_unix_s is None:
+            self.stats.started_at_unix_s = float(unix_s)
+
+    def sense(self, unix_s: float, position_enu: np.ndarray) -> int:
+        """Measure the targets in the footprint of a vehicle at ``position_enu`` (2,) m at
+        ``unix_s`` and send them; returns how many were sent (0 before the start)."""
+        start = self.stats.started_at_unix_s
+        if start is None:
+            return 0
+        truth = self._targets.positions_at(unix_s - start)
+        sensor = self.mission.sensor
+        seen = np.flatnonzero(sensor.in_footprint(np.asarray(position_enu, float), truth))
+        if not len(seen):
+            return 0
+        measured = sensor.sample(truth[seen], self._sensor_rng)
+        ids = [self.mission.target_ids[i] for i in seen]
+        for tid in ids:
+            self.stats.detections[tid] = self.stats.detections.get(tid, 0) + 1
+        try:
+            self._sock.sendto(
+                detection_datagram(unix_s, list(zip(ids, measured, strict=True))), self._address
+            )
+            self.stats.datagrams += 1
+        except OSError as err:  # nobody listening (yet): the next one may arrive
+            logger.debug("detection send failed: %s", err)
+        return len(ids)
+
+    def close(self) -> None:
+        self._sock.close()
+
+
+@dataclass
+class _Telemetry:
+    position_ned: np.ndarray | None = None
+    offboard: bool = False
+    armed: bool = False
+
+
+def run_targets_sim(
+    detector: TargetDetector,
+    mavlink_url: str,
+    duration_s: float,
+    rate_hz: float,
+    stop: threading.Event | None = None,
+    min_altitude_m: float = 0.5,
+    on_event=None,
+) -> dict:
+    """Listen to an autopilot's MAVLink telemetry at ``mavlink_url`` (``udpin://HOST:PORT``,
+    pymavlink) and sense at ``rate_hz`` for at most ``duration_s`` s: the mission starts at the
+    first heartbeat in offboard mode; the vehicle's position is its ``LOCAL_POSITION_NED`` (the
+    local frame of the mission); it senses while higher than ``min_altitude_m`` above the
+    local origin. Returns a summary (heartbeats seen, positions, detections sent).
+
+    Raises:
+        InputError: an address that cannot be opened (malformed, in use, not on this machine).
+    """
+    from pymavlink import mavutil
+
+    host, port = udp_address(mavlink_url, "--mavlink")
+    try:
+        link = mavutil.mavlink_connection(f"udpin:{host}:{port}", source_system=255)
+    except OSError as err:
+        raise InputError(
+            f"--mavlink {mavlink_url!r}: cannot listen there ({err.strerror})"
+        ) from None
+    say = on_event or (lambda text: None)
+    seen = _Telemetry()
+    counts = {"heartbeats": 0, "positions": 0}
+    end = time.monotonic() + duration_s
+    next_sense = time.monotonic()
+    try:
+        while time.monotonic() < end and not (stop is not None and stop.is_set()):
+            msg = link.recv_match(blocking=True, timeout=min(0.02, 1.0 / rate_hz))
+            while msg is not None:
+                kind = msg.get_type()
+                if kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
+                    counts["heartbeats"] += 1
+                    offboard = (msg.custom_mode >> 16) & 0xFF == PX4_OFFBOARD_MAIN_MODE
+                    if offboard and not seen.offboard:
+                        say("vehicle in OFFBOARD")
+                        if not detector.started:
+                            detector.start(time.time())
+                            say("mission started: targets moving")
+                    elif seen.offboard and not offboard:
+                        say("vehicle left OFFBOARD")
+                    seen.offboard = offboard
+                elif kind == "LOCAL_POSITION_NED":
+                    counts["positions"] += 1
+                    seen.position_ned = np.array([msg.x, msg.y, msg.z], dtype=float)
+                msg = link.recv_match(blocking=False)
+            now = time.monotonic()
+            if now >= next_sense:
+                next_sense = now + 1.0 / rate_hz
+                ned = seen.position_ned
+                if ned is not None and math.isfinite(ned.sum()) and -ned[2] > min_altitude_m:
+                    east, north, _ = ned_to_enu(*ned)
+                    detector.sense(time.time(), np.array([east, north]))
+    finally:
+        link.close()
+        detector.close()
+    return {
+        **counts,
+        "mission_started": detector.started,
+        "datagrams": detector.stats.datagrams,
+        "detections_sent": detector.stats.detections,
+    }
