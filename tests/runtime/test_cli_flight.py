@@ -54,11 +54,28 @@ def test_replay_writes_the_figure_and_the_summary(flight_cli, flight_scenario, t
         (["fly", "{scenario}", "--deadline", "0"], "--deadline"),
         (["fly", "{scenario}", "--planner", "nope"], "unknown planner"),
         (["fly", "{scenario}", "--detections", "tcp://x:1"], "--detections"),
+        (["fly", "{scenario}", "--connection", "bogus"], "--connection 'bogus': expected"),
+        (["fly", "{scenario}", "--connection", "udpin://0.0.0.0:99999"], "port 1-65535"),
+        (
+            ["fly", "{scenario}", "--connection", "serial:///dev/ttyNOPE0:57600"],
+            "no serial device /dev/ttyNOPE0",
+        ),
+        (["fly", "{scenario}", "--connection", "udpin://{busy}"], "the port is in use"),
+        (["fly", "{scenario}", "--connection", "udpin://10.254.254.1:14540"], "cannot receive"),
+        (["fly", "{scenario}", "--detections", "udp://{busy}"], "the port is in use"),
+        (["fly", "{scenario}", "--detections", "udp://10.254.254.1:5005"], "cannot receive"),
+        (["fly", "{scenario}", "--first-plan-timeout", "0"], "--first-plan-timeout"),
+        (["vehicle-sim", "{scenario}", "--param", "NOPE=1"], "--param 'NOPE=1'"),
+        (["vehicle-sim", "{scenario}", "--gcs", "udpout://10.1.2.3:14550"], "loopback"),
+        (["targets-sim", "{scenario}", "--mavlink", "udpin://{busy}"], "the port is in use"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_code_2(flight_cli, example_path, tmp_path, args, message):
-    args = [a.format(scenario=example_path) for a in args]
-    result = flight_cli(*args, *(["--log", tmp_path / "l.jsonl"] if args[0] == "fly" else []))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        address = f"127.0.0.1:{busy.getsockname()[1]}"
+        args = [a.format(scenario=example_path, busy=address) for a in args]
+        result = flight_cli(*args, *(["--log", tmp_path / "l.jsonl"] if args[0] == "fly" else []))
     assert result.code == 2, result.out + result.err
     assert len(result.error_lines) == 1 and message in result.err, result.err
 
@@ -82,3 +99,34 @@ def test_fly_without_a_vehicle_gives_up_with_exit_code_3(flight_cli, example_pat
     )
     assert result.code == 3, result.out + result.err
     assert "no autopilot found" in result.err
+
+
+def test_the_planned_speed_is_the_vehicles_limit_only_when_asked():
+    from hptrack.cli.flight import planned_speed
+    from hptrack.interface import InputError
+    from hptrack.runtime.mavsdk_adapter import VehicleLimits
+
+    px4 = VehicleLimits(12.0, 3.0, "MPC_XY_VEL_MAX 12 m/s")
+    assert planned_speed(8.0, px4, cap=False) == 8.0
+    assert planned_speed(30.0, px4, cap=True) == 12.0
+    with pytest.raises(InputError, match=r"agent.speed 30 m/s is above .* 12 m/s: pass --cap"):
+        planned_speed(30.0, px4, cap=False)
+    assert planned_speed(30.0, VehicleLimits(None, None, "not PX4"), cap=False) == 30.0
+
+
+def test_plain_errors_say_what_happened_what_the_vehicle_does_and_what_to_do():
+    pytest.importorskip("mavsdk")
+    from mavsdk.asyncio.plugins.offboard import OffboardError, OffboardResult
+
+    from hptrack.runtime.mavsdk_adapter import plain_error
+
+    text = plain_error(
+        OffboardError(OffboardResult.TIMEOUT, "hold()"), "switching to hold", "it last said X"
+    )
+    assert text == (
+        "switching to hold failed: the vehicle did not answer (the link may be lost); it last "
+        "said X; check the link and watch the vehicle with a ground station; PX4 leaves "
+        "offboard by itself after COM_OF_LOSS_T (1 s by default) and applies its offboard-loss "
+        "failsafe."
+    )
+    assert "\n" not in text and "origin" not in text

@@ -285,3 +285,57 @@ def test_safe_ends_switch_to_hold_and_say_why(dry_run, end):
     else:
         assert safety[0]["confirmed"] == "HOLD"
         assert _stop_stub(dry_run)["final_mode"] == "hold"
+
+
+def test_targets_sim_feeds_fly_from_the_vehicles_own_telemetry(tmp_path, example_path):
+    """stub (no targets, telemetry also to a ground-station port) -> targets-sim over MAVLink
+    -> detections over UDP -> fly."""
+    gcs = _free_udp_port()
+    run = _start_dry_run(
+        tmp_path, example_path, BUDGET_S, ["--no-targets", "--gcs", f"udpout://127.0.0.1:{gcs}"]
+    )
+    targets_stats = tmp_path / "targets.json"
+    targets = subprocess.Popen(
+        [
+            *CLI,
+            "targets-sim",
+            str(run["scenario"]),
+            "--mavlink",
+            f"udpin://127.0.0.1:{gcs}",
+            "--detections",
+            f"udp://127.0.0.1:{run['detections_port']}",
+            "--duration",
+            "150",
+            "--stats",
+            str(targets_stats),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        fly = subprocess.run(
+            [*run["fly"], "--log", str(run["log"]), "--planner", "greedy"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert fly.returncode == 0, fly.stdout + fly.stderr
+        stub = _stop_stub(run)
+        targets.send_signal(signal.SIGINT)
+        out, err = targets.communicate(timeout=10)
+    finally:
+        _end(run["stub"])
+        _end(targets)
+    assert targets.returncode == 0, err
+    assert stub["detections_sent"] == {}  # the stub simulated no targets itself
+    sent = json.loads(targets_stats.read_text())
+    assert sent["mission_started"] and sent["positions"] > 100
+    assert "mission started: targets moving" in out and "vehicle in OFFBOARD" in out
+    accepted = [r for r in _records(run["log"], "detection") if r["accepted"]]
+    assert accepted and sum(sent["detections_sent"].values()) >= len(accepted) > 0
+    # the detections are where the truth is: p1 starts at (30.5, 9.5) walking east at 3 m/s
+    first = min(accepted, key=lambda r: r["t"])
+    truth = {"p1": (30.5, 9.5, 3.0, 0.1), "p2": (29.5, -10.5, 3.0, -0.1)}[first["target"]]
+    expected = np.array(truth[:2]) + first["t"] * np.array(truth[2:])
+    assert np.hypot(*(np.asarray(first["position"]) - expected)) < 8.0  # 1 s offset + noise
