@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -135,22 +135,72 @@ class Observation:
     detected: np.ndarray
 
 
+class SettingsRecord(Protocol):
+    """A planner's settings as the layers above read them (a
+    :class:`~hptrack.settings.PlannerSettings`)."""
+
+    def as_json(self) -> dict[str, Any]:
+        """The settings as JSON-ready options (they rebuild the same planner)."""
+        ...
+
+
+@dataclass(frozen=True)
+class Subtask:
+    """The sub-task a planner is flying (paper Sec. IV).
+
+    Attributes:
+        kind: ``"pursue"`` (a coverage sub-task on ``target``), ``"follow"`` (follow a found
+            target) or ``"dwell"`` (follow it for the dwell's length).
+        target: the target's index.
+        since_step: the step it began at.
+        p_find: the pursuit's estimated chance of finding the target, or ``None``.
+    """
+
+    kind: Literal["pursue", "follow", "dwell"]
+    target: int
+    since_step: int
+    p_find: float | None = None
+
+
+@dataclass(frozen=True)
+class CurrentPlan:
+    """What a planner is doing now and means to do next.
+
+    Attributes:
+        subtask: the sub-task being flown, or ``None`` (a planner without sub-tasks, or one
+            hovering with nothing left to do).
+        after_find: the action planned after a find (a target index; ``n`` is the dwell), or
+            ``None``.
+        after_miss: the action planned after a miss, or ``None``.
+    """
+
+    subtask: Subtask | None = None
+    after_find: int | None = None
+    after_miss: int | None = None
+
+
 @runtime_checkable
 class Planner(Protocol):
-    """A mission planner. ``name`` identifies it in records and the registry.
+    """A mission planner. ``name`` identifies it in records and the registry; ``settings``
+    are the options it was made with.
 
     ``reset`` is called once before the first step with the mission facts, the first
     observation and the planner's own random generator; ``act`` then returns, every step, the
-    waypoint ``(2,)`` in m that the agent should fly towards; ``episode_info`` returns
-    JSON-ready metadata of the mission so far (its decisions, effort, settings).
+    waypoint ``(2,)`` in m that the agent should fly towards; ``current_plan`` says, after an
+    ``act``, what it is doing and means to do next (the real-time controller shows it);
+    ``episode_info`` returns JSON-ready metadata of the mission so far (its decisions, effort,
+    settings).
     """
 
     name: str
+    settings: SettingsRecord
 
     def reset(
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
     ) -> None: ...
 
     def act(self, observation: Observation) -> np.ndarray: ...
+
+    def current_plan(self) -> CurrentPlan: ...
 
     def episode_info(self) -> dict[str, Any]: ...

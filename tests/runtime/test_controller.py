@@ -4,8 +4,10 @@ import time
 import numpy as np
 import pytest
 
-from hptrack.runtime.controller import ControllerSettings, MissionController
+from hptrack.interface import CurrentPlan, Subtask
+from hptrack.runtime.controller import ControllerSettings, MissionController, plan_json
 from hptrack.runtime.worker import InlineRunner, ThreadedRunner
+from hptrack.settings import NoSettings
 
 
 class Recorder:
@@ -13,6 +15,7 @@ class Recorder:
     or sleep at chosen steps."""
 
     name = "recorder"
+    settings = NoSettings()
 
     def __init__(self, fail_at=(), sleep_s=0.0):
         self.fail_at, self.sleep_s = set(fail_at), sleep_s
@@ -29,6 +32,9 @@ class Recorder:
         if observation.step in self.fail_at:
             raise RuntimeError(f"boom at {observation.step}")
         return observation.agent_position + np.array([1.0, 0.0])
+
+    def current_plan(self):
+        return CurrentPlan()
 
     def episode_info(self):
         return {}
@@ -352,20 +358,29 @@ def test_the_mission_ends_at_the_budget(flight_scenario):
 
 def test_the_current_sub_task_names_a_follow_a_dwell_and_a_pursuit():
     from hptrack.cli.flight import _subtask_text
-    from hptrack.runtime.controller import _subtask_of
-
-    class Logged:
-        def __init__(self, entry):
-            self.entry = entry
-
-        def episode_info(self):
-            return {"subtasks": [self.entry]}
 
     ids = ("t1", "t2")
-    dwell = _subtask_of(Logged({"dwell": 1, "start_step": 30}), ids)
-    assert dwell == {"dwell": "t2", "since_step": 30}
-    assert _subtask_text(dwell) == "dwell on t2 (since step 30)"
-    follow = _subtask_of(Logged({"follow": 0, "start_step": 7}), ids)
-    assert _subtask_text(follow) == "follow t1 (since step 7)"
-    pursuit = _subtask_of(Logged({"target_index": 0, "start_step": 0, "p_find": 0.5}), ids)
-    assert _subtask_text(pursuit) == "pursue t1 (since step 0, p_find 0.50)"
+    dwell = CurrentPlan(Subtask("dwell", 1, 30), after_find=2)
+    assert plan_json(dwell, ids) == {"dwell": "t2", "since_step": 30}
+    assert _subtask_text(dwell, ids) == "dwell on t2 (since step 30)"
+    follow = CurrentPlan(Subtask("follow", 0, 7))
+    assert _subtask_text(follow, ids) == "follow t1 (since step 7)"
+    pursuit = CurrentPlan(Subtask("pursue", 0, 0, 0.5), 1, None)
+    assert plan_json(pursuit, ids) == {"target": "t1", "since_step": 0, "p_find": 0.5}
+    assert _subtask_text(pursuit, ids) == "pursue t1 (since step 0, p_find 0.50)"
+    assert plan_json(CurrentPlan(), ids) is None and _subtask_text(None, ids) == "-"
+
+
+def test_the_controller_shows_the_hierarchical_planners_current_plan(flight_scenario):
+    from hptrack.registry import make_planner
+
+    ctrl, _ = _controller(flight_scenario, planner=make_planner("mcts", {"iterations": 200}))
+    ctrl.odometry(0.0, [0.0, 0.0])
+    ctrl.setpoint(0.0)
+    plan = ctrl.status()["plan"]
+    assert plan.subtask.kind == "pursue" and plan.subtask.since_step == 0
+    assert 0.0 < plan.subtask.p_find <= 1.0
+    first = next(r for r in ctrl.log.records if r["kind"] == "plan")
+    assert first["subtask"] == plan_json(plan, flight_scenario.target_ids)
+    header = ctrl.log.records[0]
+    assert header["planner_settings"]["iterations"] == 200

@@ -7,9 +7,11 @@ import time
 import pytest
 
 pytest.importorskip("mavsdk")
+from hptrack.interface import CurrentPlan  # noqa: E402
 from hptrack.runtime.controller import MissionController  # noqa: E402
 from hptrack.runtime.mavsdk_adapter import FlightOptions, _Flight  # noqa: E402
 from hptrack.runtime.worker import InlineRunner  # noqa: E402
+from hptrack.settings import NoSettings  # noqa: E402
 
 
 def test_detection_datagrams_feed_the_controller_and_bad_lines_are_refused(flight_scenario):
@@ -39,6 +41,10 @@ def test_detection_datagrams_feed_the_controller_and_bad_lines_are_refused(fligh
 
 class _Still:
     name = "stationary"
+    settings = NoSettings()
+
+    def current_plan(self):
+        return CurrentPlan()
 
     def reset(self, mission, observation, rng):
         pass

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Annotated, Any, ClassVar
 import numpy as np
 from pydantic import BeforeValidator, Field
 
+from hptrack.interface import CurrentPlan
 from hptrack.settings import PlannerSettings
 
 if TYPE_CHECKING:
@@ -127,6 +128,10 @@ class PrimitivePlanner(ABC):
     @abstractmethod
     def search(self, observation: Observation) -> tuple[np.ndarray, DecisionStats]:
         """Plan from ``observation``: control indices ``(H,)`` and the decision's statistics."""
+
+    def current_plan(self) -> CurrentPlan:
+        """No sub-tasks: nothing to show."""
+        return CurrentPlan()
 
     def episode_info(self) -> dict:
         """Planning effort over the mission so far (stored with the episode record)."""

@@ -9,7 +9,7 @@ import numpy as np
 from pydantic import Field
 
 from hptrack.coverage.subtask import CoverageSubtask
-from hptrack.interface import InputError, MissionSpec, Observation
+from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation, Subtask
 from hptrack.models.motion import predicted_positions
 from hptrack.settings import PlannerSettings
 
@@ -68,6 +68,13 @@ class CoveragePlanner:
             self._subtask = CoverageSubtask.from_observation(observation, i, self._mission)
             self._log.append(self._subtask.summary())
         return self._subtask.next_waypoint(observation)
+
+    def current_plan(self) -> CurrentPlan:
+        """The coverage sub-task being flown, if any."""
+        sub = self._subtask
+        if sub is None:
+            return CurrentPlan()
+        return CurrentPlan(Subtask("pursue", sub.target_index, sub.start_step, float(sub.p_find)))
 
     def episode_info(self) -> dict:
         """The sub-tasks flown, each with its plan and outcome, and the settings."""

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hptrack.interface import MissionSpec, Observation
+from hptrack.interface import CurrentPlan, MissionSpec, Observation
 from hptrack.models.beliefs import position_logdet
 from hptrack.settings import NoSettings
 
@@ -69,6 +69,10 @@ class GreedyPlanner:
         if self._target is None:
             self._target = self._choose(obs)
         return obs.means[self._target, :2].copy()
+
+    def current_plan(self) -> CurrentPlan:
+        """No sub-tasks: nothing to show."""
+        return CurrentPlan()
 
     def episode_info(self) -> dict:
         return {"settings": self.settings.as_json()}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hptrack.interface import MissionSpec, Observation
+from hptrack.interface import CurrentPlan, MissionSpec, Observation
 from hptrack.settings import NoSettings
 
 
@@ -23,6 +23,10 @@ class StationaryPlanner:
 
     def act(self, observation: Observation) -> np.ndarray:
         return self._home
+
+    def current_plan(self) -> CurrentPlan:
+        """No sub-tasks: nothing to show."""
+        return CurrentPlan()
 
     def episode_info(self) -> dict:
         return {"settings": self.settings.as_json()}

@@ -32,7 +32,7 @@ from hptrack.cli.common import (
     planner_settings_for,
     write_json,
 )
-from hptrack.interface import InputError
+from hptrack.interface import CurrentPlan, InputError
 from hptrack.registry import PLANNERS, make_planner
 from hptrack.scenario import load_scenario
 from hptrack.scenario.io import format_validation_error, parse_scenario
@@ -61,16 +61,16 @@ def _positive(value: float, option: str, low: float = 0.0, high: float = math.in
         raise InputError(f"{option} must be a number in ({low:g}, {high:g}], got {value}")
 
 
-def _subtask_text(subtask: dict | None) -> str:
-    if not subtask:
+def _subtask_text(plan: CurrentPlan | None, target_ids: tuple[str, ...]) -> str:
+    if plan is None or plan.subtask is None:
         return "-"
-    if "follow" in subtask:
-        return f"follow {subtask['follow']} (since step {subtask.get('since_step')})"
-    if "dwell" in subtask:
-        return f"dwell on {subtask['dwell']} (since step {subtask.get('since_step')})"
-    p_find = subtask.get("p_find")
-    extra = f", p_find {p_find:.2f}" if isinstance(p_find, float) else ""
-    return f"pursue {subtask['target']} (since step {subtask.get('since_step')}{extra})"
+    sub = plan.subtask
+    name = target_ids[sub.target]
+    if sub.kind == "pursue":
+        extra = "" if sub.p_find is None else f", p_find {sub.p_find:.2f}"
+        return f"pursue {name} (since step {sub.since_step}{extra})"
+    verb = "dwell on" if sub.kind == "dwell" else "follow"
+    return f"{verb} {name} (since step {sub.since_step})"
 
 
 def _live_view(status: dict) -> Group:
@@ -86,7 +86,7 @@ def _live_view(status: dict) -> Group:
             f"{status.get('setpoint_rate_hz', 0):.1f} Hz)"
         ),
     )
-    head.add_row("sub-task", escape(_subtask_text(status.get("subtask"))))
+    head.add_row("sub-task", escape(_subtask_text(status["plan"], status["target_ids"])))
     last = status.get("last_detection")
     head.add_row(
         "last detection",

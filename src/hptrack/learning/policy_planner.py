@@ -22,7 +22,7 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import Field
 
-from hptrack.interface import InputError, MissionSpec, Observation
+from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation
 from hptrack.models.beliefs import position_logdet
 from hptrack.settings import PlannerSettings
 
@@ -118,6 +118,10 @@ class _DiscretePolicyPlanner(ABC):
         action = self._choose(self.encode(observation))
         self._actions[action] += 1
         return observation.agent_position + self._mission.step_length * self._headings[action]
+
+    def current_plan(self) -> CurrentPlan:
+        """No sub-tasks: nothing to show."""
+        return CurrentPlan()
 
     def episode_info(self) -> dict[str, Any]:
         return {

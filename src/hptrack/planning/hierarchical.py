@@ -29,7 +29,7 @@ from pydantic import Field, model_validator
 
 from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
-from hptrack.interface import MissionSpec, Observation
+from hptrack.interface import CurrentPlan, MissionSpec, Observation, Subtask
 from hptrack.models.motion import predicted_positions
 from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchResult, search
@@ -363,6 +363,19 @@ class HierarchicalPlanner:
         if self._follow is not None:
             return predicted_positions(observation.means[self._follow], self._mission.time_step)
         return observation.agent_position
+
+    def current_plan(self) -> CurrentPlan:
+        """The sub-task being flown (pursuit, dwell or follow) and the plans after it."""
+        if self._subtask is not None:
+            sub = self._subtask
+            pursuit = Subtask("pursue", sub.target_index, sub.start_step, float(sub.p_find))
+            return CurrentPlan(pursuit, *self._plan)
+        if self._follow is None:
+            return CurrentPlan()
+        since = self._log[-1]["start_step"]
+        if self._dwell_end is not None:
+            return CurrentPlan(Subtask("dwell", self._follow, since), self._plan[0])
+        return CurrentPlan(Subtask("follow", self._follow, since))
 
     def episode_info(self) -> dict:
         """The sub-tasks flown (plan, estimate, outcome; a planned action ``n`` is the dwell),

@@ -47,7 +47,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from hptrack.baselines.greedy import GreedyPlanner
-from hptrack.interface import Observation, Planner
+from hptrack.interface import CurrentPlan, Observation, Planner
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import check_noise_covariance
 from hptrack.runtime.beliefs import BeliefTimeline
@@ -163,27 +163,18 @@ def _raw(value: Any) -> Any:
         return repr(value)[:200]
 
 
-def _subtask_of(planner: Planner, target_ids: tuple[str, ...]) -> dict[str, Any] | None:
-    """The planner's current sub-task from its ``episode_info`` (hierarchical planners)."""
-    try:
-        subtasks = planner.episode_info().get("subtasks")
-    except Exception:  # noqa: BLE001 - optional information only
+def plan_json(plan: CurrentPlan | None, target_ids: tuple[str, ...]) -> dict[str, Any] | None:
+    """The sub-task of ``plan`` for the log, with target names: ``{"target": id, "since_step":
+    k, "p_find": p}`` (a pursuit), ``{"follow": id, ...}`` or ``{"dwell": id, ...}``; ``None``
+    without a sub-task."""
+    if plan is None or plan.subtask is None:
         return None
-    if not subtasks:
-        return None
-    last = subtasks[-1]
-    if last.get("follow") is not None:
-        return {"follow": target_ids[int(last["follow"])], "since_step": last.get("start_step")}
-    if "dwell" in last:
-        return {"dwell": target_ids[int(last["dwell"])], "since_step": last.get("start_step")}
-    if "target_index" in last:
-        return {
-            "target": target_ids[int(last["target_index"])],
-            "since_step": last.get("start_step"),
-            "p_find": last.get("p_find"),
-            "outcome": last.get("outcome"),
-        }
-    return None
+    sub = plan.subtask
+    key = {"pursue": "target", "follow": "follow", "dwell": "dwell"}[sub.kind]
+    out: dict[str, Any] = {key: target_ids[sub.target], "since_step": sub.since_step}
+    if sub.p_find is not None:
+        out["p_find"] = sub.p_find
+    return out
 
 
 class MissionController:
@@ -253,7 +244,8 @@ class MissionController:
         self.history: list[dict] = []
         """Per processed tick: ``k``, ``agent`` (or ``None``), ``means``, ``covariances``,
         ``detected``."""
-        self.subtask: dict[str, Any] | None = None
+        self.plan: CurrentPlan | None = None
+        """What the planner said it is doing after its last flown call."""
         self.last_detection: dict[str, Any] | None = None
         self.accepted: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
@@ -262,14 +254,13 @@ class MissionController:
         self.end: dict | None = None
         self.first_plan_s: float | None = None
         """Compute time of tick 0's plan (s) once it is flown."""
-        settings_json = getattr(getattr(planner, "settings", None), "as_json", None)
         self._write(
             {
                 "kind": "header",
                 "version": LOG_VERSION,
                 "scenario": scenario.model_dump(mode="json"),
                 "planner": planner.name,
-                "planner_settings": settings_json() if settings_json else {},
+                "planner_settings": planner.settings.as_json(),
                 "seed": self.seed,
                 "controller": self.settings.model_dump(),
                 **(header or {}),
@@ -558,7 +549,6 @@ class MissionController:
         first = not self._planner_started
         self._planner_started = True
         planner, mission, rng = self._planner, self.mission, self._rng
-        ids = mission.target_ids
 
         def call() -> np.ndarray:
             if first:
@@ -572,7 +562,7 @@ class MissionController:
             ):
                 error, waypoint = f"invalid waypoint {waypoint.tolist()}", None
             return PlanOutcome(
-                k, waypoint, error, elapsed, None if error else _subtask_of(planner, ids)
+                k, waypoint, error, elapsed, None if error else planner.current_plan()
             )
 
         self._in_flight = (k, now)
@@ -612,7 +602,7 @@ class MissionController:
             "status": status,
             "waypoint": outcome.waypoint,
             "compute_s": outcome.compute_s,
-            "subtask": outcome.subtask,
+            "subtask": plan_json(outcome.plan, self.mission.target_ids),
             "speed_m_s": self.mission.agent_speed,
         }
         if outcome.error:
@@ -623,12 +613,12 @@ class MissionController:
                 self._planner_started = False
         elif late and self._fallback_active:
             record["detail"] = "not flown: the fallback flies until the next tick's plan"
-            self.subtask = outcome.subtask
+            self.plan = outcome.plan
         elif not after_end:
             self._fallback_active = False
             self._fly(outcome.waypoint, t)
             self._planner_error = None
-            self.subtask = outcome.subtask
+            self.plan = outcome.plan
             if outcome.tick == 0 and self.first_plan_s is None:
                 self.first_plan_s = outcome.compute_s
         if after_end:
@@ -808,7 +798,8 @@ class MissionController:
                 "t": self._last_call,
                 "budget": self.mission.budget,
                 "mode": self._mode,
-                "subtask": self.subtask,
+                "plan": self.plan,
+                "target_ids": self.mission.target_ids,
                 "logdet": logdet,
                 "last_detection": self.last_detection,
                 "accepted": dict(self.accepted),

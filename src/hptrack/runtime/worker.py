@@ -14,9 +14,11 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
+
+from hptrack.interface import CurrentPlan
 
 
 @dataclass(frozen=True)
@@ -28,16 +30,14 @@ class PlanOutcome:
         waypoint: ``(2,)`` m, or ``None`` if the call failed.
         error: the failure (``"TypeError: ..."``), or ``None``.
         compute_s: wall time the call took, s.
-        subtask: the planner's current sub-task after the call (``{"target": i, "outcome":
-            ...}``, ``{"follow": i}`` or ``{"dwell": i}``), or ``None`` for planners without
-            sub-tasks.
+        plan: what the planner said it is doing after the call, or ``None`` if it failed.
     """
 
     tick: int
     waypoint: np.ndarray | None
     error: str | None
     compute_s: float
-    subtask: dict[str, Any] | None
+    plan: CurrentPlan | None
 
 
 Job = Callable[[], PlanOutcome]
