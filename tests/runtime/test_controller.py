@@ -274,7 +274,7 @@ def test_a_short_leg_stops_at_its_waypoint(flight_scenario):
 
 
 def test_detections_outside_the_area_or_with_absurd_noise_are_refused(flight_scenario):
-    from hptrack.runtime.controller import mission_area
+    from hptrack.runtime.inputs import mission_area
 
     centre, radius = mission_area(flight_scenario)
     assert radius == pytest.approx(8.0 * 60.0 + 10.0 + 10.0)  # v_a B + w/2 + 10 sigma

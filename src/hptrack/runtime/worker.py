@@ -1,8 +1,11 @@
-"""Where the planner runs: a worker thread (real time), inline with a simulated compute time
-(the simulated runner) or on the log's say-so (replay).
+"""The planner's side of the controller: :class:`PlannerWorker` hands the planner one
+observation at a time, tells when a call is late and delivers its outcome; :class:`Fallback` is
+the cheap decision flown while a call is late. Where the planner runs: a worker thread (real
+time), inline with a simulated compute time (the simulated runner) or on the log's say-so
+(replay).
 
-The controller hands a runner one job at a time (a call of the planner for one tick) and polls
-it for the outcome at each ``setpoint``; a runner never blocks the caller of ``poll``. Only the
+The worker hands a runner one job at a time (a call of the planner for one tick) and polls it
+for the outcome at each ``setpoint``; a runner never blocks the caller of ``poll``. Only the
 runner's thread touches the planner while a job runs.
 """
 
@@ -18,7 +21,8 @@ from typing import Protocol
 
 import numpy as np
 
-from hptrack.interface import CurrentPlan
+from hptrack.baselines.greedy import GreedyPlanner
+from hptrack.interface import CurrentPlan, MissionSpec, Observation, Planner
 
 
 @dataclass(frozen=True)
@@ -181,3 +185,161 @@ def timed(call: Callable[[], np.ndarray]) -> tuple[np.ndarray | None, str | None
         return np.array(result, dtype=float), None, time.perf_counter() - start
     except Exception as err:  # noqa: BLE001 - a planner failure is reported, not raised
         return None, f"{type(err).__name__}: {err}", time.perf_counter() - start
+
+
+def observation(
+    step: int,
+    time_s: float,
+    budget: float,
+    agent: np.ndarray,
+    means: np.ndarray,
+    covariances: np.ndarray,
+    detected: np.ndarray,
+) -> Observation:
+    """A planner's read-only observation of step ``step`` at ``time_s`` s (arrays copied where
+    the caller keeps them)."""
+    arrays = [np.array(agent, dtype=float), means, covariances, detected]
+    for a in arrays:
+        a.flags.writeable = False
+    return Observation(step, time_s, budget - time_s, *arrays)
+
+
+@dataclass(frozen=True)
+class Poll:
+    """What a poll of the worker found.
+
+    Attributes:
+        outcome: the call's outcome if it arrived, else ``None``.
+        late: the call is (or was, when it arrived) past its deadline.
+        newly_late: this poll is the first to find it past its deadline.
+        tick: the call's tick.
+        waited_s: mission time since the call was made, s.
+    """
+
+    outcome: PlanOutcome | None
+    late: bool
+    newly_late: bool
+    tick: int
+    waited_s: float
+
+
+class PlannerWorker:
+    """One planner call at a time with a deadline.
+
+    Args:
+        planner: a fresh planner (``reset`` at its first call, again after a failed first
+            call).
+        mission: the mission's facts.
+        rng: the planner's generator.
+        runner: where the calls run.
+        deadline_s: a call not back within this is late, mission s.
+    """
+
+    def __init__(
+        self,
+        planner: Planner,
+        mission: MissionSpec,
+        rng: np.random.Generator,
+        runner: PlannerRunner,
+        deadline_s: float,
+    ) -> None:
+        self.planner, self.mission, self._rng = planner, mission, rng
+        self.runner, self.deadline_s = runner, deadline_s
+        self.in_flight: tuple[int, float] | None = None
+        """Tick and mission time of the running call."""
+        self.started = False
+        self._late_seen = False
+        self._first = False
+
+    def submit(self, obs: Observation, now_s: float) -> None:
+        """Call the planner on ``obs`` (the first call resets it) at mission time ``now_s``."""
+        first = not self.started
+        self.started = True
+        planner, mission, rng = self.planner, self.mission, self._rng
+
+        def call() -> np.ndarray:
+            if first:
+                planner.reset(mission, obs, rng)
+            return planner.act(obs)
+
+        def job() -> PlanOutcome:
+            waypoint, error, elapsed = timed(call)
+            if waypoint is not None and (
+                waypoint.shape != (2,) or not np.all(np.isfinite(waypoint))
+            ):
+                error, waypoint = f"invalid waypoint {waypoint.tolist()}", None
+            return PlanOutcome(
+                obs.step, waypoint, error, elapsed, None if error else planner.current_plan()
+            )
+
+        self.in_flight = (obs.step, now_s)
+        self._late_seen = False
+        self._first = first
+        self.runner.submit(obs.step, job, now_s)
+
+    def poll(self, t: float) -> Poll | None:
+        """The running call's state at mission time ``t`` s (``None`` if none runs)."""
+        if self.in_flight is None:
+            return None
+        tick, since = self.in_flight
+        outcome = self.runner.poll(t)
+        waited = t - since
+        if outcome is None:
+            newly = not self._late_seen and waited > self.deadline_s
+            self._late_seen = self._late_seen or newly
+            return Poll(None, self._late_seen, newly, tick, waited)
+        self._delivered(outcome)
+        return Poll(outcome, waited > self.deadline_s + 1e-9, False, tick, waited)
+
+    def drain(self) -> PlanOutcome | None:
+        """At the mission's end: the running call's outcome, waiting at most the deadline."""
+        if self.in_flight is None:
+            return None
+        outcome = self.runner.drain(self.deadline_s)
+        if outcome is not None:
+            self._delivered(outcome)
+        return outcome
+
+    def _delivered(self, outcome: PlanOutcome) -> None:
+        self.in_flight = None
+        if outcome.error and self._first:
+            self.started = False  # the next call resets the planner again
+
+    def wait(self, timeout_s: float) -> bool:
+        """Block up to ``timeout_s`` s until the running call's outcome is ready."""
+        return self.in_flight is not None and self.runner.wait(timeout_s)
+
+    def info(self) -> dict:
+        """The planner's own record of the mission (``unavailable`` while a call runs)."""
+        if self.in_flight is not None:
+            return {"unavailable": f"the planner was still running tick {self.in_flight[0]}"}
+        return self.planner.episode_info() if self.started else {}
+
+    def close(self) -> None:
+        self.runner.close()
+
+
+class Fallback:
+    """The decision flown while the planner is late: the ``greedy`` planner on the current
+    beliefs (deterministic, milliseconds), reset at the start of each late spell.
+
+    Args:
+        mission: the mission's facts.
+        seed: the generator handed to ``greedy``'s reset (it draws nothing).
+    """
+
+    def __init__(self, mission: MissionSpec, seed: int) -> None:
+        self.mission, self.seed = mission, seed
+        self.planner = GreedyPlanner()
+        self.active = False
+
+    def decide(self, obs: Observation) -> np.ndarray:
+        """A waypoint ``(2,)`` m for ``obs``; the fallback is active until :meth:`stop`."""
+        if not self.active:
+            self.planner.reset(self.mission, obs, np.random.default_rng(self.seed))
+        self.active = True
+        return np.asarray(self.planner.act(obs), dtype=float)
+
+    def stop(self) -> None:
+        """The planner flies again."""
+        self.active = False

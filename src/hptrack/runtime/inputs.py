@@ -1,0 +1,207 @@
+"""What the controller accepts from outside: every odometry and detection is checked here
+before it changes anything, and a refusal names its reason (``"jump"``, ``"outside the
+area"``...) and one line of figures.
+
+Checks: malformed or non-finite values; an unknown target id; an event before the start or
+after the end; a detection stamped ahead of the clock by more than the tolerance; odometry older
+than the last one or at the same time, or implying a speed the vehicle cannot fly; a detection
+older than the newest by more than the reorder tolerance, or a duplicate; a detection outside
+the mission's area (:func:`mission_area`); a detection's own covariance that is not a
+covariance or has eigenvalues outside :data:`NOISE_RANGE_M2`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from hptrack.models.measurement import check_noise_covariance
+from hptrack.runtime.beliefs import BeliefTimeline
+from hptrack.runtime.clock import STEP_EPS
+from hptrack.scenario.model import Scenario
+
+if TYPE_CHECKING:
+    from hptrack.runtime.controller import ControllerSettings
+
+Problem = tuple[str, str]
+"""A refusal: its reason and one line of figures."""
+
+NOISE_RANGE_M2 = (1e-12, 1e8)
+"""A detection's noise covariance must have its eigenvalues in ``(low, high]`` m^2 (the range
+a scenario's ``R`` may take: beyond it the Kalman update loses its precision)."""
+
+
+def mission_area(scenario: Scenario) -> tuple[np.ndarray, float]:
+    """Centre (the agent's start, m) and radius (m) of the area where a detection can be: the
+    vehicle flies at most ``v_a B`` from its start and measures only within ``w/2`` of itself,
+    with an error under 10 standard deviations of ``R``."""
+    mission = scenario.mission_spec()
+    sigma = math.sqrt(float(np.max(np.linalg.eigvalsh(mission.measurement_noise))))
+    radius = mission.agent_speed * mission.budget + mission.sensor_radius + 10.0 * sigma
+    return np.asarray(scenario.agent.position, dtype=float), radius
+
+
+def vector(value: Any, shape: tuple[int, ...]) -> np.ndarray | None:
+    """``value`` as a float array of ``shape``, or ``None``."""
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return array if array.shape == shape else None
+
+
+def raw(value: Any) -> Any:
+    """A raw input as log data (an array as a list, anything odd as its repr)."""
+    if value is None or isinstance(value, str | bool | int | float):
+        return value
+    try:
+        return np.array(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        return repr(value)[:200]
+
+
+@dataclass(frozen=True)
+class DetectionCheck:
+    """A checked detection: the problem (``None`` if accepted), the target's index (``-1`` if
+    unknown) and the noise covariance to filter it with, m^2."""
+
+    problem: Problem | None
+    index: int
+    noise: np.ndarray
+
+
+class InputChecks:
+    """The checks of one mission (module docstring).
+
+    Args:
+        scenario: the mission (speed, ``R``, targets, area).
+        settings: the controller's tolerances.
+    """
+
+    def __init__(self, scenario: Scenario, settings: ControllerSettings) -> None:
+        self.mission = scenario.mission_spec()
+        self.settings = settings
+        self.area = mission_area(scenario)
+        self._ids = {tid: i for i, tid in enumerate(self.mission.target_ids)}
+
+    def time(
+        self, t: float, ahead_s: float, clock_source: bool, ended: str | None
+    ) -> Problem | None:
+        """Refuse a non-finite time, one outside the mission (``ended``: why it ended), or
+        (for an event that is not a source of the clock) one ``ahead_s`` s ahead of it by more
+        than the tolerance."""
+        if not math.isfinite(t):
+            return "non-finite", f"time {t}"
+        if ended is not None:
+            return "after the end", f"the mission ended ({ended})"
+        if t < -STEP_EPS:
+            return "before the start", f"time {t:.3f} s is before the mission's start"
+        if clock_source:
+            return None
+        if ahead_s > self.settings.future_tolerance_s:
+            return "in the future", (
+                f"stamped {ahead_s:.3f} s ahead of the controller's clock "
+                f"(tolerance {self.settings.future_tolerance_s:g} s)"
+            )
+        return None
+
+    def odometry(
+        self,
+        t: float,
+        p: np.ndarray | None,
+        last: tuple[float, np.ndarray] | None,
+        ended: str | None,
+    ) -> Problem | None:
+        """The problem with odometry ``p`` (2,) m at ``t`` s after the ``last`` accepted one."""
+        if p is None:
+            return "malformed", "position is not two numbers"
+        if not np.all(np.isfinite(p)):
+            return "non-finite", f"position {p.tolist()}"
+        problem = self.time(t, 0.0, clock_source=True, ended=ended)
+        if problem is not None or last is None:
+            return problem
+        last_t, last_p = last
+        if t < last_t:
+            return "out of order", f"{last_t - t:.3f} s older than the last odometry"
+        if t == last_t:
+            return "duplicate", f"a second odometry at {t:.3f} s"
+        distance = float(np.hypot(*(p - last_p)))
+        speed = self.settings.max_speed_factor * self.mission.agent_speed
+        if distance > speed * (t - last_t) + self.settings.jump_slack_m:
+            return "jump", (
+                f"{distance:.1f} m in {t - last_t:.3f} s (more than {speed:g} m/s "
+                f"+ {self.settings.jump_slack_m:g} m)"
+            )
+        return None
+
+    def detection(
+        self,
+        t: float,
+        target_id: Any,
+        z: np.ndarray | None,
+        covariance: Any,
+        ahead_s: float,
+        ended: str | None,
+        beliefs: BeliefTimeline,
+    ) -> DetectionCheck:
+        """The check of a measurement ``z`` (2,) m of ``target_id`` at ``t`` s (``ahead_s``
+        ahead of the clock) with its own ``covariance`` or ``None``, against the ``beliefs``
+        so far."""
+        noise = self.mission.measurement_noise
+        if not isinstance(target_id, str) or target_id not in self._ids:
+            return DetectionCheck(
+                (
+                    "unknown target",
+                    f"target id {raw(target_id)!r} is not in the mission "
+                    f"({', '.join(self.mission.target_ids)})",
+                ),
+                -1,
+                noise,
+            )
+        if z is None:
+            return DetectionCheck(("malformed", "position is not two numbers"), -1, noise)
+        if not np.all(np.isfinite(z)):
+            return DetectionCheck(("non-finite", f"position {z.tolist()}"), -1, noise)
+        centre, radius = self.area
+        distance = float(np.hypot(*(z - centre)))
+        if not distance <= radius:
+            detail = f"{distance:.3g} m from the start, beyond the mission's {radius:.0f} m"
+            return DetectionCheck(("outside the area", detail), -1, noise)
+        if covariance is not None:
+            problem, noise = self._noise(covariance, noise)
+            if problem is not None:
+                return DetectionCheck(problem, -1, noise)
+        problem = self.time(t, ahead_s, clock_source=False, ended=ended)
+        if problem is not None:
+            return DetectionCheck(problem, -1, noise)
+        index = self._ids[target_id]
+        behind = beliefs.newest_s - t
+        if behind > self.settings.reorder_tolerance_s:
+            detail = (
+                f"{behind:.3f} s older than the newest detection "
+                f"(tolerance {self.settings.reorder_tolerance_s:g} s)"
+            )
+            return DetectionCheck(("out of order", detail), index, noise)
+        if beliefs.is_duplicate(index, t, z):
+            detail = f"the same measurement of {target_id} at {t:.3f} s"
+            return DetectionCheck(("duplicate", detail), index, noise)
+        return DetectionCheck(None, index, noise)
+
+    @staticmethod
+    def _noise(covariance: Any, default: np.ndarray) -> tuple[Problem | None, np.ndarray]:
+        r = vector(covariance, (2, 2))
+        if r is None:
+            return ("malformed", "covariance is not a 2x2 matrix"), default
+        try:
+            noise = check_noise_covariance(r)
+        except ValueError as err:
+            return ("bad covariance", str(err)), default
+        low, high = NOISE_RANGE_M2
+        eig = np.linalg.eigvalsh(noise)
+        if not (eig[0] > low and eig[1] <= high):
+            detail = f"eigenvalues {eig[0]:.3g}, {eig[1]:.3g} m^2 outside ({low:g}, {high:g}]"
+            return ("bad covariance", detail), default
+        return None, noise
