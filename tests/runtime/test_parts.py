@@ -249,3 +249,17 @@ def test_the_history_holds_the_agent_between_ticks_and_ends_with_the_final_belie
     expected = [[True, False], [False, False], [False, False], [False, True]]
     assert record.detections.tolist() == expected
     assert np.isnan(record.true_states).all() and record.info == {"x": 1}
+
+
+def test_a_leg_moves_its_reference_at_its_speed_and_stops_at_its_end():
+    from hptrack.runtime.legs import Leg
+
+    leg = Leg(np.array([0.0, 0.0]), 2.0, np.array([3.0, 4.0]), 2.0)
+    reference, velocity = leg.at(1.0)  # before its start: at the start, already moving
+    np.testing.assert_array_equal(reference, [0.0, 0.0])
+    np.testing.assert_allclose(velocity, [1.2, 1.6])
+    reference, velocity = leg.at(3.0)
+    np.testing.assert_allclose(reference, [1.2, 1.6])
+    reference, velocity = leg.at(4.5)  # 5 m at 2 m/s: there after 2.5 s
+    np.testing.assert_array_equal(reference, [3.0, 4.0])
+    np.testing.assert_array_equal(velocity, [0.0, 0.0])

@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import threading
 from collections import Counter
-from dataclasses import dataclass
 from typing import Annotated, Any
 
 import numpy as np
@@ -61,6 +60,7 @@ from hptrack.runtime.beliefs import BeliefTimeline
 from hptrack.runtime.clock import STEP_EPS, MissionClock
 from hptrack.runtime.inputs import InputChecks, raw, vector
 from hptrack.runtime.journal import Journal
+from hptrack.runtime.legs import Leg, Setpoint
 from hptrack.runtime.log import LOG_VERSION, MissionLog, log_float
 from hptrack.runtime.record import MissionHistory
 from hptrack.runtime.worker import (
@@ -99,51 +99,6 @@ class ControllerSettings(BaseModel):
     planner_deadline_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 1.0
     max_speed_factor: Annotated[float, Field(ge=1.0, le=100.0)] = 2.0
     jump_slack_m: Annotated[float, Field(ge=0.0, le=1e4)] = 3.0
-
-
-@dataclass(frozen=True)
-class Setpoint:
-    """Where the vehicle should be now.
-
-    Attributes:
-        position: ``(2,)`` m (``x`` east, ``y`` north): the decision's waypoint, or the hold.
-        hold: the position is a hold, not the planner's waypoint.
-        reason: ``"tracking"``, ``"no odometry yet"``, ``"waiting for the first plan"``,
-            ``"odometry stale"``, ``"planner error"`` or ``"mission over"``.
-        detail: one line with the figures behind ``reason``.
-        reference: ``(2,)`` m, where the vehicle should be now on its way to ``position``: it
-            leaves the odometry of the moment the decision arrived at the planned speed.
-        velocity: ``(2,)`` m/s, the planned velocity at ``reference`` (0 once it reaches
-            ``position``, and in a hold): the feed-forward of a position controller.
-    """
-
-    position: np.ndarray
-    hold: bool
-    reason: str
-    detail: str
-    reference: np.ndarray
-    velocity: np.ndarray
-
-
-@dataclass(frozen=True)
-class Leg:
-    """The straight flight to a decision's waypoint: from ``start`` (m) at ``start_s`` (mission
-    s) at ``speed`` m/s towards ``end`` (m)."""
-
-    start: np.ndarray
-    start_s: float
-    end: np.ndarray
-    speed: float
-
-    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Reference position (m) and velocity (m/s) at mission time ``t`` s."""
-        step = self.end - self.start
-        length = float(np.hypot(*step))
-        along = self.speed * max(t - self.start_s, 0.0)
-        if length <= 0.0 or along >= length:
-            return self.end.copy(), np.zeros(2)
-        unit = step / length
-        return self.start + along * unit, self.speed * unit
 
 
 def plan_json(plan: CurrentPlan | None, target_ids: tuple[str, ...]) -> dict[str, Any] | None:

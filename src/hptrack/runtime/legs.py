@@ -1,0 +1,55 @@
+"""What the controller tells the vehicle: each decision is flown as a straight :class:`Leg` from
+the odometry of the moment it arrives, at the planned speed, and every ``setpoint`` call returns
+a :class:`Setpoint` with the leg's reference point for now and its velocity (the feed-forward of
+the vehicle's position controller), or a hold."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """Where the vehicle should be now.
+
+    Attributes:
+        position: ``(2,)`` m (``x`` east, ``y`` north): the decision's waypoint, or the hold.
+        hold: the position is a hold, not the planner's waypoint.
+        reason: ``"tracking"``, ``"no odometry yet"``, ``"waiting for the first plan"``,
+            ``"odometry stale"``, ``"planner error"`` or ``"mission over"``.
+        detail: one line with the figures behind ``reason``.
+        reference: ``(2,)`` m, where the vehicle should be now on its way to ``position``: it
+            leaves the odometry of the moment the decision arrived at the planned speed.
+        velocity: ``(2,)`` m/s, the planned velocity at ``reference`` (0 once it reaches
+            ``position``, and in a hold): the feed-forward of a position controller.
+    """
+
+    position: np.ndarray
+    hold: bool
+    reason: str
+    detail: str
+    reference: np.ndarray
+    velocity: np.ndarray
+
+
+@dataclass(frozen=True)
+class Leg:
+    """The straight flight to a decision's waypoint: from ``start`` (m) at ``start_s`` (mission
+    s) at ``speed`` m/s towards ``end`` (m)."""
+
+    start: np.ndarray
+    start_s: float
+    end: np.ndarray
+    speed: float
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Reference position (m) and velocity (m/s) at mission time ``t`` s."""
+        step = self.end - self.start
+        length = float(np.hypot(*step))
+        along = self.speed * max(t - self.start_s, 0.0)
+        if length <= 0.0 or along >= length:
+            return self.end.copy(), np.zeros(2)
+        unit = step / length
+        return self.start + along * unit, self.speed * unit
