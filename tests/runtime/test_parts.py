@@ -104,10 +104,14 @@ def test_the_mission_area_is_what_the_vehicle_can_reach_plus_its_footprint(fligh
     assert radius == 8.0 * 60.0 + 10.0 + 10.0 * 1.0
 
 
-def test_numbers_that_overflow_are_malformed_not_a_crash():
+def test_numbers_only_and_none_that_overflow():
     assert vector([10**400, 1.0], (2,)) is None
     assert isinstance(raw([10**400]), str)
     assert vector([[1, 2], [3, 4]], (2,)) is None
+    assert vector(["30", 10], (2,)) is None and vector([True, 10], (2,)) is None
+    assert vector(np.array(["1", "2"]), (2,)) is None
+    assert vector((1, np.float32(2.5)), (2,)).tolist() == [1.0, 2.5]
+    assert vector([[1, 0], [0, 1]], (2, 2)).tolist() == [[1.0, 0.0], [0.0, 1.0]]
 
 
 def test_the_journal_numbers_a_calls_records_and_counts_inputs():

@@ -44,8 +44,22 @@ def mission_area(scenario: Scenario) -> tuple[np.ndarray, float]:
     return np.asarray(scenario.agent.position, dtype=float), radius
 
 
+def _numbers_only(value: Any) -> bool:
+    """Whether ``value`` is a number or nested lists of numbers (no text, no booleans)."""
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind in "iuf"
+    if isinstance(value, list | tuple):
+        return all(_numbers_only(item) for item in value)
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(
+        value, bool | np.bool_
+    )
+
+
 def vector(value: Any, shape: tuple[int, ...]) -> np.ndarray | None:
-    """``value`` as a float array of ``shape``, or ``None``."""
+    """``value`` as a float array of ``shape``, or ``None`` (numbers only: text and booleans
+    are not coerced; integers too large for a float are refused)."""
+    if not _numbers_only(value):
+        return None
     try:
         array = np.array(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
