@@ -197,23 +197,13 @@ def _write_report(
     from rich.markdown import Markdown
 
     from hptrack.experiments.benchmark import planner_for, scenario_for
-    from hptrack.experiments.report import markdown_tables, write_csv
+    from hptrack.experiments.report import benchmark_report, write_csv
     from hptrack.experiments.store import EpisodeKey
     from hptrack.sim.episode import run_episode
     from hptrack.viz.benchmark import plot_trajectories, plot_uncertainty_boxes
 
     out.mkdir(parents=True, exist_ok=True)
-    paper = (
-        ("ARVI (paper)", "A* with heuristic (paper)", "hierarchical, homogeneous (paper)")
-        if config.homogeneous
-        else ("ADFQ (paper)", "hierarchical, heterogeneous (paper)")
-    )
-    efforts = "; ".join(f"{p}: {config.settings[p].effort_label()}" for p in config.planners)
-    text = (
-        f"Setting: {config.setting}; planning effort: {efforts}; "
-        f"{config.scenarios} scenarios per n from seed {config.first_seed}.\n\n"
-        + markdown_tables(rows, paper)
-    )
+    text = benchmark_report(config, rows)
     (out / "table.md").write_text(text)
     write_csv(rows, out / "episodes.csv")
     console.print(Markdown(text))
@@ -221,7 +211,7 @@ def _write_report(
     if counts:
         fig = Figure(figsize=(4.0 * len(counts), 4.0))
         for i, n in enumerate(counts):
-            plot_uncertainty_boxes(fig.add_subplot(1, len(counts), i + 1), rows, n)
+            plot_uncertainty_boxes(fig.add_subplot(1, len(counts), i + 1), rows, n, config.planners)
         fig.tight_layout()
         fig.savefig(out / "uncertainty_boxes.png", dpi=120)
     names = (

@@ -190,13 +190,16 @@ def run_keys(
     return finished
 
 
-def summarise(rows: Iterable[EpisodeRow]) -> dict:
-    """``{planner: {n: {"mean", "std", "episodes", "never_observed"}}}`` of ``U``."""
-    groups: dict = {}
+def summarise(rows: Iterable[EpisodeRow], order: Iterable[str] = ()) -> dict:
+    """``{planner: {n: {"mean", "std", "episodes", "never_observed"}}}`` of ``U``; planners in
+    ``order`` first (in that order), then the others as they first appear in ``rows``."""
+    groups: dict = {planner: {} for planner in order}
     for row in rows:
         groups.setdefault(row.key.planner, {}).setdefault(row.key.n_targets, []).append(row)
     out: dict = {}
     for planner, by_n in groups.items():
+        if not by_n:
+            continue
         out[planner] = {}
         for n, items in sorted(by_n.items()):
             u = np.array([r.uncertainty for r in items])
@@ -210,16 +213,17 @@ def summarise(rows: Iterable[EpisodeRow]) -> dict:
     return out
 
 
-def reductions(summary: dict) -> dict:
-    """Reduction of each planner's mean ``U`` against each other planner's, percent:
+def reductions(summary: dict, planner: str) -> dict:
+    """Reduction of ``planner``'s mean ``U`` against each other planner's, percent (the paper's
+    "our method reduces U by ... compared to ARVI"):
     ``{(planner, baseline): {n: 100 (U_baseline - U_planner) / U_baseline}}``."""
+    mine = summary[planner]
     out = {}
-    for a, by_a in summary.items():
-        for b, by_b in summary.items():
-            if a == b:
-                continue
-            shared = sorted(set(by_a) & set(by_b))
-            out[(a, b)] = {
-                n: 100.0 * (by_b[n]["mean"] - by_a[n]["mean"]) / by_b[n]["mean"] for n in shared
-            }
+    for baseline, theirs in summary.items():
+        if baseline == planner:
+            continue
+        shared = sorted(set(mine) & set(theirs))
+        out[(planner, baseline)] = {
+            n: 100.0 * (theirs[n]["mean"] - mine[n]["mean"]) / theirs[n]["mean"] for n in shared
+        }
     return out
