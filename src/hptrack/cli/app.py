@@ -21,7 +21,6 @@ from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
-    Progress,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
@@ -36,6 +35,7 @@ from hptrack.cli.common import (
     console,
     error_console,
     planner_settings_for,
+    progress_display,
     write_json,
 )
 from hptrack.interface import InputError
@@ -164,18 +164,19 @@ def simulate(
     if drawn:
         console.print(f"seed {seed} (drawn; pass --seed {seed} to repeat this mission)")
     agent = make_planner(planner, settings)
-    with Progress(
-        TextColumn("[bold]{task.description}"),
+    with progress_display(
+        f"{planner} mission",
+        "steps",
+        TextColumn(f"[bold]{escape(planner)} mission"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("steps"),
         TimeElapsedColumn(),
         TextColumn("left"),
         TimeRemainingColumn(),
-        console=console,
         transient=True,
     ) as progress:
-        task = progress.add_task(escape(f"{planner} mission"), total=scenario.n_steps)
+        task = progress.add_task("", total=scenario.n_steps)
         record = run_episode(
             scenario,
             agent,

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
 from hptrack.cli.common import (
     SETTING_HELP,
@@ -18,6 +18,7 @@ from hptrack.cli.common import (
     check_seed,
     console,
     planner_settings_for,
+    progress_display,
     write_json,
 )
 from hptrack.interface import InputError
@@ -157,13 +158,14 @@ def benchmark(
                 f"Dask scheduler {escape(pool.address)}: {pool.threads} worker "
                 f"threads, {in_flight} episodes in flight"
             )
-        with Progress(
+        with progress_display(
+            "benchmark",
+            "episodes",
             TextColumn("[bold]benchmark"),
             BarColumn(),
             MofNCompleteColumn(),
             TimeElapsedColumn(),
             TextColumn("{task.description}"),
-            console=console,
         ) as progress:
             task = progress.add_task("", total=None)
 
