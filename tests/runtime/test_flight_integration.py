@@ -157,14 +157,12 @@ def _straight_leg_speeds(records, min_run_s=3.0, heading_tolerance_deg=3.0):
 def test_a_dry_run_plans_before_offboard_flies_the_planned_speed_ends_in_hold_and_replays(
     long_dry_run, tmp_path
 ):
-    start = time.monotonic()
     fly = subprocess.run(
         [*long_dry_run["fly"], "--log", str(long_dry_run["log"])],
         capture_output=True,
         text=True,
         timeout=120,
     )
-    elapsed = time.monotonic() - start
     assert fly.returncode == 0, fly.stdout + fly.stderr
     assert "ended by budget" in fly.stdout
     assert "first plan ready before offboard" in fly.stdout
@@ -230,7 +228,6 @@ def test_a_dry_run_plans_before_offboard_flies_the_planned_speed_ends_in_hold_an
     assert summary["mismatches"] == 0, summary["first_mismatches"]
     assert summary["U"] == end["U"] and summary["ended_by"] == "budget"
     assert figure.read_bytes()[:4] == b"\x89PNG"
-    assert elapsed < LONG_BUDGET_S + 40.0
 
 
 def _wait_for_offboard(path, timeout_s=90.0):
