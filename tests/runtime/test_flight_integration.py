@@ -161,7 +161,7 @@ def test_a_dry_run_plans_before_offboard_flies_the_planned_speed_ends_in_hold_an
         [*long_dry_run["fly"], "--log", str(long_dry_run["log"])],
         capture_output=True,
         text=True,
-        timeout=120,
+        timeout=240,
     )
     assert fly.returncode == 0, fly.stdout + fly.stderr
     assert "ended by budget" in fly.stdout
