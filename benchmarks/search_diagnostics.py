@@ -139,14 +139,16 @@ def _first_problem(n: int):
 
 
 def rates(targets: list[int], seconds: float) -> None:
-    from hptrack.planning import search
-    from hptrack.planning.tree import BACKUPS
+    from hptrack.planning import SearchOptions, search
+    from hptrack.planning.backups import BACKUPS, backup_of
 
     for n in targets:
         problem = _first_problem(n)
         search(problem, iterations=64)  # load the kernels
         for backup in BACKUPS:
-            result = search(problem, time_limit=seconds, seed=0, backup=backup)
+            result = search(
+                problem, SearchOptions(backup=backup_of(backup)), time_limit=seconds, seed=0
+            )
             print(
                 f"n={n} {backup}: {result.simulations / result.elapsed:,.0f} simulations/s, "
                 f"{result.state_nodes:,} state nodes"

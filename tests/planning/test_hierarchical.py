@@ -7,7 +7,7 @@ from typer.testing import CliRunner
 from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.cli.app import app
 from hptrack.interface import InputError
-from hptrack.planning import hierarchical
+from hptrack.planning import hierarchical, subtask_search
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.scenario import random_scenario
 from hptrack.sim.episode import run_episode
@@ -111,15 +111,15 @@ def test_timed_runs_warm_the_kernels_before_the_first_search(monkeypatch):
     """The first timed search of a process must not pay the kernels' loading: reset runs a
     tiny search first (once per process)."""
     calls = []
-    monkeypatch.setattr(hierarchical, "_warmed", set())
-    real = hierarchical.search
-    monkeypatch.setattr(
-        hierarchical, "search", lambda *a, **k: calls.append(k.get("iterations")) or real(*a, **k)
-    )
+    monkeypatch.setattr(subtask_search, "_warmed", set())
+    real = subtask_search.search
+    spy = lambda *a, **k: calls.append(k.get("iterations")) or real(*a, **k)  # noqa: E731
+    monkeypatch.setattr(subtask_search, "search", spy)
+    monkeypatch.setattr(hierarchical, "search", spy)
     scenario = random_scenario(2, seed=0).model_copy(update={"budget": 20.0})
     run_episode(scenario, mcts(time_limit=0.05))
     assert calls[:2] == [64, 64]  # the warm-up's two searches (first plan, re-plan)
-    assert hierarchical._warmed
+    assert subtask_search._warmed
     calls.clear()
     run_episode(scenario, mcts(time_limit=0.05))
     assert 64 not in calls

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from hptrack.planning import PlanningProblem, search
-from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import SearchOptions, run_simulations
 from hptrack.planning.subtask_mdp import (
     SubtaskEnv,
@@ -167,11 +166,10 @@ def test_tree_is_independent_of_chunking_and_initial_capacity():
                     root,
                     state,
                     new_work(),
-                    UniformRandom(),
+                    SearchOptions(),
                     6,
                     problem.n_steps + 2,
                     -1,
-                    SearchOptions(0.5, 0, 1.0, False, False),
                     n,
                 )
                 if n:

@@ -13,7 +13,7 @@
    may also follow it for the dwell's length only (action index ``n``, also in the log's plans),
    re-planning with the dwell fixed as it starts.
 
-Choices the paper leaves open (recorded in the README): a missed target that the agent measures
+Choices the paper leaves open (``docs/model.md``): a missed target that the agent measures
 by chance later returns to the action list; a planned next action that the remaining budget can
 no longer carry out triggers a fresh plan from the current state; with no action left the agent
 follows the last found target, or hovers.
@@ -31,10 +31,12 @@ from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.motion import predicted_positions
+from hptrack.planning.backups import backup_of
 from hptrack.planning.rollout import UniformRandom
-from hptrack.planning.search import DEFAULT_EXPLORATION, SearchResult, search
+from hptrack.planning.search import DEFAULT_EXPLORATION, SearchOptions, SearchResult
 from hptrack.planning.subtask_mdp import PlanningProblem, dwell_steps, steps_left
 from hptrack.planning.subtask_rollout import MostUncertain, Nearest, UniformNoFollow
+from hptrack.planning.subtask_search import search, warm_up
 from hptrack.settings import PlannerSettings
 
 DEFAULT_ITERATIONS = 100_000
@@ -168,35 +170,13 @@ class MctsSettings(PlannerSettings):
             return Nearest(self.rollout_epsilon)
         return UniformRandom()
 
-
-_warmed: set[tuple[type, str]] = set()
-"""(rollout policy class, estimator) pairs whose kernels this process has loaded."""
-
-
-def warm_up(policy: tuple = UniformRandom(), estimator: str = "paper") -> None:
-    """Load (or compile) the search's kernels for ``policy``'s class and ``estimator`` once per
-    process with a tiny search, so that the first timed search of a process gets as many
-    simulations as the later ones."""
-    if (type(policy), estimator) in _warmed:
-        return
-    cov = np.diag([1000.0, 1000.0, 0.4, 0.4])
-    for fixed in (None, 0):
-        problem = PlanningProblem(
-            np.zeros(2),
-            np.array([[300.0, 0, 1, 0], [-300.0, 0, 0, 1]]),
-            np.stack([cov, cov]),
-            np.full(2, 3e-4),
-            60.0,
-            0.5,
-            0.5,
-            30.0,
-            100.0,
-            10.0 * np.eye(2),
-            current_action=fixed,
-            estimator=estimator,
-        )
-        search(problem, iterations=64, seed=0, policy=policy)
-    _warmed.add((type(policy), estimator))
+    def search_options(self) -> SearchOptions:
+        """The search's options record: each of its fields is the option of the same name,
+        the backup and the rollout policy as the instances the kernels take."""
+        values = {name: getattr(self, name) for name in SearchOptions._fields}
+        values["backup"] = backup_of(self.backup, self.max_weight)
+        values["rollout"] = self.rollout_policy()
+        return SearchOptions(**values)
 
 
 class HierarchicalPlanner:
@@ -209,8 +189,7 @@ class HierarchicalPlanner:
         self.settings = settings or MctsSettings()
         self.iterations = self.settings.iterations
         self.time_limit = self.settings.time_limit
-        self.exploration = self.settings.exploration
-        self.policy = self.settings.rollout_policy()
+        self.options = self.settings.search_options()
 
     # --- planning -------------------------------------------------------------------------
     def _search(
@@ -230,16 +209,11 @@ class HierarchicalPlanner:
         )
         result = search(
             problem,
+            self.options,
             iterations=self.iterations,
             time_limit=self.time_limit,
             seed=self._rng,
-            exploration=self.exploration,
-            policy=self.policy,
-            backup=self.settings.backup,
             threads=self.settings.threads,
-            max_weight=self.settings.max_weight,
-            weighted_root=self.settings.root_split == "weighted",
-            common_rollouts=self.settings.common_rollouts,
         )
         self._searches.append(
             {
@@ -328,7 +302,7 @@ class HierarchicalPlanner:
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
     ) -> None:
         if self.time_limit is not None:
-            warm_up(self.policy, self.settings.estimator)
+            warm_up(self.options, self.settings.estimator)
         self._mission = mission
         self._rng = rng
         self._available = np.ones(mission.n_targets, dtype=bool)
