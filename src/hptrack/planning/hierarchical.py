@@ -78,7 +78,6 @@ class MctsSettings(PlannerSettings):
         time_limit: wall time per tree search, s (the paper uses 30 s). With both, whichever
             comes first.
         exploration: UCB1 constant ``c`` on values normalised to the observed return range.
-        root_exploration: UCB1 constant at the root only (default ``exploration``).
         preset: ``"paper"`` (the paper's search, Algorithm 1) or ``"improved"``; it sets the
             options below that are not given (:data:`PRESETS`).
         backup: ``"sampled"`` (the paper's running mean), ``"expected"``, ``"max"`` or
@@ -108,7 +107,6 @@ class MctsSettings(PlannerSettings):
     iterations: Annotated[int | None, Field(ge=1)] = None
     time_limit: Annotated[float | None, Field(gt=0.0)] = None
     exploration: Annotated[float, Field(gt=0.0)] = DEFAULT_EXPLORATION
-    root_exploration: Annotated[float | None, Field(gt=0.0)] = None
     preset: Literal["paper", "improved"] = DEFAULT_PRESET
     backup: Literal["sampled", "expected", "max", "robust"] | None = None
     max_weight: Annotated[float | None, Field(ge=0.0, le=1.0)] = None

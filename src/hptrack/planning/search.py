@@ -126,7 +126,6 @@ class SearchOptions(NamedTuple):
             are less noisy. Otherwise every draw comes from the tree's single stream (the
             paper's).
         rollout: a registered rollout policy instance (:mod:`hptrack.planning.rollout`).
-        root_exploration: UCB1 constant at the root only (``None``: ``exploration``).
     """
 
     exploration: float = DEFAULT_EXPLORATION
@@ -134,7 +133,6 @@ class SearchOptions(NamedTuple):
     root_split: str = "even"
     common_rollouts: bool = False
     rollout: tuple = UniformRandom()
-    root_exploration: float | None = None
 
 
 PAPER_SEARCH = SearchOptions()
@@ -224,7 +222,6 @@ def run_simulations(
     ``p``, so both are needed, and the draw no longer weights them).
     """
     exploration, policy = options.exploration, options.rollout
-    root_c = exploration if options.root_exploration is None else options.root_exploration
     paired = pairs_outcomes(options.backup)
     weighted = options.root_split == "weighted"
     candidates = np.empty(n_actions, dtype=np.int64)
@@ -269,7 +266,7 @@ def run_simulations(
                 break
             if first == LEAF:
                 _open_slots(tree, env, s, state, fixed, n_actions)
-            x = select(tree, s, root_c if s == 0 else exploration)
+            x = select(tree, s, exploration)
             if tree.a_p[x] < 0.0:
                 applied = _catch_up(
                     tree, env, path_action, path_found, applied, depth, root, state, work
