@@ -58,16 +58,11 @@ def first_plan(n: int, seed: int):
     scenario = random_scenario(n, seed=seed, homogeneous=True)
     spec = scenario.mission_spec()
     return PlanningProblem(
+        spec.record,
         scenario.agent.position,
         scenario.means(),
         scenario.covariances(),
-        scenario.process_noise(),
         scenario.budget,
-        spec.time_step,
-        spec.c_per_step,
-        spec.agent_speed,
-        spec.sensor_diameter,
-        spec.measurement_noise,
     )
 
 

@@ -36,16 +36,7 @@ def scaling(seconds: float = 3.0) -> None:
     sc = random_scenario(10, seed=0, homogeneous=True)
     spec = sc.mission_spec()
     problem = PlanningProblem(
-        sc.agent.position,
-        sc.means(),
-        sc.covariances(),
-        sc.process_noise(),
-        sc.budget,
-        spec.time_step,
-        spec.c_per_step,
-        spec.agent_speed,
-        spec.sensor_diameter,
-        spec.measurement_noise,
+        spec.record, sc.agent.position, sc.means(), sc.covariances(), sc.budget
     )
     options = SearchOptions(backup=Max())
     search(problem, options, iterations=64, threads=2)  # load the kernels

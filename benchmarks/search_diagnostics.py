@@ -124,18 +124,7 @@ def _first_problem(n: int):
 
     sc = random_scenario(n, seed=0, homogeneous=True)
     spec = sc.mission_spec()
-    return PlanningProblem(
-        sc.agent.position,
-        sc.means(),
-        sc.covariances(),
-        sc.process_noise(),
-        sc.budget,
-        spec.time_step,
-        spec.c_per_step,
-        spec.agent_speed,
-        spec.sensor_diameter,
-        spec.measurement_noise,
-    )
+    return PlanningProblem(spec.record, sc.agent.position, sc.means(), sc.covariances(), sc.budget)
 
 
 def rates(targets: list[int], seconds: float) -> None:
@@ -195,7 +184,7 @@ def rollouts(targets: list[int], count: int) -> None:
             ("uniform_no_follow", UniformNoFollow()),
             ("nearest, epsilon 0.6", Nearest(0.6)),
         ):
-            env = mdp.SubtaskEnv(problem.model(), mdp.new_memo(n, problem.n_steps))
+            env = problem.env()
             root = problem.root_state()
             state = tuple(a.copy() for a in root)
             args = (np.array([3], dtype=np.uint64), np.empty(n, dtype=np.int64), mdp.new_work())

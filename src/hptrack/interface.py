@@ -8,18 +8,20 @@ its own position, the target beliefs and which targets it just measured) and rec
 waypoint: the position the agent should fly towards, at most ``agent_speed * time_step`` away.
 
 :class:`MissionSpec` is the one vocabulary for the mission constants (time step, budget, speed,
-sensor diameter, measurement noise, process noise); the compiled kernels receive the same names.
+sensor diameter, measurement noise, process noise); the compiled kernels receive them as one
+record, :attr:`MissionSpec.record` (:class:`hptrack.models.mission.Mission`), built and
+validated once.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from hptrack.models.measurement import PositionMeasurementModel, check_noise_covariance
+from hptrack.models.measurement import PositionMeasurementModel
+from hptrack.models.mission import Mission, mission_record
 from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
 
 DEFAULT_MEASUREMENT_NOISE = 10.0
@@ -59,28 +61,31 @@ class MissionSpec:
     process_noise_form: ProcessNoiseForm = "continuous"
     process_noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     target_ids: tuple[str, ...] = ()
+    record: Mission = field(init=False, repr=False)
+    """The mission's constants as the compiled kernels take them (built and validated once,
+    with the spec)."""
 
     def __post_init__(self) -> None:
-        for name in ("time_step", "budget", "agent_speed", "sensor_diameter"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
         if self.process_noise_form not in ("continuous", "paper_text"):
             raise ValueError(f"unknown process_noise_form {self.process_noise_form!r}")
-        noise = check_noise_covariance(self.measurement_noise)
-        q = np.array(self.process_noise, dtype=float).reshape(-1)
-        if not np.all(np.isfinite(q) & (q >= 0.0)):
-            raise ValueError(f"process_noise must be finite and >= 0, got {q.tolist()}")
-        noise.flags.writeable = False
-        q.flags.writeable = False
-        object.__setattr__(self, "measurement_noise", noise)
-        object.__setattr__(self, "process_noise", q)
+        record = mission_record(
+            self.time_step,
+            self.budget,
+            self.agent_speed,
+            self.sensor_diameter,
+            self.measurement_noise,
+            self.process_noise,
+            self.process_noise_form == "continuous",
+        )
+        object.__setattr__(self, "measurement_noise", record.measurement_noise)
+        object.__setattr__(self, "process_noise", record.process_noise)
         object.__setattr__(self, "target_ids", tuple(self.target_ids))
+        object.__setattr__(self, "record", record)
 
     @property
     def n_steps(self) -> int:
         """Number of simulation steps in the budget (``B / tau``)."""
-        return int(np.floor(self.budget / self.time_step + 1e-9))
+        return self.record.n_steps
 
     @property
     def step_length(self) -> float:
@@ -100,11 +105,6 @@ class MissionSpec:
     def motion(self) -> ConstantVelocityModel:
         """The target motion model (``F``, ``Q`` form)."""
         return ConstantVelocityModel(self.time_step, self.process_noise_form)
-
-    @property
-    def c_per_step(self) -> float:
-        """Lower-right block of the per-step ``Q`` over ``q`` (``tau`` s or 1)."""
-        return self.motion.c_per_step
 
     @property
     def sensor(self) -> PositionMeasurementModel:

@@ -2,7 +2,8 @@
 
 Each planner declares its settings as one :class:`PlannerSettings` subclass (pydantic: types,
 ranges, defaults, one docstring line per field with its unit). Options from the command line
-(``-o KEY=VALUE``, values read as YAML scalars) or from Python are validated into it, and a bad
+(``-o KEY=VALUE``, values read as integers, numbers, ``true``/``false``, ``none`` or text,
+:func:`hptrack.cli.common.parse_value`) or from Python are validated into it, and a bad
 value is refused with one line that names the planner, the option and the value::
 
     planner 'mcts': option exploration must be > 0, got -1

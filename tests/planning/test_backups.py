@@ -12,7 +12,7 @@ from hptrack.models.motion import position_covariance_after
 from hptrack.planning import SearchOptions, search, search_mdp
 from hptrack.planning.backups import Expected, Max, Robust, back_max, backup_of
 from hptrack.planning.search import _root_outcome
-from hptrack.planning.subtask_mdp import SubtaskEnv, intercept_of, is_available, new_memo
+from hptrack.planning.subtask_mdp import intercept_of, is_available
 from hptrack.planning.subtask_rollout import (
     MostUncertain,
     Nearest,
@@ -81,16 +81,20 @@ def _greedy_cases():
     their available actions and the greedy rules' scores computed here: the position log det
     on arrival at the belief mean (numpy) and the intercept steps."""
     problem = six_targets(3)
-    env = SubtaskEnv(problem.model(), new_memo(6, problem.n_steps))
+    env = problem.env()
     for step, last in ((0, -1), (300, 2), (900, 4)):
         state = problem.root_state()
         state[0][0], state[0][2] = step, last
         available = [a for a in range(6) if is_available(env, state, a)]
-        steps = {a: intercept_of(env.model, state[1], a, step) for a in available if a != last}
+        steps = {a: intercept_of(env, state[1], a, step) for a in available if a != last}
         uncertainty = {
             a: logdet_xy(
                 *position_covariance_after(
-                    problem.covariances[a], problem.process_noise[a], float(step + k), 0.5, 0.5
+                    problem.covariances[a],
+                    problem.mission.process_noise[a],
+                    float(step + k),
+                    0.5,
+                    0.5,
                 )
             )
             for a, k in steps.items()
@@ -120,7 +124,7 @@ def test_greedy_rollouts_pick_their_best_target_other_than_the_one_just_found(po
 
 def test_most_uncertain_rollout_follows_only_when_nothing_else_is_left():
     problem = two_targets()
-    env = SubtaskEnv(problem.model(), new_memo(2, problem.n_steps))
+    env = problem.env()
     state = problem.root_state()
     state[0][1] = 0b01  # target 1 missed: only target 0, just found, is left
     state[0][2] = 0
@@ -193,7 +197,7 @@ def test_mixmax_backup_mixes_the_best_action_and_the_mean_return(weight):
 
 def test_no_follow_rollout_draws_uniformly_among_the_targets_not_just_found():
     problem = six_targets()
-    env = SubtaskEnv(problem.model(), new_memo(6, problem.n_steps))
+    env = problem.env()
     state = problem.root_state()
     state[0][2] = 3  # target 3 was just found
     rng = np.array([7], dtype=np.uint64)

@@ -234,3 +234,38 @@ def test_dwell_follows_the_target_just_found_for_its_length_then_flies_the_plan(
     assert '"dwell":10.0' in settings.canonical()
     assert "dwell" not in MctsSettings(preset="improved").canonical()
     assert MctsSettings.from_canonical(settings.canonical()).dwell == 10.0
+
+
+def test_options_keep_their_names_from_the_settings_to_the_records():
+    """Every field of the search's and the sub-task MDP's option records is the planner option
+    of the same name (the backup and the rollout as the instances the kernels take)."""
+    from hptrack.planning.backups import Max
+    from hptrack.planning.search import SearchOptions
+    from hptrack.planning.subtask_mdp import SubtaskOptions
+    from hptrack.planning.subtask_rollout import Nearest
+
+    settings = MctsSettings(
+        exploration=0.7,
+        backup="max",
+        max_weight=0.5,
+        root_split="weighted",
+        common_rollouts=True,
+        rollout="nearest",
+        rollout_epsilon=0.3,
+        estimator="sharp",
+        dwell=12.5,
+    )
+    assert set(SearchOptions._fields) | set(SubtaskOptions._fields) <= set(
+        MctsSettings.model_fields
+    )
+    assert settings.search_options() == SearchOptions(
+        exploration=0.7,
+        backup=Max(0.5),
+        root_split="weighted",
+        common_rollouts=True,
+        rollout=Nearest(0.3),
+    )
+    assert settings.subtask_options() == SubtaskOptions(estimator="sharp", dwell=12.5)
+    paper = MctsSettings(preset="paper")
+    assert paper.search_options() == SearchOptions()
+    assert paper.subtask_options() == SubtaskOptions()

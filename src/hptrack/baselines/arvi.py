@@ -54,7 +54,7 @@ _MAX_GRID_CELLS = 512
 
 
 class ArviSettings(PrimitiveSettings):
-    """ARVI settings (defaults: ``docs/baselines.md`` and the README's timing table).
+    """ARVI settings (defaults: ``docs/baselines.md``).
 
     Attributes:
         horizon: planning horizon in motion primitives (count; 12 x 5 s = 60 s).

@@ -38,6 +38,7 @@ from hptrack.cli.common import (
     write_json,
 )
 from hptrack.interface import InputError
+from hptrack.models.mission import MAX_TARGETS
 from hptrack.registry import PLANNERS, make_planner
 from hptrack.scenario import Scenario, load_scenario, random_scenario, save_scenario
 from hptrack.scenario.model import MAX_STEPS
@@ -87,8 +88,8 @@ def _load_or_random(
     if (path is None) == (not random):
         raise InputError("give either a SCENARIO file or --random")
     if random:
-        if not 1 <= targets <= 62:
-            raise InputError(f"--targets must be between 1 and 62, got {targets}")
+        if not 1 <= targets <= MAX_TARGETS:
+            raise InputError(f"--targets must be between 1 and {MAX_TARGETS}, got {targets}")
         return random_scenario(targets, seed=seed, homogeneous=homogeneous)
     scenario = load_scenario(path)
     return scenario if seed is None else scenario.with_seed(seed)
@@ -230,8 +231,8 @@ def scenario_random(
 ) -> None:
     """Write the paper's random scenario (Sec. V) to a YAML file."""
     check_seed(seed)
-    if not 1 <= targets <= 62:
-        raise InputError(f"--targets must be between 1 and 62, got {targets}")
+    if not 1 <= targets <= MAX_TARGETS:
+        raise InputError(f"--targets must be between 1 and {MAX_TARGETS}, got {targets}")
     check_output_path(output, "--output")
     save_scenario(random_scenario(targets, seed=seed, homogeneous=homogeneous), output)
     console.print(f"{targets}-target scenario (seed {seed}) written to {escape(str(output))}")

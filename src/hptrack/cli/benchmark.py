@@ -21,6 +21,7 @@ from hptrack.cli.common import (
     write_json,
 )
 from hptrack.interface import InputError
+from hptrack.models.mission import MAX_TARGETS
 from hptrack.models.motion import ProcessNoiseForm
 
 
@@ -29,8 +30,8 @@ def _int_list(text: str, option: str) -> tuple[int, ...]:
         values = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
         raise InputError(f"{option} expects comma-separated integers, got {text!r}") from None
-    if not values or min(values) < 1 or max(values) > 62:
-        raise InputError(f"{option} expects integers between 1 and 62, got {text!r}")
+    if not values or min(values) < 1 or max(values) > MAX_TARGETS:
+        raise InputError(f"{option} expects integers between 1 and {MAX_TARGETS}, got {text!r}")
     return values
 
 

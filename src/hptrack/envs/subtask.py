@@ -36,6 +36,7 @@ from gymnasium import spaces
 from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.envs.tracking import MissionEnv
+from hptrack.models.mission import reachable_before_budget, steps_left
 from hptrack.models.motion import predicted_positions
 
 
@@ -62,7 +63,7 @@ class SubtaskTrackingEnv(MissionEnv):
         mask = np.zeros(self.layout.n_slots, dtype=bool)
         if w.done:
             return mask
-        left = math.floor(w.remaining_budget / m.time_step + 1e-9)
+        left = steps_left(m.time_step, w.remaining_budget)
         for i in range(w.n_targets):
             mean = w.means[i]
             if math.hypot(mean[2], mean[3]) >= m.agent_speed:
@@ -78,7 +79,7 @@ class SubtaskTrackingEnv(MissionEnv):
                 m.time_step,
                 m.sensor_radius,
             )
-            mask[i] = 0 <= steps < left
+            mask[i] = reachable_before_budget(steps, left)
         if self.last_found is not None:
             mask[self.last_found] = True
         return mask

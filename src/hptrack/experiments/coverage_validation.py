@@ -47,7 +47,8 @@ from hptrack.coverage.estimator import CoverageEstimate
 from hptrack.coverage.sharp_estimator import SharpEstimate
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.interface import InputError, MissionSpec
-from hptrack.models.motion import advance_true_state, motion_noise_factors
+from hptrack.models.mission import motion_noise_factors_on
+from hptrack.models.motion import advance_true_state
 from hptrack.scenario.random import random_mean, random_prior
 
 PAPER_MAPE = {"0": (3.58, 5.18), "100": (2.46, 3.42), "200": (5.46, 3.73)}
@@ -208,23 +209,14 @@ def plan_coverage(
 
 @numba.njit(cache=True)
 def _advance_block(
-    states,
-    active,
-    noise,
-    path,
-    first_step,
-    flight_steps,
-    sqrt_q,
-    tau,
-    c_per_step,
-    radius2,
-    first_any,
-    first_spiral,
+    mission, states, active, noise, path, first_step, flight_steps, sqrt_q, first_any, first_spiral
 ):
     """Advance the ``active`` runs through steps ``first_step ..`` with unit normal ``noise``
     ``(runs, steps, 4)`` and record detections; a run stops at its first detection on the
-    spiral (step >= ``flight_steps``)."""
-    l11, l21, l22 = motion_noise_factors(tau, c_per_step)
+    spiral (step >= ``flight_steps``). ``mission`` is the mission record."""
+    l11, l21, l22 = motion_noise_factors_on(mission)
+    tau = mission.time_step
+    radius2 = mission.footprint_radius * mission.footprint_radius
     for a in range(active.shape[0]):
         i = active[a]
         for t in range(noise.shape[1]):
@@ -263,6 +255,7 @@ def first_detections(
         block = min(BLOCK_STEPS, total - step)
         noise = rng.standard_normal((active.size, block, 4))
         _advance_block(
+            mission.record,
             states,
             active,
             noise,
@@ -270,9 +263,6 @@ def first_detections(
             step,
             n,
             math.sqrt(q),
-            mission.time_step,
-            mission.c_per_step,
-            radius2,
             first_any,
             first_spiral,
         )

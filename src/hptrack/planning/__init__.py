@@ -5,7 +5,7 @@ from hptrack.planning.backups import register_backup
 from hptrack.planning.mdp import MdpKernels, register_mdp
 from hptrack.planning.rollout import UniformRandom, register_policy
 from hptrack.planning.search import SearchOptions, SearchResult, search_mdp
-from hptrack.planning.subtask_mdp import PlanningProblem
+from hptrack.planning.subtask_mdp import PlanningProblem, SubtaskOptions
 from hptrack.planning.subtask_search import search
 from hptrack.planning.tree import MAX_ACTIONS, ActionStats
 
@@ -16,6 +16,7 @@ __all__ = [
     "PlanningProblem",
     "SearchOptions",
     "SearchResult",
+    "SubtaskOptions",
     "UniformRandom",
     "register_backup",
     "register_mdp",

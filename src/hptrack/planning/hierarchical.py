@@ -30,11 +30,17 @@ from pydantic import Field, model_validator
 from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.interface import MissionSpec, Observation
+from hptrack.models.mission import follow_tables, reachable_before_budget, steps_left
 from hptrack.models.motion import predicted_positions
 from hptrack.planning.backups import backup_of
 from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchOptions, SearchResult
-from hptrack.planning.subtask_mdp import PlanningProblem, dwell_steps, steps_left
+from hptrack.planning.subtask_mdp import (
+    PlanningProblem,
+    SubtaskOptions,
+    dwell_action,
+    dwell_steps,
+)
 from hptrack.planning.subtask_rollout import MostUncertain, Nearest, UniformNoFollow
 from hptrack.planning.subtask_search import search, warm_up
 from hptrack.settings import PlannerSettings
@@ -178,6 +184,10 @@ class MctsSettings(PlannerSettings):
         values["rollout"] = self.rollout_policy()
         return SearchOptions(**values)
 
+    def subtask_options(self) -> SubtaskOptions:
+        """The sub-task MDP's options record, field by field the options of the same name."""
+        return SubtaskOptions(**{name: getattr(self, name) for name in SubtaskOptions._fields})
+
 
 class HierarchicalPlanner:
     """Monte Carlo tree search over coverage sub-tasks (name ``"mcts"``); see the module
@@ -190,6 +200,7 @@ class HierarchicalPlanner:
         self.iterations = self.settings.iterations
         self.time_limit = self.settings.time_limit
         self.options = self.settings.search_options()
+        self.subtask_options = self.settings.subtask_options()
 
     # --- planning -------------------------------------------------------------------------
     def _search(
@@ -198,18 +209,18 @@ class HierarchicalPlanner:
         current_action: int | None = None,
         last_found: int | None = None,
     ) -> SearchResult:
-        problem = PlanningProblem.from_mission(
-            self._mission,
+        problem = PlanningProblem.from_observation(
+            self._record,
             observation,
             available=self._available,
             last_found=last_found,
             current_action=current_action,
-            estimator=self.settings.estimator,
-            dwell_time=self.settings.dwell,
+            follow=self._follow_tables,
         )
         result = search(
             problem,
             self.options,
+            self.subtask_options,
             iterations=self.iterations,
             time_limit=self.time_limit,
             seed=self._rng,
@@ -229,7 +240,7 @@ class HierarchicalPlanner:
         """In the action list and interceptable before the budget ends (as in the MDP)."""
         if not self._available[target]:
             return False
-        m, agent, mission = observation.means[target], observation.agent_position, self._mission
+        m, agent, mission = observation.means[target], observation.agent_position, self._record
         steps = intercept_steps(
             agent[0],
             agent[1],
@@ -237,15 +248,16 @@ class HierarchicalPlanner:
             m[1],
             m[2],
             m[3],
-            mission.agent_speed,
+            mission.speed,
             mission.time_step,
-            mission.sensor_radius,
+            mission.footprint_radius,
         )
-        return 0 <= steps < steps_left(observation.remaining_budget, mission.time_step)
+        left = steps_left(mission.time_step, observation.remaining_budget)
+        return reachable_before_budget(steps, left)
 
     def _dwell_feasible(self, observation: Observation, last_found: int | None) -> bool:
         """A target was just found and the dwell ends before the budget (as in the MDP)."""
-        left = steps_left(observation.remaining_budget, self._mission.time_step)
+        left = steps_left(self._record.time_step, observation.remaining_budget)
         return last_found is not None and 0 < self._dwell_steps < left
 
     def _start_dwell(self, observation: Observation, target: int) -> None:
@@ -253,7 +265,8 @@ class HierarchicalPlanner:
         self._follow = target
         self._subtask = None
         self._dwell_end = observation.step + self._dwell_steps
-        plan = self._search(observation, current_action=self._mission.n_targets, last_found=target)
+        dwell = dwell_action(self._mission.n_targets)
+        plan = self._search(observation, current_action=dwell, last_found=target)
         self._plan = (plan.best_after_find, None)
         self._log.append(
             {"dwell": target, "start_step": observation.step, "plan_after_dwell": self._plan[0]}
@@ -275,7 +288,7 @@ class HierarchicalPlanner:
     def _next(self, observation: Observation, planned: int | None, last_found: int | None) -> None:
         """Carry on after a sub-task: follow, dwell, start the planned target, or plan
         afresh."""
-        dwell = self._mission.n_targets  # the dwell's action index
+        dwell = dwell_action(self._mission.n_targets)
         if planned is None:
             feasible = False
         elif planned == dwell:
@@ -302,15 +315,17 @@ class HierarchicalPlanner:
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
     ) -> None:
         if self.time_limit is not None:
-            warm_up(self.options, self.settings.estimator)
+            warm_up(self.options, self.subtask_options)
         self._mission = mission
+        self._record = mission.record
+        self._follow_tables = follow_tables(self._record)
         self._rng = rng
         self._available = np.ones(mission.n_targets, dtype=bool)
         self._subtask: CoverageSubtask | None = None
         self._plan: tuple[int | None, int | None] = (None, None)
         self._follow: int | None = None
         self._dwell_end: int | None = None
-        self._dwell_steps = dwell_steps(self.settings.dwell, mission.time_step)
+        self._dwell_steps = dwell_steps(mission.time_step, self.settings.dwell)
         self._log: list[dict] = []
         self._searches: list[dict] = []
         self._next(observation, None, None)

@@ -12,6 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 import numpy as np
 
+from hptrack.models.mission import mission_record
 from hptrack.planning import subtask_mdp
 from hptrack.planning.search import (
     PAPER_SEARCH,
@@ -44,6 +45,7 @@ def run_subtask_simulations(
 def search(
     problem: subtask_mdp.PlanningProblem,
     options: SearchOptions = PAPER_SEARCH,
+    subtask: subtask_mdp.SubtaskOptions = subtask_mdp.PAPER_SUBTASK,
     iterations: int | None = None,
     time_limit: float | None = None,
     seed: int | np.random.Generator = 0,
@@ -57,6 +59,8 @@ def search(
             each of its outcomes (Algorithm 1 lines 9-12).
         options: the search's options (:class:`~hptrack.planning.search.SearchOptions`,
             default the paper's search).
+        subtask: the sub-task MDP's options (estimator, dwell; default the paper's MDP). With
+            a dwell, ``problem.current_action`` may be the dwell.
         iterations: stop after this many simulations.
         time_limit: stop once this wall time (s) has passed, checked between chunks of
             simulations. With both limits, whichever comes first.
@@ -74,14 +78,9 @@ def search(
     if threads < 1:
         raise ValueError(f"threads must be positive, got {threads}")
     start = time.perf_counter()
-    model = problem.model()
     root = problem.root_state()
     fixed = -1 if problem.current_action is None else problem.current_action
-
-    envs = [
-        subtask_mdp.SubtaskEnv(model, subtask_mdp.new_memo(problem.n_targets, problem.n_steps))
-        for _ in range(threads)
-    ]  # one memo per tree: the kernels write to it
+    envs = [problem.env(subtask) for _ in range(threads)]  # one memo per tree: kernels write it
     if fixed >= 0 and not subtask_mdp.is_available(envs[0], root, fixed):
         raise ValueError(f"current action {fixed} cannot be carried out in the remaining budget")
 
@@ -89,7 +88,7 @@ def search(
         return search_mdp(
             env,
             root,
-            problem.n_actions,
+            subtask_mdp.n_actions(problem.n_targets, subtask),
             problem.n_steps + 2,
             subtask_mdp.new_work(),
             options,
@@ -113,28 +112,22 @@ _warmed: set[tuple] = set()
 """Compiled signatures (rollout and backup classes, estimator) this process has loaded."""
 
 
-def warm_up(options: SearchOptions = PAPER_SEARCH, estimator: str = "paper") -> None:
-    """Load (or compile) the search's kernels for ``options``' rollout and backup classes and
-    ``estimator`` once per process with a tiny search, so that the first timed search of a
-    process gets as many simulations as the later ones."""
-    key = (type(options.rollout), type(options.backup), estimator)
+def warm_up(
+    options: SearchOptions = PAPER_SEARCH,
+    subtask: subtask_mdp.SubtaskOptions = subtask_mdp.PAPER_SUBTASK,
+) -> None:
+    """Load (or compile) the search's kernels for ``options``' rollout and backup classes once
+    per process with a tiny search, so that the first timed search of a process gets as many
+    simulations as the later ones."""
+    key = (type(options.rollout), type(options.backup))
     if key in _warmed:
         return
     cov = np.diag([1000.0, 1000.0, 0.4, 0.4])
+    mission = mission_record(0.5, 60.0, 30.0, 100.0, 10.0 * np.eye(2), np.full(2, 3e-4))
+    means = np.array([[300.0, 0, 1, 0], [-300.0, 0, 0, 1]])
     for fixed in (None, 0):
         problem = subtask_mdp.PlanningProblem(
-            np.zeros(2),
-            np.array([[300.0, 0, 1, 0], [-300.0, 0, 0, 1]]),
-            np.stack([cov, cov]),
-            np.full(2, 3e-4),
-            60.0,
-            0.5,
-            0.5,
-            30.0,
-            100.0,
-            10.0 * np.eye(2),
-            current_action=fixed,
-            estimator=estimator,
+            mission, np.zeros(2), means, np.stack([cov, cov]), 60.0, current_action=fixed
         )
-        search(problem, options, iterations=64, seed=0)
+        search(problem, options, subtask, iterations=64, seed=0)
     _warmed.add(key)

@@ -20,6 +20,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_valida
 from hptrack.interface import MissionSpec
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import PositionMeasurementModel
+from hptrack.models.mission import MAX_TARGETS, steps_left
 from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
 
 MAX_STEPS = 1_000_000
@@ -123,7 +124,7 @@ class Scenario(BaseModel):
     seed: Annotated[int, BeforeValidator(_not_bool), Field(ge=0, lt=2**63)] = 0
     process_noise_form: ProcessNoiseForm = "continuous"
     agent: AgentSpec = AgentSpec()
-    targets: Annotated[list[TargetSpec], Field(min_length=1, max_length=62)]
+    targets: Annotated[list[TargetSpec], Field(min_length=1, max_length=MAX_TARGETS)]
 
     @model_validator(mode="after")
     def _consistent(self) -> Self:
@@ -175,8 +176,8 @@ class Scenario(BaseModel):
 
     @property
     def n_steps(self) -> int:
-        """Simulation steps in the budget."""
-        return round(self.budget / self.time_step)
+        """Simulation steps in the budget (:func:`hptrack.models.mission.steps_left`)."""
+        return steps_left(self.time_step, self.budget)
 
     def means(self) -> np.ndarray:
         """Prior means ``(n, 4)``."""
