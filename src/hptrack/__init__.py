@@ -5,4 +5,6 @@ Tracking Under Target Motion Uncertainty" (``docs/model.md``). SI units througho
 metres, seconds, metres per second.
 """
 
+import hptrack._numba_cache  # noqa: F401  (first: numba's cache directory, before any kernel)
+
 __version__ = "0.1.0"
