@@ -7,6 +7,7 @@ from pathlib import Path
 import hptrack
 
 LAYERS = [
+    "_numba_cache",
     "models",
     "interface",
     "settings",
@@ -19,10 +20,12 @@ LAYERS = [
     "envs",
     "learning",
     "registry",
+    "decision",
     "runtime",
     "integrations",
     "experiments",
     "cli",
+    "examples",
 ]
 """Bottom to top."""
 ROOT = Path(hptrack.__file__).parent
