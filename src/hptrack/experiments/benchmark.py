@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
+from hptrack.experiments.workers import worker_pool
 from hptrack.registry import planner_entry
 from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
@@ -165,7 +166,9 @@ def run_keys(
                 record(row)
         return finished
     own_pool = executor is None
-    pool = ProcessPoolExecutor(max_workers=workers) if own_pool else executor
+    if own_pool:
+        workers = max(1, min(workers, len(todo)))
+    pool = worker_pool(workers) if own_pool else executor
     pending: dict[Future, EpisodeKey] = {}
     queue = iter(todo)
     try:

@@ -46,7 +46,7 @@ whose ``log det`` is -inf (the score of a known target is not defined)."""
 MAX_POSITION_VARIANCE = MAX_COORDINATE_M**2
 """Largest position variance of a belief up to the budget's end, m^2: a standard deviation
 beyond the 10,000 km area carries no information."""
-MAX_UPDATE_RATIO = 1e12
+MAX_UPDATE_RATIO = 1e13
 """Largest ratio of a position variance (prior or predicted to the budget's end) to ``R``'s
 smallest eigenvalue: the Kalman update ``(I - K) P`` loses about ``ratio * 2e-16`` of its
 relative precision and gives negative variances from about 1e15."""
