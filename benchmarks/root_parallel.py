@@ -64,8 +64,8 @@ def main() -> None:
     store = ResultStore(args.db)
     runs = defaultdict(dict)  # (label, n) -> {seed: U}
     for r in store.rows():
-        s = json.loads(r.key.settings)
-        label = f"{s.get('threads', 1)} x {s['iterations']:,}"
+        s = json.loads(r.key.planner_settings)
+        label = f"{s['threads']} x {s['iterations']:,}"
         runs[(label, r.key.n_targets)][r.key.seed] = r.uncertainty
     store.close()
     labels = sorted({lb for lb, _ in runs})

@@ -229,7 +229,10 @@ def test_a_toy_search_leaves_the_disk_cache_usable_by_another_process():
     subprocess.run(
         [sys.executable, "-c", f"import numpy as np; {toy}"],
         check=True,
-        env={**os.environ, "PYTHONPATH": str(here)},
+        env={
+            **os.environ,
+            "PYTHONPATH": os.pathsep.join([str(here), os.environ.get("PYTHONPATH", "")]),
+        },
         cwd=here,
     )
     plan = (

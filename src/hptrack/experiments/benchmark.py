@@ -93,7 +93,7 @@ def scenario_for(key: EpisodeKey) -> Scenario:
 def planner_for(key: EpisodeKey):
     """A fresh planner of a benchmark episode, from the settings stored in its key."""
     entry = planner_entry(key.planner)
-    return entry.factory(entry.settings_type.from_canonical(key.settings))
+    return entry.factory(entry.settings_type.from_canonical(key.planner_settings))
 
 
 def run_one(key: EpisodeKey) -> EpisodeRow:

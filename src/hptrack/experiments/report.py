@@ -15,7 +15,8 @@ from hptrack.registry import planner_entry
 
 def effort_label(key: EpisodeKey) -> str:
     """The planning effort an episode's settings set (``"none"`` for a planner without one)."""
-    return planner_entry(key.planner).settings_type.from_canonical(key.settings).effort_label()
+    settings = planner_entry(key.planner).settings_type.from_canonical(key.planner_settings)
+    return settings.effort_label()
 
 
 # Paper, Tables II and III (mean +- std of U over its random cases), for side-by-side reports.
@@ -185,7 +186,7 @@ def write_csv(rows: list[EpisodeRow], path: Path) -> None:
                 "never_observed",
                 "detections",
                 "wall_time_s",
-                "settings",
+                "planner_settings",
             ]
         )
         for r in rows:
@@ -200,7 +201,7 @@ def write_csv(rows: list[EpisodeRow], path: Path) -> None:
                     r.never_observed,
                     r.detections,
                     r.wall_time_s,
-                    r.key.settings,
+                    r.key.planner_settings,
                 ]
             )
     summary_path = path.with_name(path.stem + "_summary.csv")

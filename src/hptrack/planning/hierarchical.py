@@ -139,23 +139,23 @@ class MctsSettings(PlannerSettings):
 
     @classmethod
     def from_canonical(cls, text: str) -> MctsSettings:
-        """The settings of a stored identity: an option it leaves out has the paper's value
-        (:meth:`canonical`), whatever the default preset."""
-        return cls.model_validate({"preset": "paper", **json.loads(text)})
+        """The settings of a stored identity, under the first preset that stands for them."""
+        values = json.loads(text)
+        preset = next(
+            (
+                name
+                for name, options in PRESETS.items()
+                if all(values[k] == v for k, v in options.items())
+            ),
+            DEFAULT_PRESET,
+        )
+        return cls.model_validate({**values, "preset": preset})
 
     def canonical(self) -> str:
-        """The identity of the results: the resolved options, without ``preset`` (which only
-        stands for them), and without the options that have the paper's value, so that the
-        paper's search keeps the identity it had before these options existed."""
+        """The identity of the results: every resolved option, without ``preset`` (which only
+        stands for some of them)."""
         values = self.as_json()
         values.pop("preset")
-        for key, paper in PRESETS["paper"].items():
-            if values[key] == paper:
-                values.pop(key)
-        if values.get("rollout", "uniform") not in ("most_uncertain", "nearest"):
-            values.pop("rollout_epsilon")
-        if values["threads"] == 1:
-            values.pop("threads")
         return json.dumps(values, sort_keys=True, separators=(",", ":"))
 
     def rollout_policy(self) -> tuple:
