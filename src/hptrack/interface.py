@@ -15,6 +15,8 @@ validated once.
 
 from __future__ import annotations
 
+import math
+import reprlib
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
@@ -36,6 +38,56 @@ class InputError(ValueError):
     """Bad user input (a file, a field, an option or a value): the message is one line that
     names it and the value. The CLI shows it without a traceback and exits with code 2; every
     other exception is a bug and keeps its traceback."""
+
+
+MAX_SHOWN_CHARS = 80
+"""Longest shown value in an error message (:func:`shown`)."""
+MAX_MESSAGE_CHARS = 600
+"""Longest error message (:func:`one_line`)."""
+
+
+class _ShortRepr(reprlib.Repr):
+    """``repr`` that looks at a bounded part of a value: a few items of a list or a mapping, two
+    levels deep, the digit count of a long integer (never its digits)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.maxlevel, self.maxlist, self.maxtuple, self.maxdict = 2, 4, 4, 3
+        self.maxstring, self.maxother, self.maxlong = 40, 40, 30
+
+    def repr_int(self, x: int, level: int) -> str:
+        if x.bit_length() > 96:
+            return f"<an integer of about {int(x.bit_length() * math.log10(2)) + 1} digits>"
+        return repr(x)
+
+    def repr_str(self, x: str, level: int) -> str:
+        return repr(x[: self.maxstring]) + ("..." if len(x) > self.maxstring else "")
+
+    def repr_list(self, x: list, level: int) -> str:
+        text = super().repr_list(x, level)
+        return f"{text[:-1]} ({len(x)} items)]" if len(x) > self.maxlist else text
+
+
+_SHORT = _ShortRepr()
+
+
+def shown(value: Any, limit: int = MAX_SHOWN_CHARS) -> str:
+    """A bounded, printable ``repr`` of ``value`` for an error message: long lists, mappings,
+    strings and integers are shortened, control characters escaped, at most ``limit`` chars."""
+    try:
+        text = _SHORT.repr(value)
+    except Exception:  # noqa: BLE001 - a value whose repr fails is still shown
+        text = f"<{type(value).__name__}>"
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def one_line(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """``message`` as one bounded, printable line (whitespace collapsed, control characters
+    escaped, cut at ``limit`` chars)."""
+    text = " ".join(message[: 4 * limit].split())
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @dataclass(frozen=True, eq=False)

@@ -47,6 +47,7 @@ from hptrack.baselines.information import (
     rollout_children,
 )
 from hptrack.models.beliefs import position_logdet
+from hptrack.settings import TimeLimit
 
 if TYPE_CHECKING:
     from hptrack.interface import MissionSpec, Observation
@@ -66,7 +67,7 @@ class AStarSettings(PrimitiveSettings):
     horizon: Annotated[int, Field(ge=1, le=100)] = 6
     max_expansions: Annotated[int, Field(ge=1, le=10_000_000)] = 2000
     heuristic_weight: Annotated[float, Field(ge=0.0)] = 1.0
-    time_limit_s: Annotated[float | None, Field(gt=0.0)] = None
+    time_limit_s: TimeLimit | None = None
     cost: CostKind = "difference"
 
     effort_fields = {"iterations": "max_expansions", "time_limit": "time_limit_s"}

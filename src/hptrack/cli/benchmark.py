@@ -3,6 +3,7 @@ cluster."""
 
 from __future__ import annotations
 
+import time
 from contextlib import ExitStack
 from pathlib import Path
 from typing import Annotated
@@ -16,14 +17,21 @@ from hptrack.cli.common import (
     check_output_dir,
     check_output_path,
     check_seed,
+    check_workers,
     console,
     planner_settings_for,
     progress_display,
     write_json,
+    writing,
 )
 from hptrack.interface import InputError
 from hptrack.models.mission import MAX_TARGETS
 from hptrack.models.motion import ProcessNoiseForm
+
+MAX_SCENARIOS = 1_000_000
+"""Most scenarios per number of targets (the paper uses 100)."""
+OTHER_RUN_POLL_S = 2.0
+"""How often a benchmark waiting for another run's episodes looks at the database, s."""
 
 
 def _int_list(text: str, option: str) -> tuple[int, ...]:
@@ -111,6 +119,8 @@ def benchmark(
         raise InputError(f"--scenarios must be a positive integer, got {scenarios}")
     if workers is not None and workers < 1:
         raise InputError(f"--workers must be a positive integer, got {workers}")
+    if not 1 <= scenarios <= MAX_SCENARIOS:
+        raise InputError(f"--scenarios must be between 1 and {MAX_SCENARIOS:,}, got {scenarios}")
     dask = scheduler is not None or dask_local is not None
     if dask:
         from hptrack.experiments.dask_cluster import check_dask_options
@@ -124,6 +134,8 @@ def benchmark(
     for name in names:
         planner_entry(name)
     counts = _int_list(targets, "--targets")
+    if workers is not None and not dask:
+        workers = check_workers(workers, scenarios * len(counts) * len(names))
     settings = planner_settings_for(names, option, iterations, time_limit)
     for name in (figure_planners or "").split(","):
         if name.strip() and name.strip() not in names:
@@ -179,13 +191,29 @@ def benchmark(
                     f"seed={row.key.seed}: U={row.uncertainty:.2f}",
                 )
 
-            ran = run_benchmark(
-                config, store, workers=in_flight, on_done=on_done, executor=executor
-            )
-        keys = set(config.keys())
-        rows = [r for r in store.rows() if r.key in keys]
+            keys = set(config.keys())
+            ran = 0
+            while True:
+                ran += run_benchmark(
+                    config, store, workers=in_flight, on_done=on_done, executor=executor
+                )
+                rows = [r for r in store.rows() if r.key in keys]
+                if len(rows) == len(keys):
+                    break
+                # another run on this database holds the rest: wait for it (or for its claims
+                # to go stale if it died) rather than write partial tables
+                progress.update(
+                    task,
+                    completed=len(rows),
+                    total=len(keys),
+                    description=f"waiting for {len(keys) - len(rows)} episodes that another "
+                    "run on this database holds",
+                )
+                time.sleep(OTHER_RUN_POLL_S)
+                store.release_stale_claims()
     console.print(f"{ran} episodes run now, {len(rows)} of {len(keys)} in the table ({db})")
-    _write_report(config, rows, out, figure_planners, figure_targets)
+    with writing(out, "--out"):
+        _write_report(config, rows, out, figure_planners, figure_targets)
     if json_path:
         summary = summarise(rows)
         write_json(

@@ -18,8 +18,9 @@ from rich.progress import (
 )
 
 from hptrack.cli.common import (
+    check_figure_path,
+    check_memory,
     check_output_dir,
-    check_output_path,
     check_seed,
     console,
     progress_display,
@@ -30,6 +31,8 @@ learn_app = typer.Typer(
     help="Train learning baselines on hptrack/Tracking-v0 (resumable).", no_args_is_help=True
 )
 
+MAX_TRAINING_STEPS = 10**10
+"""Most environment steps of one training run (about a year at 300 steps per second)."""
 PROGRESS_EVERY = 250
 """Steps between progress-bar refreshes."""
 
@@ -79,10 +82,10 @@ def _check_common(
     validation_interval: int,
     checkpoint_interval: int,
 ) -> None:
-    if targets < 1:
-        raise InputError(f"--targets must be at least 1, got {targets}")
-    if steps < 1:
-        raise InputError(f"--steps must be at least 1, got {steps}")
+    if not 1 <= targets <= 62:
+        raise InputError(f"--targets must be between 1 and 62, got {targets}")
+    if not 1 <= steps <= MAX_TRAINING_STEPS:
+        raise InputError(f"--steps must be between 1 and {MAX_TRAINING_STEPS:g}, got {steps}")
     check_seed(seed)
     for option, value in (
         ("--validation-scenarios", validation_scenarios),
@@ -176,6 +179,9 @@ def learn_adfq(
     )
     if warmup < 0 or buffer < 1:
         raise InputError(f"--warmup must be >= 0 and --buffer >= 1, got {warmup} and {buffer}")
+    # two float32 observations (6 features per target, the budget, a mask), action, reward,
+    # end flag, and the priority tree's two float64 leaves
+    check_memory(buffer * (8 * (7 * targets + 1) + 8 + 8 + 1 + 16), f"--buffer {buffer}")
     _require_learn_extra()
     from hptrack.learning.agent import AdfqConfig
     from hptrack.learning.train import TrainConfig, Trainer, tracking_task
@@ -245,7 +251,7 @@ def learn_plot(
     """Draw a run's training curve: final U of the training episodes and of the validation
     scenarios against steps, with the never-observed U."""
     path = output or run / "curve.png"
-    check_output_path(path, "--output")
+    check_figure_path(path, "--output")
     _write_figure(run, path, title if title is not None else run.name)
 
 

@@ -35,7 +35,7 @@ from gymnasium import spaces
 
 from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
-from hptrack.envs.tracking import MissionEnv
+from hptrack.envs.tracking import MissionEnv, discrete_action
 from hptrack.models.mission import reachable_before_budget, steps_left
 from hptrack.models.motion import predicted_positions
 
@@ -119,9 +119,7 @@ class SubtaskTrackingEnv(MissionEnv):
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         world = self._check_running()
-        i = int(action)
-        if not 0 <= i < self.layout.n_slots:
-            raise ValueError(f"action must be in 0..{self.layout.n_slots - 1}, got {action!r}")
+        i = discrete_action(action, self.layout.n_slots)
         feasible = bool(self.action_masks()[i])
         before, start = world.uncertainty, world.step_index
         plan: dict = {}

@@ -43,7 +43,7 @@ from hptrack.planning.subtask_mdp import (
 )
 from hptrack.planning.subtask_rollout import MostUncertain, Nearest, UniformNoFollow
 from hptrack.planning.subtask_search import search, warm_up
-from hptrack.settings import PlannerSettings
+from hptrack.settings import Iterations, PlannerSettings, TimeLimit
 
 DEFAULT_ITERATIONS = 100_000
 """Simulations per tree search when neither ``iterations`` nor ``time_limit`` is given."""
@@ -110,8 +110,8 @@ class MctsSettings(PlannerSettings):
             cores.
     """
 
-    iterations: Annotated[int | None, Field(ge=1)] = None
-    time_limit: Annotated[float | None, Field(gt=0.0)] = None
+    iterations: Iterations | None = None
+    time_limit: TimeLimit | None = None
     exploration: Annotated[float, Field(gt=0.0)] = DEFAULT_EXPLORATION
     preset: Literal["paper", "improved"] = DEFAULT_PRESET
     backup: Literal["sampled", "expected", "max", "robust"] | None = None
