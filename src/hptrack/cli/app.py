@@ -308,11 +308,12 @@ def list_planners() -> None:
 
 
 def _register_commands() -> None:
-    from hptrack.cli import animate, benchmark, coverage, flight, learn
+    from hptrack.cli import animate, benchmark, coverage, examples, flight, learn
 
     animate.register(app)
     benchmark.register(app)
     coverage.register(app)
+    examples.register(app)
     flight.register(app)
     learn.register(app)
 

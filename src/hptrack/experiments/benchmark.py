@@ -12,14 +12,17 @@ and the budget.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
-from hptrack.registry import planner_entry
+from hptrack.interface import InputError
+from hptrack.registry import planner_entry, planner_settings
 from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
 from hptrack.settings import PlannerSettings
@@ -188,6 +191,50 @@ def run_keys(
         if own_pool:
             pool.shutdown(wait=True, cancel_futures=True)
     return finished
+
+
+def benchmark(
+    planners: Sequence[str] = ("mcts", "greedy"),
+    target_counts: Sequence[int] = (2, 3, 4, 5, 6),
+    scenarios: int = 10,
+    *,
+    homogeneous: bool = True,
+    options: dict[str, dict[str, Any]] | None = None,
+    db: str | Path = ":memory:",
+    workers: int = 1,
+    first_seed: int = 0,
+) -> dict:
+    """Fly every planner once on each random scenario and summarise ``U`` (the library face of
+    ``hptrack benchmark``).
+
+    Args:
+        planners: registered planner names.
+        target_counts: the values of ``n``.
+        scenarios: scenarios per ``n`` (seeds ``first_seed ..``).
+        homogeneous: the paper's ARVI/A* setting (shared prior and ``q``); else heterogeneous.
+        options: each planner's options, e.g. ``{"mcts": {"iterations": 20_000}}``.
+        db: a results database file to store episodes in and resume from (default in memory).
+        workers: episodes in flight at once (worker processes).
+        first_seed: first scenario seed.
+
+    Returns:
+        ``{planner: {n: {"mean", "std", "episodes", "never_observed", "wall_time_s"}}}``.
+    """
+    options = options or {}
+    unknown = sorted(set(options) - set(planners))
+    if unknown:
+        raise InputError(f"options given for planners not benchmarked: {', '.join(unknown)}")
+    settings = {p: planner_settings(p, options.get(p)) for p in planners}
+    config = BenchmarkConfig(
+        tuple(planners), settings, tuple(target_counts), scenarios, homogeneous, first_seed
+    )
+    store = ResultStore(db)
+    try:
+        run_benchmark(config, store, workers)
+        wanted = set(config.keys())
+        return summarise((row for row in store.rows() if row.key in wanted), planners)
+    finally:
+        store.close()
 
 
 def summarise(rows: Iterable[EpisodeRow], order: Iterable[str] = ()) -> dict:
