@@ -215,7 +215,7 @@ def benchmark(
     with writing(out, "--out"):
         _write_report(config, rows, out, figure_planners, figure_targets)
     if json_path:
-        summary = summarise(rows)
+        summary = summarise(rows, config.planners)
         write_json(
             json_path, {p: {str(n): c for n, c in by_n.items()} for p, by_n in summary.items()}
         )
@@ -224,27 +224,27 @@ def benchmark(
 def _write_report(
     config, rows, out: Path, figure_planners: str | None, figure_targets: int | None
 ) -> None:
-    from matplotlib.figure import Figure
     from rich.markdown import Markdown
 
     from hptrack.experiments.benchmark import planner_for, scenario_for
     from hptrack.experiments.report import benchmark_report, write_csv
     from hptrack.experiments.store import EpisodeKey
     from hptrack.sim.episode import run_episode
-    from hptrack.viz.benchmark import plot_trajectories, plot_uncertainty_boxes
+    from hptrack.viz.benchmark import plot_trajectories, save_uncertainty_boxes
+    from hptrack.viz.style import new_figure, save_figure
 
     out.mkdir(parents=True, exist_ok=True)
     text = benchmark_report(config, rows)
     (out / "table.md").write_text(text)
     write_csv(rows, out / "episodes.csv")
     console.print(Markdown(text))
-    counts = sorted({r.key.n_targets for r in rows})
-    if counts:
-        fig = Figure(figsize=(4.0 * len(counts), 4.0))
-        for i, n in enumerate(counts):
-            plot_uncertainty_boxes(fig.add_subplot(1, len(counts), i + 1), rows, n, config.planners)
-        fig.tight_layout()
-        fig.savefig(out / "uncertainty_boxes.png", dpi=120)
+    if rows:
+        save_uncertainty_boxes(
+            rows,
+            out / "uncertainty_boxes.png",
+            config.planners,
+            f"U per planner at the budget's end ({config.setting} setting)",
+        )
     names = (
         [p.strip() for p in figure_planners.split(",")]
         if figure_planners
@@ -257,16 +257,9 @@ def _write_report(
             name, n_figure, config.first_seed, config.setting, config.settings[name].canonical()
         )
         records.append(run_episode(scenario_for(key), planner_for(key)))
-    fig = Figure(figsize=(6.0 * len(names) + 1.0, 6.5))
-    plot_trajectories(
-        fig,
-        records,
-        [
-            f"{r.planner}, n = {n_figure}, seed {config.first_seed}: U = {r.uncertainty:.2f}"
-            for r in records
-        ],
-    )
-    fig.savefig(out / "trajectories.png", dpi=110)
+    fig = new_figure(6.0 * len(names) + 1.0, 7.0)
+    plot_trajectories(fig, records)
+    save_figure(fig, out / "trajectories.png", dpi=110)
     console.print(f"tables and figures written to {out}")
 
 

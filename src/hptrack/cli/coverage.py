@@ -175,6 +175,7 @@ def coverage(
                 end_cov[0, :2, :2],
                 est.cdf,
                 mission.time_step,
+                title=f"coverage sub-task of target {target} after waiting {delay:g} s",
             )
         console.print(f"figure written to {plot}")
 

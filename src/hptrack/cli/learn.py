@@ -129,23 +129,14 @@ def _train(trainer: Any, name: str, out: Path, total: int) -> dict[str, Any]:
         f"{summary['best_U']:.3f} at step {summary['best_step']}; last "
         f"{summary['last_validation_U']:.3f}; model {escape(summary['best_model'])}"
     )
-    _write_figure(out, out / "curve.png", name)
+    _write_figure(out, out / "curve.png")
     return summary
 
 
-def _write_figure(run: Path, path: Path, title: str) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+def _write_figure(run: Path, path: Path, title: str | None = None) -> None:
+    from hptrack.learning.curves import save_training_curve
 
-    from hptrack.learning.curves import load_curve, plot_training_curve
-
-    curve = load_curve(run)
-    fig = Figure(figsize=(7, 4), layout="constrained")
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    plot_training_curve(ax, curve)
-    ax.set_title(title)
-    fig.savefig(path, dpi=120)
+    save_training_curve(run, path, title)
     console.print(f"training curve written to {escape(str(path))}")
 
 
@@ -246,13 +237,16 @@ def learn_plot(
     output: Annotated[
         Path | None, typer.Option("--output", "-o", help="PNG to write (default RUN/curve.png).")
     ] = None,
-    title: Annotated[str | None, typer.Option(help="Figure title.")] = None,
+    title: Annotated[
+        str | None,
+        typer.Option(help="Figure title (default: algorithm, n, setting from the run's config)."),
+    ] = None,
 ) -> None:
     """Draw a run's training curve: final U of the training episodes and of the validation
     scenarios against steps, with the never-observed U."""
     path = output or run / "curve.png"
     check_figure_path(path, "--output")
-    _write_figure(run, path, title if title is not None else run.name)
+    _write_figure(run, path, title)
 
 
 def register(app: typer.Typer) -> None:

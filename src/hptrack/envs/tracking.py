@@ -281,22 +281,15 @@ class MissionEnv(gym.Env):
         )
 
     def render(self) -> np.ndarray | None:
-        """The mission figure of the episode so far (:func:`hptrack.viz.mission.plot_mission`)
+        """The mission figure of the episode so far (:func:`hptrack.viz.mission.mission_figure`)
         as an RGB array ``(640, 640, 3)`` uint8; ``None`` without ``render_mode``."""
         if self.render_mode is None:
             return None
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
+        from hptrack.viz.mission import mission_figure
 
-        from hptrack.viz.mission import plot_mission
-
-        fig = Figure(figsize=(6.4, 6.4), dpi=100, layout="constrained")
-        canvas = FigureCanvasAgg(fig)
-        ax = fig.add_subplot()
-        artists = plot_mission(ax, self.episode_record())
-        fig.colorbar(artists["agent"], ax=ax, label="agent time (s)", shrink=0.8)
-        canvas.draw()
-        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+        fig = mission_figure(self.episode_record(), 6.4, 6.4, dpi=100)
+        fig.canvas.draw()
+        return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
 
 
 class TrackingEnv(MissionEnv):
