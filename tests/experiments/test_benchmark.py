@@ -74,7 +74,7 @@ def test_summary_and_reductions_arithmetic(tmp_path):
     cell = summary["greedy"][2]
     u = [r.uncertainty for r in store.rows() if r.key.planner == "greedy" and r.key.n_targets == 2]
     assert cell["mean"] == pytest.approx(np.mean(u)) and cell["std"] == pytest.approx(np.std(u))
-    red = reductions(summary)[("greedy", "stationary")][2]
+    red = reductions(summary, "greedy")[("greedy", "stationary")][2]
     base = summary["stationary"][2]["mean"]
     assert red == pytest.approx(100 * (base - cell["mean"]) / base)
 

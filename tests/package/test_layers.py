@@ -20,10 +20,12 @@ LAYERS = [
     "envs",
     "learning",
     "registry",
+    "decision",
     "runtime",
     "integrations",
     "experiments",
     "cli",
+    "examples",
 ]
 """Bottom to top."""
 ROOT = Path(hptrack.__file__).parent

@@ -1,4 +1,5 @@
-"""``hptrack animate``: a saved episode record as a GIF (or MP4 with ffmpeg), with a progress bar.
+"""``hptrack animate``: a saved episode record as a GIF (or MP4 with ffmpeg), with progress of
+the drawing and then of the GIF's encoding.
 
 :func:`write_animation` is the same rendering for other commands (``simulate --animate``).
 """
@@ -11,9 +12,9 @@ from typing import Annotated
 
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
 
-from hptrack.cli.common import check_output_path, console
+from hptrack.cli.common import check_output_path, console, progress_display
 from hptrack.interface import InputError
 from hptrack.sim.record import EpisodeRecord
 
@@ -46,22 +47,32 @@ def write_animation(record: EpisodeRecord, path: Path, stride: int = 5, fps: int
     from hptrack.viz.animation import animate_mission
 
     path = Path(path)
-    with Progress(
+    with progress_display(
+        "animation",
+        "frames",
         TextColumn("[bold]animation"),
         BarColumn(),
         MofNCompleteColumn(),
-        TextColumn("frames"),
+        TextColumn("frames {task.description}"),
         TimeRemainingColumn(),
-        console=console,
         transient=True,
     ) as progress:
-        task = progress.add_task("", total=None)
+        drawing = progress.add_task("drawn", total=None)
+        encoding = None
+
+        def encoded(done: int, total: int) -> None:
+            nonlocal encoding
+            if encoding is None:
+                encoding = progress.add_task(f"encoded into {path.suffix[1:].upper()}", total=total)
+            progress.update(encoding, completed=done)
+
         frames = animate_mission(
             record,
             path,
             stride=stride,
             fps=fps,
-            progress=lambda done, total: progress.update(task, completed=done, total=total),
+            progress=lambda done, total: progress.update(drawing, completed=done, total=total),
+            encoding=encoded,
         )
     console.print(
         f"animation written to {escape(str(path))} ({frames} frames, "

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import sys
 import traceback
+import typing
 from pathlib import Path
 from typing import Annotated
 
@@ -20,7 +21,6 @@ from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
-    Progress,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
@@ -35,6 +35,7 @@ from hptrack.cli.common import (
     console,
     error_console,
     planner_settings_for,
+    progress_display,
     write_json,
 )
 from hptrack.interface import InputError
@@ -163,18 +164,19 @@ def simulate(
     if drawn:
         console.print(f"seed {seed} (drawn; pass --seed {seed} to repeat this mission)")
     agent = make_planner(planner, settings)
-    with Progress(
-        TextColumn("[bold]{task.description}"),
+    with progress_display(
+        f"{planner} mission",
+        "steps",
+        TextColumn(f"[bold]{escape(planner)} mission"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("steps"),
         TimeElapsedColumn(),
         TextColumn("left"),
         TimeRemainingColumn(),
-        console=console,
         transient=True,
     ) as progress:
-        task = progress.add_task(escape(f"{planner} mission"), total=scenario.n_steps)
+        task = progress.add_task("", total=scenario.n_steps)
         record = run_episode(
             scenario,
             agent,
@@ -246,22 +248,72 @@ def scenario_check(path: Annotated[Path, typer.Argument(help="Scenario YAML file
     )
 
 
+def _shown(value: object) -> str:
+    """An option value as a user would type it after ``-o KEY=``."""
+    if value is None:
+        return "none"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, list | tuple):
+        return ",".join(map(_shown, value))
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def option_defaults(name: str) -> dict[str, str]:
+    """Each option of planner ``name`` with its default as the planner resolves it (an option
+    without a default shows ``required``)."""
+    settings_type = PLANNERS[name].settings_type
+    try:
+        resolved = settings_type.from_options(name, {}).as_json()
+    except InputError:  # a required option: show the declared defaults
+        resolved = {
+            key: "required" if field.is_required() else field.default
+            for key, field in settings_type.model_fields.items()
+        }
+    return {key: value if value == "required" else _shown(value) for key, value in resolved.items()}
+
+
+def preset_changes(name: str) -> dict[str, dict[str, str]]:
+    """For a planner with a ``preset`` option: per other preset, the defaults it changes."""
+    field = PLANNERS[name].settings_type.model_fields.get("preset")
+    if field is None:
+        return {}
+    base = option_defaults(name)
+    out = {}
+    for preset in typing.get_args(field.annotation):
+        if preset != base["preset"]:
+            other = PLANNERS[name].settings_type.from_options(name, {"preset": preset}).as_json()
+            out[preset] = {
+                k: _shown(v)
+                for k, v in other.items()
+                if k != "preset" and k in base and _shown(v) != base[k]
+            }
+    return out
+
+
 @app.command("planners")
 def list_planners() -> None:
-    """List the registered planners."""
+    """List the registered planners, each option with its default (set with -o KEY=VALUE)."""
+    table = Table(title="planners (set an option with -o KEY=VALUE)", show_lines=True)
+    table.add_column("planner", style="bold", no_wrap=True)
+    table.add_column("what it does")
+    table.add_column("options (defaults)", overflow="fold")
     for name, entry in PLANNERS.items():
-        console.print(
-            f"{name}: {entry.summary}; options: "
-            f"{', '.join(entry.settings_type.model_fields) or 'none'}"
-        )
+        lines = [", ".join(f"{k}={v}" for k, v in option_defaults(name).items()) or "none"]
+        for preset, changes in preset_changes(name).items():
+            changed = ", ".join(f"{k}={v}" for k, v in changes.items())
+            lines.append(f"-o preset={preset} sets {changed}")
+        table.add_row(escape(name), escape(entry.summary), escape("\n".join(lines)))
+    console.print(table)
 
 
 def _register_commands() -> None:
-    from hptrack.cli import animate, benchmark, coverage, flight, learn
+    from hptrack.cli import animate, benchmark, coverage, examples, flight, learn
 
     animate.register(app)
     benchmark.register(app)
     coverage.register(app)
+    examples.register(app)
     flight.register(app)
     learn.register(app)
 

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
 from hptrack.cli.common import (
     SETTING_HELP,
@@ -18,6 +18,7 @@ from hptrack.cli.common import (
     check_seed,
     console,
     planner_settings_for,
+    progress_display,
     write_json,
 )
 from hptrack.interface import InputError
@@ -157,13 +158,14 @@ def benchmark(
                 f"Dask scheduler {escape(pool.address)}: {pool.threads} worker "
                 f"threads, {in_flight} episodes in flight"
             )
-        with Progress(
+        with progress_display(
+            "benchmark",
+            "episodes",
             TextColumn("[bold]benchmark"),
             BarColumn(),
             MofNCompleteColumn(),
             TimeElapsedColumn(),
             TextColumn("{task.description}"),
-            console=console,
         ) as progress:
             task = progress.add_task("", total=None)
 
@@ -197,23 +199,13 @@ def _write_report(
     from rich.markdown import Markdown
 
     from hptrack.experiments.benchmark import planner_for, scenario_for
-    from hptrack.experiments.report import markdown_tables, write_csv
+    from hptrack.experiments.report import benchmark_report, write_csv
     from hptrack.experiments.store import EpisodeKey
     from hptrack.sim.episode import run_episode
     from hptrack.viz.benchmark import plot_trajectories, plot_uncertainty_boxes
 
     out.mkdir(parents=True, exist_ok=True)
-    paper = (
-        ("ARVI (paper)", "A* with heuristic (paper)", "hierarchical, homogeneous (paper)")
-        if config.homogeneous
-        else ("ADFQ (paper)", "hierarchical, heterogeneous (paper)")
-    )
-    efforts = "; ".join(f"{p}: {config.settings[p].effort_label()}" for p in config.planners)
-    text = (
-        f"Setting: {config.setting}; planning effort: {efforts}; "
-        f"{config.scenarios} scenarios per n from seed {config.first_seed}.\n\n"
-        + markdown_tables(rows, paper)
-    )
+    text = benchmark_report(config, rows)
     (out / "table.md").write_text(text)
     write_csv(rows, out / "episodes.csv")
     console.print(Markdown(text))
@@ -221,7 +213,7 @@ def _write_report(
     if counts:
         fig = Figure(figsize=(4.0 * len(counts), 4.0))
         for i, n in enumerate(counts):
-            plot_uncertainty_boxes(fig.add_subplot(1, len(counts), i + 1), rows, n)
+            plot_uncertainty_boxes(fig.add_subplot(1, len(counts), i + 1), rows, n, config.planners)
         fig.tight_layout()
         fig.savefig(out / "uncertainty_boxes.png", dpi=120)
     names = (

@@ -1,4 +1,5 @@
-"""Shared CLI helpers: the rich consoles, planner options, output paths and JSON output.
+"""Shared CLI helpers: the rich consoles, progress display, planner options, output paths and
+JSON output.
 
 Errors are not handled here: :func:`hptrack.cli.app.main` turns an
 :class:`~hptrack.interface.InputError` (and a command-line usage error) into one line and exit
@@ -10,10 +11,12 @@ from __future__ import annotations
 import json
 import math
 import os
+import time
 from pathlib import Path
 from typing import Any
 
 from rich.console import Console
+from rich.progress import Progress, ProgressColumn
 
 from hptrack.interface import InputError
 from hptrack.registry import PLANNERS, planner_entry
@@ -21,6 +24,72 @@ from hptrack.settings import PlannerSettings
 
 console = Console()
 error_console = Console(stderr=True)
+
+PLAIN_PROGRESS_INTERVAL_S = 30.0
+"""Time between two lines of :class:`PlainProgress`, s."""
+
+
+class PlainProgress:
+    """Progress as plain lines, for a log file or a pipe (rich's bar is for terminals): the
+    subset of :class:`rich.progress.Progress` that the commands use. A line at a task's first
+    update, then every :data:`PLAIN_PROGRESS_INTERVAL_S`, and when it completes,
+    e.g. ``benchmark: 12/30 episodes (40 %), 00:01:10; mcts n=2 seed=3: U=40.12``."""
+
+    def __init__(self, label: str, unit: str, output: Console | None = None) -> None:
+        self.label, self.unit, self.console = label, unit, output or console
+        self._tasks: list[dict[str, Any]] = []
+        self._start = time.monotonic()
+
+    def __enter__(self) -> PlainProgress:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        return None
+
+    def add_task(self, description: str, total: float | None = None, **_fields: Any) -> int:
+        self._tasks.append({"description": description, "total": total, "completed": 0})
+        return len(self._tasks) - 1
+
+    def update(
+        self,
+        task_id: int,
+        *,
+        completed: float | None = None,
+        total: float | None = None,
+        description: str | None = None,
+        **_fields: Any,
+    ) -> None:
+        task = self._tasks[task_id]
+        before = task["completed"]
+        changes = {"completed": completed, "total": total, "description": description}
+        task.update({key: value for key, value in changes.items() if value is not None})
+        done, whole, now = task["completed"], task["total"], time.monotonic()
+        last = task.get("shown_at")
+        finished = bool(whole) and done >= whole > before
+        if not (last is None or finished or (now - last >= PLAIN_PROGRESS_INTERVAL_S)):
+            return
+        task["shown_at"] = now
+        count = f"{done:,.0f}/{whole:,.0f}" if whole else f"{done:,.0f}"
+        share = f" ({100 * done / whole:.0f} %)" if whole else ""
+        elapsed = time.strftime("%H:%M:%S", time.gmtime(now - self._start))
+        what = f"; {task['description']}" if task["description"] else ""
+        self.console.print(
+            f"{self.label}: {count} {self.unit}{share}, {elapsed}{what}",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
+
+
+def progress_display(
+    label: str, unit: str, *columns: str | ProgressColumn, transient: bool = False
+) -> Progress | PlainProgress:
+    """A rich progress bar of ``columns`` on a terminal; :class:`PlainProgress` lines
+    (``label: done/total unit``) otherwise."""
+    if console.is_terminal:
+        return Progress(*columns, console=console, transient=transient)
+    return PlainProgress(label, unit)
+
 
 SETTING_HELP = (
     "Shared q and prior for all targets (the paper's ARVI/A* setting) or drawn per "

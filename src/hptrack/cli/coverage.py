@@ -11,10 +11,17 @@ from typing import Annotated
 import numpy as np
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from hptrack.cli.common import check_output_dir, check_output_path, check_seed, console, write_json
+from hptrack.cli.common import (
+    check_output_dir,
+    check_output_path,
+    check_seed,
+    console,
+    progress_display,
+    write_json,
+)
 from hptrack.coverage import CoverageSubtask
 from hptrack.experiments.coverage_validation import (
     PAPER_MAPE,
@@ -204,14 +211,15 @@ def validate_coverage(
         f"x {runs} runs; {workers} worker(s); results in {out}"
     )
     start = time.perf_counter()
-    with Progress(
+    with progress_display(
+        "validation",
+        "cases",
         TextColumn("[bold]cases"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
-        console=console,
     ) as progress:
-        task = progress.add_task("cases", total=cases)
+        task = progress.add_task("", total=cases)
         rows = run_validation(
             config, out, workers, on_case=lambda done, total: progress.update(task, completed=done)
         )

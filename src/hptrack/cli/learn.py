@@ -12,13 +12,18 @@ from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
-    Progress,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
 
-from hptrack.cli.common import check_output_dir, check_output_path, check_seed, console
+from hptrack.cli.common import (
+    check_output_dir,
+    check_output_path,
+    check_seed,
+    console,
+    progress_display,
+)
 from hptrack.interface import InputError
 
 learn_app = typer.Typer(
@@ -89,8 +94,8 @@ def _check_common(
     check_output_dir(out, "--out")
 
 
-def _train(trainer: Any, name: str, out: Path) -> dict[str, Any]:
-    total = trainer.config.steps
+def _train(trainer: Any, name: str, out: Path, total: int) -> dict[str, Any]:
+    """Run ``trainer`` to ``total`` steps with a progress display, then draw its curve."""
     columns = (
         TextColumn(f"[bold]{escape(name)}"),
         BarColumn(),
@@ -100,7 +105,7 @@ def _train(trainer: Any, name: str, out: Path) -> dict[str, Any]:
         TextColumn("{task.description}"),
     )
     start = time.perf_counter()
-    with Progress(*columns, console=console) as progress:
+    with progress_display(name, "steps", *columns) as progress:
         task = progress.add_task("", total=total)
 
         def on_progress(p) -> None:
@@ -152,6 +157,14 @@ def learn_adfq(
     validation_interval: ValidationInterval = 25_000,
     checkpoint_interval: CheckpointInterval = 10_000,
     warmup: Annotated[int, typer.Option(help="Steps of exploration before learning.")] = 10_000,
+    allow_untrained: Annotated[
+        bool,
+        typer.Option(
+            "--allow-untrained",
+            help="Run even when --steps is not above --warmup (no learning: the network stays "
+            "untrained).",
+        ),
+    ] = False,
     buffer: Annotated[int, typer.Option(help="Replay capacity, transitions.")] = 200_000,
     prioritized: Annotated[
         bool, typer.Option(help="Prioritised replay (alpha 0.6, beta 0.4 -> 1) instead of uniform.")
@@ -175,7 +188,7 @@ def learn_adfq(
         checkpoint_interval=checkpoint_interval,
         agent=AdfqConfig(warmup_steps=warmup, buffer_size=buffer, prioritized=prioritized),
     )
-    _train(Trainer(task, config, out), f"adfq n={targets}", out)
+    _train(Trainer(task, config, out, allow_untrained), f"adfq n={targets}", out, steps)
 
 
 @learn_app.command("sb3-ppo")
@@ -201,7 +214,7 @@ def learn_sb3_ppo(
         raise InputError(
             "hptrack learn sb3-ppo needs stable-baselines3: pip install 'hptrack[learn]'"
         ) from None
-    from hptrack.learning.sb3 import PpoConfig, PpoTrainer
+    from hptrack.learning.sb3 import PpoConfig, PpoTrainer, trained_steps
     from hptrack.learning.train import tracking_task
 
     task = tracking_task(targets, homogeneous, validation_scenarios)
@@ -211,7 +224,14 @@ def learn_sb3_ppo(
         validation_interval=validation_interval,
         checkpoint_interval=checkpoint_interval,
     )
-    _train(PpoTrainer(task, config, out), f"sb3-ppo n={targets}", out)
+    trainer = PpoTrainer(task, config, out)
+    rounded = trained_steps(steps, config.n_steps)
+    if rounded != steps:
+        console.print(
+            f"PPO trains whole rollouts of {config.n_steps:,} steps: --steps {steps:,} "
+            f"trains {rounded:,} steps"
+        )
+    _train(trainer, f"sb3-ppo n={targets}", out, rounded)
 
 
 @learn_app.command("plot")

@@ -12,14 +12,17 @@ and the budget.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
-from hptrack.registry import planner_entry
+from hptrack.interface import InputError
+from hptrack.registry import planner_entry, planner_settings
 from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
 from hptrack.settings import PlannerSettings
@@ -190,13 +193,60 @@ def run_keys(
     return finished
 
 
-def summarise(rows: Iterable[EpisodeRow]) -> dict:
-    """``{planner: {n: {"mean", "std", "episodes", "never_observed"}}}`` of ``U``."""
-    groups: dict = {}
+def benchmark(
+    planners: Sequence[str] = ("mcts", "greedy"),
+    target_counts: Sequence[int] = (2, 3, 4, 5, 6),
+    scenarios: int = 10,
+    *,
+    homogeneous: bool = True,
+    options: dict[str, dict[str, Any]] | None = None,
+    db: str | Path = ":memory:",
+    workers: int = 1,
+    first_seed: int = 0,
+) -> dict:
+    """Fly every planner once on each random scenario and summarise ``U`` (the library face of
+    ``hptrack benchmark``).
+
+    Args:
+        planners: registered planner names.
+        target_counts: the values of ``n``.
+        scenarios: scenarios per ``n`` (seeds ``first_seed ..``).
+        homogeneous: the paper's ARVI/A* setting (shared prior and ``q``); else heterogeneous.
+        options: each planner's options, e.g. ``{"mcts": {"iterations": 20_000}}``.
+        db: a results database file to store episodes in and resume from (default in memory).
+        workers: episodes in flight at once (worker processes).
+        first_seed: first scenario seed.
+
+    Returns:
+        ``{planner: {n: {"mean", "std", "episodes", "never_observed", "wall_time_s"}}}``.
+    """
+    options = options or {}
+    unknown = sorted(set(options) - set(planners))
+    if unknown:
+        raise InputError(f"options given for planners not benchmarked: {', '.join(unknown)}")
+    settings = {p: planner_settings(p, options.get(p)) for p in planners}
+    config = BenchmarkConfig(
+        tuple(planners), settings, tuple(target_counts), scenarios, homogeneous, first_seed
+    )
+    store = ResultStore(db)
+    try:
+        run_benchmark(config, store, workers)
+        wanted = set(config.keys())
+        return summarise((row for row in store.rows() if row.key in wanted), planners)
+    finally:
+        store.close()
+
+
+def summarise(rows: Iterable[EpisodeRow], order: Iterable[str] = ()) -> dict:
+    """``{planner: {n: {"mean", "std", "episodes", "never_observed"}}}`` of ``U``; planners in
+    ``order`` first (in that order), then the others as they first appear in ``rows``."""
+    groups: dict = {planner: {} for planner in order}
     for row in rows:
         groups.setdefault(row.key.planner, {}).setdefault(row.key.n_targets, []).append(row)
     out: dict = {}
     for planner, by_n in groups.items():
+        if not by_n:
+            continue
         out[planner] = {}
         for n, items in sorted(by_n.items()):
             u = np.array([r.uncertainty for r in items])
@@ -210,16 +260,17 @@ def summarise(rows: Iterable[EpisodeRow]) -> dict:
     return out
 
 
-def reductions(summary: dict) -> dict:
-    """Reduction of each planner's mean ``U`` against each other planner's, percent:
+def reductions(summary: dict, planner: str) -> dict:
+    """Reduction of ``planner``'s mean ``U`` against each other planner's, percent (the paper's
+    "our method reduces U by ... compared to ARVI"):
     ``{(planner, baseline): {n: 100 (U_baseline - U_planner) / U_baseline}}``."""
+    mine = summary[planner]
     out = {}
-    for a, by_a in summary.items():
-        for b, by_b in summary.items():
-            if a == b:
-                continue
-            shared = sorted(set(by_a) & set(by_b))
-            out[(a, b)] = {
-                n: 100.0 * (by_b[n]["mean"] - by_a[n]["mean"]) / by_b[n]["mean"] for n in shared
-            }
+    for baseline, theirs in summary.items():
+        if baseline == planner:
+            continue
+        shared = sorted(set(mine) & set(theirs))
+        out[(planner, baseline)] = {
+            n: 100.0 * (theirs[n]["mean"] - mine[n]["mean"]) / theirs[n]["mean"] for n in shared
+        }
     return out

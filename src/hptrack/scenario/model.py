@@ -17,7 +17,7 @@ from typing import Annotated, Any, Self
 import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
-from hptrack.interface import MissionSpec
+from hptrack.interface import MissionSpec, Observation
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
@@ -208,6 +208,20 @@ class Scenario(BaseModel):
             process_noise=self.process_noise(),
             target_ids=self.target_ids,
         )
+
+    def initial_observation(self) -> Observation:
+        """What a planner sees at the start, before any measurement: time 0, the agent at its
+        start position, the prior beliefs, nothing detected (pass it with :meth:`mission_spec`
+        to :func:`hptrack.plan` or a planner's ``reset``)."""
+        arrays = [
+            np.array(self.agent.position, dtype=float),
+            self.means(),
+            self.covariances(),
+            np.zeros(len(self.targets), dtype=bool),
+        ]
+        for a in arrays:
+            a.flags.writeable = False
+        return Observation(0, 0.0, float(self.budget), *arrays)
 
     def never_observed_uncertainty(self) -> float:
         """``U`` of a mission that measures nothing: every prior grown to the budget's end."""

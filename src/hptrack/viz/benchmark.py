@@ -3,6 +3,7 @@ of several planners side by side."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from matplotlib.axes import Axes
@@ -16,13 +17,16 @@ if TYPE_CHECKING:
     from hptrack.experiments.store import EpisodeRow
 
 
-def plot_uncertainty_boxes(ax: Axes, rows: list[EpisodeRow], n_targets: int) -> dict:
-    """Box plot of ``U`` per planner for ``n_targets`` targets on ``ax``."""
-    by_planner: dict[str, list[float]] = {}
+def plot_uncertainty_boxes(
+    ax: Axes, rows: list[EpisodeRow], n_targets: int, planners: Sequence[str] = ()
+) -> dict:
+    """Box plot of ``U`` per planner for ``n_targets`` targets on ``ax``: the planners of
+    ``planners`` in that order, then any other in the order of ``rows``."""
+    by_planner: dict[str, list[float]] = {p: [] for p in planners}
     for r in rows:
         if r.key.n_targets == n_targets:
             by_planner.setdefault(r.key.planner, []).append(r.uncertainty)
-    names = sorted(by_planner)
+    names = [p for p, values in by_planner.items() if values]
     artists = ax.boxplot([by_planner[p] for p in names], tick_labels=names)
     ax.set_title(f"n = {n_targets}")
     ax.set_ylabel("U (sum of log det, lower is better)")

@@ -148,7 +148,9 @@ def fly(setup: Setup, make_manager, name: str) -> Run:
         time = START + datetime.timedelta(seconds=k * setup.time_step)
         for i, truth in enumerate(truths):
             truth.append(GroundTruthState(states[k, i].reshape(4, 1), timestamp=time))
-        measured = {d.groundtruth_path.id: d for d in sensor.measure(set(truths), noise=True)}
+        # a list, not a set: the sensor draws the noise in this order (a set's order would
+        # change from run to run)
+        measured = {d.groundtruth_path.id: d for d in sensor.measure(truths, noise=True)}
         for track in tracks:
             prediction = predictor.predict(track.state, timestamp=time)
             detection = measured.get(track.id)

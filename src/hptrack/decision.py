@@ -1,0 +1,97 @@
+"""Plan the next decision in one call, from a scenario or from current beliefs.
+
+:func:`plan` hands a planner the mission and one observation, as the simulator does at the start
+of an episode, and returns what it decided: the waypoint to fly towards and, for the paper's
+hierarchical planner (Sec. IV-C), the target it pursues and the coverage sub-task it planned.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hptrack.interface import MissionSpec, Observation, Planner
+from hptrack.registry import make_planner
+from hptrack.scenario.model import Scenario
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A planner's decision at one observation.
+
+    Attributes:
+        waypoint: ``(2,)`` position to fly towards now, m.
+        target: id of the target the planner pursues (the hierarchical planner's sub-task), or
+            ``None`` for planners without sub-tasks.
+        subtask: the planned sub-task (intercept time, ``t_cutoff``, ``p_find``, expected time,
+            in s) or ``None``.
+        info: the planner's ``episode_info()``: its searches, settings and plans so far.
+    """
+
+    waypoint: np.ndarray
+    target: str | None = None
+    subtask: dict[str, Any] | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def _first_subtask(info: dict[str, Any]) -> dict[str, Any] | None:
+    subtasks = info.get("subtasks") or []
+    return dict(subtasks[0]) if subtasks else None
+
+
+def _target_id(subtask: dict[str, Any] | None, mission: MissionSpec) -> str | None:
+    if subtask is None:
+        return None
+    if "target_index" in subtask:
+        return mission.target_ids[subtask["target_index"]]
+    target = subtask.get("target")
+    return None if target is None else str(target)
+
+
+def plan(
+    source: Scenario | MissionSpec,
+    planner: str | Planner = "mcts",
+    observation: Observation | None = None,
+    *,
+    seed: int = 0,
+    **options: Any,
+) -> Decision:
+    """The next decision of ``planner`` for a scenario or for current beliefs.
+
+    Args:
+        source: a :class:`~hptrack.scenario.Scenario` (planned from its priors at time 0 unless
+            ``observation`` is given) or a :class:`~hptrack.interface.MissionSpec` with the
+            current ``observation`` (time, remaining budget, agent position, beliefs).
+        planner: a registered planner name (``hptrack planners``) or a planner object.
+        observation: the planner's current view; default ``source.initial_observation()``.
+        seed: seeds the planner's random generator (the tree search's rollouts).
+        **options: the planner's options when ``planner`` is a name, e.g. ``iterations=20_000``
+            or ``preset="paper"``; validated, a bad one raises
+            :class:`~hptrack.interface.InputError`.
+
+    Example:
+        >>> import hptrack
+        >>> scenario = hptrack.random_scenario(n_targets=3, seed=0)
+        >>> decision = hptrack.plan(scenario, "greedy")
+        >>> decision.waypoint.shape
+        (2,)
+    """
+    if isinstance(source, Scenario):
+        mission = source.mission_spec()
+        if observation is None:
+            observation = source.initial_observation()
+    else:
+        mission = source
+        if observation is None:
+            raise TypeError("plan(mission, ...) needs the current observation")
+    if isinstance(planner, str):
+        planner = make_planner(planner, options)
+    elif options:
+        raise TypeError("options are for a planner given by name; configure the object instead")
+    planner.reset(mission, observation, np.random.default_rng(seed))
+    waypoint = np.array(planner.act(observation), dtype=float)
+    info = dict(planner.episode_info())
+    subtask = _first_subtask(info)
+    return Decision(waypoint, _target_id(subtask, mission), subtask, info)
