@@ -10,7 +10,9 @@ base is ``$HPTRACK_CACHE_DIR``, else ``$NUMBA_CACHE_DIR/hptrack``, else the user
 system's temporary directory. Directories of other hashes unused for :data:`KEEP_DAYS` are removed.
 
 ``hptrack/__init__.py`` imports this module first: numba chooses a kernel's cache directory when
-the kernel is defined.
+the kernel is defined. It imports no numerics: it sets ``NUMBA_CACHE_DIR`` (and
+``HPTRACK_CACHE_DIR`` to the base, so that child processes key their own sources under the same
+base) for numba to read when it is imported, and numba's configuration if numba already is.
 """
 
 from __future__ import annotations
@@ -128,15 +130,11 @@ def cache_directory(root: Path = PACKAGE) -> Path | None:
 
 
 def configure() -> None:
-    """Point numba's cache at :func:`cache_directory` (kernels defined from now on).
-
-    Through ``NUMBA_CACHE_DIR`` when numba is not imported yet (so that ``import hptrack``
-    loads no numerics, and numba's own re-reading of its environment keeps the choice), and
-    ``HPTRACK_CACHE_DIR`` keeps the base for child processes."""
+    """Point numba's cache at :func:`cache_directory` (kernels defined from now on)."""
     directory = cache_directory()
     if directory is None:
         return
-    os.environ.setdefault("HPTRACK_CACHE_DIR", str(directory.parent))
+    os.environ["HPTRACK_CACHE_DIR"] = str(directory.parent)
     os.environ["NUMBA_CACHE_DIR"] = str(directory)
     if "numba" in sys.modules:
         sys.modules["numba"].config.CACHE_DIR = str(directory)

@@ -1,5 +1,6 @@
 """What every layer above the models may use: the mission's constants, what a planner sees, and
-the planner protocol (Gymnasium-like; a planner never sees the truth).
+the planner protocol (Gymnasium-like; a planner never sees the truth, except a reference that
+declares it reads it, :class:`TruthReader`).
 
 Every planner, whether it chooses sub-tasks (the paper's hierarchical planner), controls (ARVI,
 A*) or a learned policy, implements :class:`Planner`. Each step the simulator (or the real-time
@@ -206,3 +207,12 @@ class Planner(Protocol):
     def act(self, observation: Observation) -> np.ndarray: ...
 
     def episode_info(self) -> dict[str, Any]: ...
+
+
+@runtime_checkable
+class TruthReader(Protocol):
+    """A reference planner that reads the true target states (``clairvoyant``): the simulator
+    hands them, before every ``act``, to a planner of this kind and to no other. No real mission
+    has them, so it is never flown."""
+
+    def see_truth(self, states: np.ndarray) -> None: ...

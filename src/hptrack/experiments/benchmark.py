@@ -277,3 +277,20 @@ def reductions(summary: dict, planner: str) -> dict:
             n: 100.0 * (theirs[n]["mean"] - mine[n]["mean"]) / theirs[n]["mean"] for n in shared
         }
     return out
+
+
+def gap_closed(summary: dict, floor: str = "greedy", reference: str = "clairvoyant") -> dict:
+    """Share of the gap from ``floor`` (no look-ahead) to ``reference`` (reads the truth) that
+    each planner's mean ``U`` closes, percent: ``{planner: {n: 100 (U_floor - U) / (U_floor -
+    U_reference)}}`` (empty without both)."""
+    if floor not in summary or reference not in summary:
+        return {}
+    low, ref = summary[floor], summary[reference]
+    return {
+        planner: {
+            n: 100.0 * (low[n]["mean"] - cell["mean"]) / (low[n]["mean"] - ref[n]["mean"])
+            for n, cell in by_n.items()
+            if n in low and n in ref and low[n]["mean"] != ref[n]["mean"]
+        }
+        for planner, by_n in summary.items()
+    }
