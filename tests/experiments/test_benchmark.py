@@ -109,12 +109,12 @@ def test_a_different_option_never_reuses_another_settings_rows(tmp_path):
     assert run_benchmark(other, store) == 1  # another horizon: its own episode
     rows = store.rows()
     assert len(rows) == 2
-    horizons = sorted(json.loads(r.key.settings)["horizon"] for r in rows)
+    horizons = sorted(json.loads(r.key.planner_settings)["horizon"] for r in rows)
     assert horizons == [2, 3]
-    assert len({r.key.settings_hash for r in rows}) == 2
+    assert len({r.key.planner_settings_hash for r in rows}) == 2
     assert (
-        rows[0].key.settings_hash
-        == planner_settings("astar", json.loads(rows[0].key.settings)).digest()
+        rows[0].key.planner_settings_hash
+        == planner_settings("astar", json.loads(rows[0].key.planner_settings)).digest()
     )
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
+from hptrack.experiments.workers import worker_pool
 from hptrack.interface import InputError
 from hptrack.registry import planner_entry, planner_settings
 from hptrack.scenario.model import Scenario
@@ -92,7 +93,7 @@ def scenario_for(key: EpisodeKey) -> Scenario:
 def planner_for(key: EpisodeKey):
     """A fresh planner of a benchmark episode, from the settings stored in its key."""
     entry = planner_entry(key.planner)
-    return entry.factory(entry.settings_type.from_canonical(key.settings))
+    return entry.factory(entry.settings_type.from_canonical(key.planner_settings))
 
 
 def run_one(key: EpisodeKey) -> EpisodeRow:
@@ -168,7 +169,9 @@ def run_keys(
                 record(row)
         return finished
     own_pool = executor is None
-    pool = ProcessPoolExecutor(max_workers=workers) if own_pool else executor
+    if own_pool:
+        workers = max(1, min(workers, len(todo)))
+    pool = worker_pool(workers) if own_pool else executor
     pending: dict[Future, EpisodeKey] = {}
     queue = iter(todo)
     try:
@@ -274,3 +277,20 @@ def reductions(summary: dict, planner: str) -> dict:
             n: 100.0 * (theirs[n]["mean"] - mine[n]["mean"]) / theirs[n]["mean"] for n in shared
         }
     return out
+
+
+def gap_closed(summary: dict, floor: str = "greedy", reference: str = "clairvoyant") -> dict:
+    """Share of the gap from ``floor`` (no look-ahead) to ``reference`` (reads the truth) that
+    each planner's mean ``U`` closes, percent: ``{planner: {n: 100 (U_floor - U) / (U_floor -
+    U_reference)}}`` (empty without both)."""
+    if floor not in summary or reference not in summary:
+        return {}
+    low, ref = summary[floor], summary[reference]
+    return {
+        planner: {
+            n: 100.0 * (low[n]["mean"] - cell["mean"]) / (low[n]["mean"] - ref[n]["mean"])
+            for n, cell in by_n.items()
+            if n in low and n in ref and low[n]["mean"] != ref[n]["mean"]
+        }
+        for planner, by_n in summary.items()
+    }

@@ -8,14 +8,15 @@ import csv
 from collections import Counter
 from pathlib import Path
 
-from hptrack.experiments.benchmark import BenchmarkConfig, reductions, summarise
+from hptrack.experiments.benchmark import BenchmarkConfig, gap_closed, reductions, summarise
 from hptrack.experiments.store import EpisodeKey, EpisodeRow
 from hptrack.registry import planner_entry
 
 
 def effort_label(key: EpisodeKey) -> str:
     """The planning effort an episode's settings set (``"none"`` for a planner without one)."""
-    return planner_entry(key.planner).settings_type.from_canonical(key.settings).effort_label()
+    settings = planner_entry(key.planner).settings_type.from_canonical(key.planner_settings)
+    return settings.effort_label()
 
 
 # Paper, Tables II and III (mean +- std of U over its random cases), for side-by-side reports.
@@ -119,15 +120,23 @@ def markdown_tables(
     ns = sorted({n for by_n in summary.values() for n in by_n})
     head = "| planner | " + " | ".join(f"n={n}" for n in ns) + " |"
     rule = "|---|" + "---|" * len(ns)
+    gaps = gap_closed(summary)
     lines = ["Mean +- std of U (lower is better); episodes per cell in brackets.", "", head, rule]
+    if gaps:
+        lines[0] += (
+            " `clairvoyant` reads the true target states (a perfect-knowledge reference that "
+            "cannot fly); `gap` is the share of the greedy-to-clairvoyant gap a planner closes."
+        )
     for planner, by_n in summary.items():
         cells = [
             f"{by_n[n]['mean']:.2f} +- {by_n[n]['std']:.2f} ({by_n[n]['episodes']})"
+            + (f", gap {gaps[planner][n]:.0f} %" if n in gaps.get(planner, {}) else "")
             if n in by_n
             else ""
             for n in ns
         ]
-        lines.append(f"| {planner} | " + " | ".join(cells) + " |")
+        truth = " (reads the truth)" if planner_entry(planner).reads_truth else ""
+        lines.append(f"| {planner}{truth} | " + " | ".join(cells) + " |")
     first = next(iter(summary))
     lines.append(
         "| never observed (same scenarios) | "
@@ -185,7 +194,7 @@ def write_csv(rows: list[EpisodeRow], path: Path) -> None:
                 "never_observed",
                 "detections",
                 "wall_time_s",
-                "settings",
+                "planner_settings",
             ]
         )
         for r in rows:
@@ -200,7 +209,7 @@ def write_csv(rows: list[EpisodeRow], path: Path) -> None:
                     r.never_observed,
                     r.detections,
                     r.wall_time_s,
-                    r.key.settings,
+                    r.key.planner_settings,
                 ]
             )
     summary_path = path.with_name(path.stem + "_summary.csv")
