@@ -113,3 +113,13 @@ def test_fuzz_tampered_logs_replay_or_are_refused_in_one_line(tmp_path_factory, 
     outcome = replayed_or_refused(tmp_path_factory.mktemp("fuzz"), lines)
     if isinstance(outcome, dict):
         assert json.dumps(outcome, allow_nan=True)
+
+
+def test_truth_of_the_wrong_shape_is_left_out(tmp_path, log_lines):
+    lines = list(log_lines)
+    i = next(i for i, line in enumerate(lines) if json.loads(line)["kind"] == "truth")
+    record = json.loads(lines[i])
+    record["states"] = []
+    lines[i] = json.dumps(record)
+    summary = replayed_or_refused(tmp_path, lines)
+    assert isinstance(summary, dict) and summary["mismatches"] == 0

@@ -178,7 +178,9 @@ def replay_log(path: str | Path) -> ReplayResult:
     final_k = round(controller.final["time"] / scenario.time_step)
     truth_array = (
         np.array([truth[k] for k in range(final_k + 1)])
-        if all(k in truth for k in range(final_k + 1))
+        if all(
+            k in truth and truth[k].shape == (len(scenario.targets), 4) for k in range(final_k + 1)
+        )
         else None
     )
     record = controller.episode_record(truth_array)
