@@ -122,29 +122,20 @@ def _first_problem(n: int):
 
     sc = random_scenario(n, seed=0, homogeneous=True)
     spec = sc.mission_spec()
-    return PlanningProblem(
-        sc.agent.position,
-        sc.means(),
-        sc.covariances(),
-        sc.process_noise(),
-        sc.budget,
-        spec.time_step,
-        spec.c_per_step,
-        spec.agent_speed,
-        spec.sensor_diameter,
-        spec.measurement_noise,
-    )
+    return PlanningProblem(spec.record, sc.agent.position, sc.means(), sc.covariances(), sc.budget)
 
 
 def rates(targets: list[int], seconds: float) -> None:
-    from hptrack.planning import search
-    from hptrack.planning.tree import BACKUPS
+    from hptrack.planning import SearchOptions, search
+    from hptrack.planning.backups import BACKUPS, backup_of
 
     for n in targets:
         problem = _first_problem(n)
         search(problem, iterations=64)  # load the kernels
         for backup in BACKUPS:
-            result = search(problem, time_limit=seconds, seed=0, backup=backup)
+            result = search(
+                problem, SearchOptions(backup=backup_of(backup)), time_limit=seconds, seed=0
+            )
             print(
                 f"n={n} {backup}: {result.simulations / result.elapsed:,.0f} simulations/s, "
                 f"{result.state_nodes:,} state nodes"
@@ -191,7 +182,7 @@ def rollouts(targets: list[int], count: int) -> None:
             ("uniform_no_follow", UniformNoFollow()),
             ("nearest, epsilon 0.6", Nearest(0.6)),
         ):
-            env = mdp.SubtaskEnv(problem.model(), mdp.new_memo(n, problem.n_steps))
+            env = problem.env()
             root = problem.root_state()
             state = tuple(a.copy() for a in root)
             args = (np.array([3], dtype=np.uint64), np.empty(n, dtype=np.int64), mdp.new_work())

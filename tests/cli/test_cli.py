@@ -290,7 +290,7 @@ def test_missing_scenario_file_names_it(cli, tmp_path):
                     }
                 ],
             ),
-            ["targets.0.covariance", "log det"],
+            ["targets.0.covariance", "1e+150"],
         ),
         (dict(seed=True), ["seed", "boolean"]),
     ],

@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.cli.app import app
 from hptrack.interface import InputError
-from hptrack.planning import hierarchical
+from hptrack.planning import hierarchical, subtask_search
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.scenario import random_scenario
 from hptrack.sim.episode import run_episode
@@ -114,15 +114,15 @@ def test_timed_runs_warm_the_kernels_before_the_first_search(monkeypatch):
     """The first timed search of a process must not pay the kernels' loading: reset runs a
     tiny search first (once per process)."""
     calls = []
-    monkeypatch.setattr(hierarchical, "_warmed", set())
-    real = hierarchical.search
-    monkeypatch.setattr(
-        hierarchical, "search", lambda *a, **k: calls.append(k.get("iterations")) or real(*a, **k)
-    )
+    monkeypatch.setattr(subtask_search, "_warmed", set())
+    real = subtask_search.search
+    spy = lambda *a, **k: calls.append(k.get("iterations")) or real(*a, **k)  # noqa: E731
+    monkeypatch.setattr(subtask_search, "search", spy)
+    monkeypatch.setattr(hierarchical, "search", spy)
     scenario = random_scenario(2, seed=0).model_copy(update={"budget": 20.0})
     run_episode(scenario, mcts(time_limit=0.05))
     assert calls[:2] == [64, 64]  # the warm-up's two searches (first plan, re-plan)
-    assert hierarchical._warmed
+    assert subtask_search._warmed
     calls.clear()
     run_episode(scenario, mcts(time_limit=0.05))
     assert 64 not in calls
@@ -244,3 +244,38 @@ def test_dwell_follows_the_target_just_found_for_its_length_then_flies_the_plan(
     assert '"dwell":10.0' in settings.canonical()
     assert '"dwell":0.0' in MctsSettings(preset="improved").canonical()
     assert MctsSettings.from_canonical(settings.canonical()).dwell == 10.0
+
+
+def test_options_keep_their_names_from_the_settings_to_the_records():
+    """Every field of the search's and the sub-task MDP's option records is the planner option
+    of the same name (the backup and the rollout as the instances the kernels take)."""
+    from hptrack.planning.backups import Max
+    from hptrack.planning.search import SearchOptions
+    from hptrack.planning.subtask_mdp import SubtaskOptions
+    from hptrack.planning.subtask_rollout import Nearest
+
+    settings = MctsSettings(
+        exploration=0.7,
+        backup="max",
+        max_weight=0.5,
+        root_split="weighted",
+        common_rollouts=True,
+        rollout="nearest",
+        rollout_epsilon=0.3,
+        estimator="sharp",
+        dwell=12.5,
+    )
+    assert set(SearchOptions._fields) | set(SubtaskOptions._fields) <= set(
+        MctsSettings.model_fields
+    )
+    assert settings.search_options() == SearchOptions(
+        exploration=0.7,
+        backup=Max(0.5),
+        root_split="weighted",
+        common_rollouts=True,
+        rollout=Nearest(0.3),
+    )
+    assert settings.subtask_options() == SubtaskOptions(estimator="sharp", dwell=12.5)
+    paper = MctsSettings(preset="paper")
+    assert paper.search_options() == SearchOptions()
+    assert paper.subtask_options() == SubtaskOptions()

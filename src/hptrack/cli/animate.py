@@ -14,7 +14,7 @@ import typer
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
 
-from hptrack.cli.common import check_output_path, console, progress_display
+from hptrack.cli.common import check_memory, check_output_path, console, progress_display
 from hptrack.interface import InputError
 from hptrack.sim.record import EpisodeRecord
 
@@ -24,6 +24,8 @@ def load_record(path: Path) -> EpisodeRecord:
     if not path.is_file():
         raise InputError(f"RECORD {str(path)!r}: no such file")
     try:
+        with zipfile.ZipFile(path) as archive:  # a zip bomb is refused before it is expanded
+            check_memory(sum(item.file_size for item in archive.infolist()), f"RECORD {path}")
         return EpisodeRecord.load(path)
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as err:
         reason = " ".join(str(err).split()) or type(err).__name__

@@ -18,8 +18,9 @@ from rich.progress import (
 )
 
 from hptrack.cli.common import (
+    check_figure_path,
+    check_memory,
     check_output_dir,
-    check_output_path,
     check_seed,
     console,
     progress_display,
@@ -30,6 +31,8 @@ learn_app = typer.Typer(
     help="Train learning baselines on hptrack/Tracking-v0 (resumable).", no_args_is_help=True
 )
 
+MAX_TRAINING_STEPS = 10**10
+"""Most environment steps of one training run (about a year at 300 steps per second)."""
 PROGRESS_EVERY = 250
 """Steps between progress-bar refreshes."""
 
@@ -79,10 +82,10 @@ def _check_common(
     validation_interval: int,
     checkpoint_interval: int,
 ) -> None:
-    if targets < 1:
-        raise InputError(f"--targets must be at least 1, got {targets}")
-    if steps < 1:
-        raise InputError(f"--steps must be at least 1, got {steps}")
+    if not 1 <= targets <= 62:
+        raise InputError(f"--targets must be between 1 and 62, got {targets}")
+    if not 1 <= steps <= MAX_TRAINING_STEPS:
+        raise InputError(f"--steps must be between 1 and {MAX_TRAINING_STEPS:g}, got {steps}")
     check_seed(seed)
     for option, value in (
         ("--validation-scenarios", validation_scenarios),
@@ -126,23 +129,14 @@ def _train(trainer: Any, name: str, out: Path, total: int) -> dict[str, Any]:
         f"{summary['best_U']:.3f} at step {summary['best_step']}; last "
         f"{summary['last_validation_U']:.3f}; model {escape(summary['best_model'])}"
     )
-    _write_figure(out, out / "curve.png", name)
+    _write_figure(out, out / "curve.png")
     return summary
 
 
-def _write_figure(run: Path, path: Path, title: str) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+def _write_figure(run: Path, path: Path, title: str | None = None) -> None:
+    from hptrack.learning.curves import save_training_curve
 
-    from hptrack.learning.curves import load_curve, plot_training_curve
-
-    curve = load_curve(run)
-    fig = Figure(figsize=(7, 4), layout="constrained")
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    plot_training_curve(ax, curve)
-    ax.set_title(title)
-    fig.savefig(path, dpi=120)
+    save_training_curve(run, path, title)
     console.print(f"training curve written to {escape(str(path))}")
 
 
@@ -176,6 +170,9 @@ def learn_adfq(
     )
     if warmup < 0 or buffer < 1:
         raise InputError(f"--warmup must be >= 0 and --buffer >= 1, got {warmup} and {buffer}")
+    # two float32 observations (6 features per target, the budget, a mask), action, reward,
+    # end flag, and the priority tree's two float64 leaves
+    check_memory(buffer * (8 * (7 * targets + 1) + 8 + 8 + 1 + 16), f"--buffer {buffer}")
     _require_learn_extra()
     from hptrack.learning.agent import AdfqConfig
     from hptrack.learning.train import TrainConfig, Trainer, tracking_task
@@ -240,13 +237,16 @@ def learn_plot(
     output: Annotated[
         Path | None, typer.Option("--output", "-o", help="PNG to write (default RUN/curve.png).")
     ] = None,
-    title: Annotated[str | None, typer.Option(help="Figure title.")] = None,
+    title: Annotated[
+        str | None,
+        typer.Option(help="Figure title (default: algorithm, n, setting from the run's config)."),
+    ] = None,
 ) -> None:
     """Draw a run's training curve: final U of the training episodes and of the validation
     scenarios against steps, with the never-observed U."""
     path = output or run / "curve.png"
-    check_output_path(path, "--output")
-    _write_figure(run, path, title if title is not None else run.name)
+    check_figure_path(path, "--output")
+    _write_figure(run, path, title)
 
 
 def register(app: typer.Typer) -> None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
+from hptrack.experiments.workers import worker_pool
 from hptrack.interface import InputError
 from hptrack.registry import planner_entry, planner_settings
 from hptrack.scenario.model import Scenario
@@ -168,7 +169,9 @@ def run_keys(
                 record(row)
         return finished
     own_pool = executor is None
-    pool = ProcessPoolExecutor(max_workers=workers) if own_pool else executor
+    if own_pool:
+        workers = max(1, min(workers, len(todo)))
+    pool = worker_pool(workers) if own_pool else executor
     pending: dict[Future, EpisodeKey] = {}
     queue = iter(todo)
     try:

@@ -156,6 +156,29 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def check_columns(db: sqlite3.Connection, source: str) -> None:
+    """Refuse a database whose tables lack columns of :data:`SCHEMA` (a file edited by hand or
+    written by another program): one line naming the table and the missing columns.
+
+    Raises:
+        InputError: a table of :data:`SCHEMA` misses columns.
+    """
+    expected = sqlite3.connect(":memory:")
+    expected.executescript(SCHEMA)
+    for (table,) in expected.execute("SELECT name FROM sqlite_master WHERE type='table'"):
+        want = [r[1] for r in expected.execute(f"PRAGMA table_info({table})")]
+        have = {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
+        missing = [c for c in want if c not in have]
+        if missing:
+            expected.close()
+            db.close()
+            raise InputError(
+                f"{source}: table {table} has no column {', '.join(missing)}; not a results "
+                "database of this hptrack (use a new file)"
+            )
+    expected.close()
+
+
 class ResultStore:
     """Episodes in an SQLite file (one row per :class:`EpisodeKey`, inserted once).
 
@@ -187,6 +210,7 @@ class ResultStore:
         if tables and version != SCHEMA_VERSION:
             self._migrate()
         self._db.executescript(SCHEMA)
+        check_columns(self._db, f"--db {path}")
         self._db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
         self._db.commit()
         self._host = socket.gethostname()
