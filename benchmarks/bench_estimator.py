@@ -34,27 +34,24 @@ from hptrack.scenario.random import random_mean, random_prior
 
 
 @numba.njit(cache=True)
-def estimate_all(covs, qs, tau, c_per_step, speed, diameter, max_steps):
+def estimate_all(covs, qs, mission, max_steps):
     """One estimate per start covariance, as the tree search calls it per node expansion."""
     total = 0.0
     for i in range(covs.shape[0]):
-        k, p, e = coverage_outcome(covs[i], qs[i], tau, c_per_step, speed, diameter, max_steps)
+        k, p, e = coverage_outcome(mission, covs[i], qs[i], max_steps)
         total += p + 1e-9 * (k + e)
     return total
 
 
 @numba.njit(cache=True)
-def estimate_all_sharp(covs, qs, tau, c_per_step, speed, diameter, max_steps, flights, approach):
+def estimate_all_sharp(covs, qs, mission, max_steps, flights, approach):
     """:func:`estimate_all` with the sharp kernel (each belief's flight steps and approach)."""
     total = 0.0
     for i in range(covs.shape[0]):
         k, p, e = sharp_coverage_outcome(
+            mission,
             covs[i],
             qs[i],
-            tau,
-            c_per_step,
-            speed,
-            diameter,
             max_steps,
             flights[i],
             approach[i, 0],
@@ -112,13 +109,7 @@ def main() -> None:
     args = parser.parse_args()
     settings = MissionSpec()
     means, covs, qs, flights, approach = start_covariances(args.n, settings, age=args.age)
-    call = (
-        settings.time_step,
-        settings.c_per_step,
-        settings.agent_speed,
-        settings.sensor_diameter,
-        1800,
-    )
+    call = (settings.record, 1800)
     estimate_all(covs[:10], qs[:10], *call)  # compile
     estimate_all_sharp(covs[:10], qs[:10], *call, flights[:10], approach[:10])
     # alternate the two kernels so that both see the same machine load

@@ -44,18 +44,15 @@ def _problem(n: int, seed: int):
     rng = np.random.default_rng(seed)
     priors = [random_prior(rng) for _ in range(n)]
     means = np.array([random_mean(rng) for _ in range(n)])
-    return PlanningProblem(
-        np.zeros(2),
-        means,
-        np.array([c for c, _ in priors]),
-        np.array([q for _, q in priors]),
-        900.0,
-        0.5,
-        0.5,
-        30.0,
-        100.0,
-        10.0 * np.eye(2),
-    )
+    covs, q, noise = np.array([c for c, _ in priors]), np.array([q for _, q in priors]), np.eye(2)
+    try:
+        from hptrack.models.mission import mission_record
+    except ImportError:  # a checkout before the mission record (--compare)
+        return PlanningProblem(
+            np.zeros(2), means, covs, q, 900.0, 0.5, 0.5, 30.0, 100.0, 10.0 * noise
+        )
+    mission = mission_record(0.5, 900.0, 30.0, 100.0, 10.0 * noise, q)
+    return PlanningProblem(mission, np.zeros(2), means, covs, 900.0)
 
 
 def worker(n: int, seed: int, duration: float) -> dict:

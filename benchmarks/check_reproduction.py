@@ -59,7 +59,7 @@ def stored(db: Path, planners: list[str], counts: list[int], seeds: int) -> dict
             if r.key.planner in planners
             and r.key.n_targets in counts
             and r.key.seed < seeds
-            and json.loads(r.key.settings).get("time_limit") is None
+            and json.loads(r.key.planner_settings).get("time_limit") is None
         }
     finally:
         store.close()

@@ -31,6 +31,14 @@ def plain_python_search() -> object:
     search = importlib.import_module("hptrack.planning.search")
     mdp = importlib.import_module("hptrack.planning.subtask_mdp")
     rollout = importlib.import_module("hptrack.planning.rollout")
+    backups = importlib.import_module("hptrack.planning.backups")
+
+    def back_up(backup, tree, path_state, path_action, path_found, depth, ret):
+        backups.back_sampled(backup, tree, path_state, path_action, path_found, depth, ret)
+        tree.value_range[0] = min(tree.value_range[0], ret)
+        tree.value_range[1] = max(tree.value_range[1], ret)
+        tree.counts[2] += 1
+
     search.mdp_copy_state = mdp.copy_state
     search.mdp_is_available = mdp.is_available
     search.mdp_expand = mdp.expand_action
@@ -38,7 +46,9 @@ def plain_python_search() -> object:
     search.mdp_value = mdp.terminal_value
     rollout.mdp_is_available = mdp.is_available
     search.choose_action = rollout.uniform_random  # the paper's random rollout policy
-    return search
+    search.back_up = back_up  # the paper's backup
+    search.pairs_outcomes = lambda backup: False
+    return importlib.import_module("hptrack.planning.subtask_search")
 
 
 def first_plan(n: int, seed: int):
@@ -48,16 +58,11 @@ def first_plan(n: int, seed: int):
     scenario = random_scenario(n, seed=seed, homogeneous=True)
     spec = scenario.mission_spec()
     return PlanningProblem(
+        spec.record,
         scenario.agent.position,
         scenario.means(),
         scenario.covariances(),
-        scenario.process_noise(),
         scenario.budget,
-        spec.time_step,
-        spec.c_per_step,
-        spec.agent_speed,
-        spec.sensor_diameter,
-        spec.measurement_noise,
     )
 
 
@@ -67,7 +72,7 @@ def count(mode: str, n: int, seed: int, seconds: float) -> int:
         warnings.simplefilter("ignore")  # uint64 wrap-around of the random stream
         search = plain_python_search()
     else:
-        search = importlib.import_module("hptrack.planning.search")
+        search = importlib.import_module("hptrack.planning.subtask_search")
         search.search(first_plan(n, seed), iterations=64)  # load the compiled kernels
     start = time.perf_counter()
     result = search.search(first_plan(n, seed), time_limit=seconds, seed=0)

@@ -68,7 +68,7 @@ def label(key, levels, variants) -> tuple[str, float] | None:
         return ("greedy", 0.0)
     for level in levels:
         for v in variants:
-            if key.settings == settings(v, level):
+            if key.planner_settings == settings(v, level):
                 return (v, level)
     return None
 
@@ -286,7 +286,7 @@ def main() -> None:
     )
 
     def on_done(row, finished, total):
-        s = json.loads(row.key.settings)
+        s = json.loads(row.key.planner_settings)
         print(
             f"[{finished}/{total}] {row.key.planner} n={row.key.n_targets} "
             f"seed={row.key.seed} {s.get('time_limit', '')} {s.get('backup', '')} "

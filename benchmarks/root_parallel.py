@@ -28,28 +28,21 @@ import numpy as np
 
 
 def scaling(seconds: float = 3.0) -> None:
-    from hptrack.planning import search
+    from hptrack.planning import SearchOptions, search
+    from hptrack.planning.backups import Max
     from hptrack.planning.subtask_mdp import PlanningProblem
     from hptrack.scenario.random import random_scenario
 
     sc = random_scenario(10, seed=0, homogeneous=True)
     spec = sc.mission_spec()
     problem = PlanningProblem(
-        sc.agent.position,
-        sc.means(),
-        sc.covariances(),
-        sc.process_noise(),
-        sc.budget,
-        spec.time_step,
-        spec.c_per_step,
-        spec.agent_speed,
-        spec.sensor_diameter,
-        spec.measurement_noise,
+        spec.record, sc.agent.position, sc.means(), sc.covariances(), sc.budget
     )
-    search(problem, iterations=64, backup="max", threads=2)  # load the kernels
+    options = SearchOptions(backup=Max())
+    search(problem, options, iterations=64, threads=2)  # load the kernels
     for threads in (1, 2):
         start = time.perf_counter()
-        result = search(problem, time_limit=seconds, backup="max", threads=threads)
+        result = search(problem, options, time_limit=seconds, threads=threads)
         rate = result.simulations / (time.perf_counter() - start)
         print(f"threads={threads}: {rate:,.0f} simulations per wall second")
 
@@ -64,8 +57,8 @@ def main() -> None:
     store = ResultStore(args.db)
     runs = defaultdict(dict)  # (label, n) -> {seed: U}
     for r in store.rows():
-        s = json.loads(r.key.settings)
-        label = f"{s.get('threads', 1)} x {s['iterations']:,}"
+        s = json.loads(r.key.planner_settings)
+        label = f"{s['threads']} x {s['iterations']:,}"
         runs[(label, r.key.n_targets)][r.key.seed] = r.uncertainty
     store.close()
     labels = sorted({lb for lb, _ in runs})

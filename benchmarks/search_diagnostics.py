@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import csv
 import functools
+import json
 import math
 from collections import defaultdict
 from pathlib import Path
@@ -53,7 +54,7 @@ def follows(db: Path) -> None:
 
     counts, totals = defaultdict(int), defaultdict(int)
     for r in _rows(db):
-        group = (r.key.setting, r.key.n_targets, r.key.settings)
+        group = (r.key.setting, r.key.n_targets, r.key.planner_settings)
         totals[group] += 1
         entries = [e for e in (r.info or {}).get("subtasks", []) if "follow" in e]
         limit = EARLY * scenario_for(r.key).n_steps
@@ -66,18 +67,15 @@ def follows(db: Path) -> None:
 
 
 @functools.cache
-def _resolved(settings: str) -> dict:
-    """The resolved mcts options of a canonical settings text (an option it leaves out has the
-    paper's value)."""
-    from hptrack.planning.hierarchical import MctsSettings
-
-    return MctsSettings.from_canonical(settings).as_json()
+def _options(settings: str) -> dict:
+    """The options of a canonical settings text (read once per text)."""
+    return json.loads(settings)
 
 
 def _matches(settings: str, where: list[str]) -> bool:
-    """Whether the mcts settings (canonical text) have every resolved ``option=value`` of
+    """Whether the mcts settings (canonical text: every option) have every ``option=value`` of
     ``where``."""
-    resolved = _resolved(settings)
+    resolved = _options(settings)
     for condition in where:
         key, _, value = condition.partition("=")
         have = resolved[key]
@@ -96,7 +94,7 @@ def _published(paths: list[Path], where: list[str]) -> dict:
                         out[(r["setting"], int(r["n_targets"]), int(r["seed"]))] = float(r["U"])
         else:
             for r in _rows(path):
-                if _matches(r.key.settings, where):
+                if _matches(r.key.planner_settings, where):
                     out[(r.key.setting, r.key.n_targets, r.key.seed)] = r.uncertainty
     return out
 
@@ -105,7 +103,7 @@ def paired(db: Path, against: list[Path], where: list[str], against_where: list[
     reference = _published(against, against_where)
     diffs = defaultdict(list)
     for r in _rows(db):
-        if not _matches(r.key.settings, where):
+        if not _matches(r.key.planner_settings, where):
             continue
         ref = reference.get((r.key.setting, r.key.n_targets, r.key.seed))
         if ref is not None:
@@ -124,29 +122,20 @@ def _first_problem(n: int):
 
     sc = random_scenario(n, seed=0, homogeneous=True)
     spec = sc.mission_spec()
-    return PlanningProblem(
-        sc.agent.position,
-        sc.means(),
-        sc.covariances(),
-        sc.process_noise(),
-        sc.budget,
-        spec.time_step,
-        spec.c_per_step,
-        spec.agent_speed,
-        spec.sensor_diameter,
-        spec.measurement_noise,
-    )
+    return PlanningProblem(spec.record, sc.agent.position, sc.means(), sc.covariances(), sc.budget)
 
 
 def rates(targets: list[int], seconds: float) -> None:
-    from hptrack.planning import search
-    from hptrack.planning.tree import BACKUPS
+    from hptrack.planning import SearchOptions, search
+    from hptrack.planning.backups import BACKUPS, backup_of
 
     for n in targets:
         problem = _first_problem(n)
         search(problem, iterations=64)  # load the kernels
         for backup in BACKUPS:
-            result = search(problem, time_limit=seconds, seed=0, backup=backup)
+            result = search(
+                problem, SearchOptions(backup=backup_of(backup)), time_limit=seconds, seed=0
+            )
             print(
                 f"n={n} {backup}: {result.simulations / result.elapsed:,.0f} simulations/s, "
                 f"{result.state_nodes:,} state nodes"
@@ -193,7 +182,7 @@ def rollouts(targets: list[int], count: int) -> None:
             ("uniform_no_follow", UniformNoFollow()),
             ("nearest, epsilon 0.6", Nearest(0.6)),
         ):
-            env = mdp.SubtaskEnv(problem.model(), mdp.new_memo(n, problem.n_steps))
+            env = problem.env()
             root = problem.root_state()
             state = tuple(a.copy() for a in root)
             args = (np.array([3], dtype=np.uint64), np.empty(n, dtype=np.int64), mdp.new_work())
@@ -236,7 +225,7 @@ def model_accuracy(db: Path) -> None:
 
     flown = defaultdict(list)
     for r in _rows(db):
-        if not _matches(r.key.settings, ["backup=max"]):
+        if not _matches(r.key.planner_settings, ["backup=max"]):
             continue
         tau = scenario_for(r.key).time_step
         for e in (r.info or {}).get("subtasks", []):
@@ -268,7 +257,7 @@ def lost(db: Path, where: list[str]) -> None:
     the never-observed ``U`` over ``n``, the same for every target of a homogeneous scenario)."""
     groups = defaultdict(list)
     for r in _rows(db):
-        if r.key.setting != "homogeneous" or not _matches(r.key.settings, where):
+        if r.key.setting != "homogeneous" or not _matches(r.key.planner_settings, where):
             continue
         tried, found = set(), set()
         for e in (r.info or {}).get("subtasks", []):
@@ -277,7 +266,7 @@ def lost(db: Path, where: list[str]) -> None:
                 if e.get("outcome") == "found":
                     found.add(e["target_index"])
         n = r.key.n_targets
-        groups[(n, r.key.settings)].append(
+        groups[(n, r.key.planner_settings)].append(
             (r.uncertainty, n - len(tried), len(tried - found), r.never_observed / n)
         )
     for (n, settings), rows in sorted(groups.items()):

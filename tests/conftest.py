@@ -37,3 +37,15 @@ def cli(capsys):
         return CliResult(exit_.value.code, captured.out, captured.err)
 
     return run
+
+
+# The fuzz suite's budgets (tests/*/test_*fuzz*.py): a small fixed one in CI ("fuzz-ci", the
+# default) and a long run by hand: HPTRACK_FUZZ=fuzz-long python3 -m pytest -k fuzz.
+# A fuzz test is decorated with ``@settings.get_profile(FUZZ_PROFILE)``; other tests keep theirs.
+from hypothesis import HealthCheck, settings  # noqa: E402
+
+_SLOW_OK = [HealthCheck.too_slow, HealthCheck.function_scoped_fixture]
+settings.register_profile("fuzz-ci", max_examples=30, deadline=None, suppress_health_check=_SLOW_OK)
+settings.register_profile(
+    "fuzz-long", max_examples=1000, deadline=None, suppress_health_check=_SLOW_OK
+)

@@ -19,6 +19,8 @@ from __future__ import annotations
 from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
+import hptrack._numba_cache  # noqa: F401  (first: numba's cache directory, before any kernel)
+
 _EXPORTS = {
     "Scenario": "hptrack.scenario",
     "load_scenario": "hptrack.scenario",

@@ -1,5 +1,6 @@
 """What every layer above the models may use: the mission's constants, what a planner sees, and
-the planner protocol (Gymnasium-like; a planner never sees the truth).
+the planner protocol (Gymnasium-like; a planner never sees the truth, except a reference that
+declares it reads it, :class:`TruthReader`).
 
 Every planner, whether it chooses sub-tasks (the paper's hierarchical planner), controls (ARVI,
 A*) or a learned policy, implements :class:`Planner`. Each step the simulator (or the real-time
@@ -8,18 +9,22 @@ its own position, the target beliefs and which targets it just measured) and rec
 waypoint: the position the agent should fly towards, at most ``agent_speed * time_step`` away.
 
 :class:`MissionSpec` is the one vocabulary for the mission constants (time step, budget, speed,
-sensor diameter, measurement noise, process noise); the compiled kernels receive the same names.
+sensor diameter, measurement noise, process noise); the compiled kernels receive them as one
+record, :attr:`MissionSpec.record` (:class:`hptrack.models.mission.Mission`), built and
+validated once.
 """
 
 from __future__ import annotations
 
 import math
+import reprlib
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from hptrack.models.measurement import PositionMeasurementModel, check_noise_covariance
+from hptrack.models.measurement import PositionMeasurementModel
+from hptrack.models.mission import Mission, mission_record
 from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
 
 DEFAULT_MEASUREMENT_NOISE = 10.0
@@ -34,6 +39,56 @@ class InputError(ValueError):
     """Bad user input (a file, a field, an option or a value): the message is one line that
     names it and the value. The CLI shows it without a traceback and exits with code 2; every
     other exception is a bug and keeps its traceback."""
+
+
+MAX_SHOWN_CHARS = 80
+"""Longest shown value in an error message (:func:`shown`)."""
+MAX_MESSAGE_CHARS = 600
+"""Longest error message (:func:`one_line`)."""
+
+
+class _ShortRepr(reprlib.Repr):
+    """``repr`` that looks at a bounded part of a value: a few items of a list or a mapping, two
+    levels deep, the digit count of a long integer (never its digits)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.maxlevel, self.maxlist, self.maxtuple, self.maxdict = 2, 4, 4, 3
+        self.maxstring, self.maxother, self.maxlong = 40, 40, 30
+
+    def repr_int(self, x: int, level: int) -> str:
+        if x.bit_length() > 96:
+            return f"<an integer of about {int(x.bit_length() * math.log10(2)) + 1} digits>"
+        return repr(x)
+
+    def repr_str(self, x: str, level: int) -> str:
+        return repr(x[: self.maxstring]) + ("..." if len(x) > self.maxstring else "")
+
+    def repr_list(self, x: list, level: int) -> str:
+        text = super().repr_list(x, level)
+        return f"{text[:-1]} ({len(x)} items)]" if len(x) > self.maxlist else text
+
+
+_SHORT = _ShortRepr()
+
+
+def shown(value: Any, limit: int = MAX_SHOWN_CHARS) -> str:
+    """A bounded, printable ``repr`` of ``value`` for an error message: long lists, mappings,
+    strings and integers are shortened, control characters escaped, at most ``limit`` chars."""
+    try:
+        text = _SHORT.repr(value)
+    except Exception:  # noqa: BLE001 - a value whose repr fails is still shown
+        text = f"<{type(value).__name__}>"
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def one_line(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """``message`` as one bounded, printable line (whitespace collapsed, control characters
+    escaped, cut at ``limit`` chars)."""
+    text = " ".join(message[: 4 * limit].split())
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,28 +114,31 @@ class MissionSpec:
     process_noise_form: ProcessNoiseForm = "continuous"
     process_noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     target_ids: tuple[str, ...] = ()
+    record: Mission = field(init=False, repr=False)
+    """The mission's constants as the compiled kernels take them (built and validated once,
+    with the spec)."""
 
     def __post_init__(self) -> None:
-        for name in ("time_step", "budget", "agent_speed", "sensor_diameter"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
         if self.process_noise_form not in ("continuous", "paper_text"):
             raise ValueError(f"unknown process_noise_form {self.process_noise_form!r}")
-        noise = check_noise_covariance(self.measurement_noise)
-        q = np.array(self.process_noise, dtype=float).reshape(-1)
-        if not np.all(np.isfinite(q) & (q >= 0.0)):
-            raise ValueError(f"process_noise must be finite and >= 0, got {q.tolist()}")
-        noise.flags.writeable = False
-        q.flags.writeable = False
-        object.__setattr__(self, "measurement_noise", noise)
-        object.__setattr__(self, "process_noise", q)
+        record = mission_record(
+            self.time_step,
+            self.budget,
+            self.agent_speed,
+            self.sensor_diameter,
+            self.measurement_noise,
+            self.process_noise,
+            self.process_noise_form == "continuous",
+        )
+        object.__setattr__(self, "measurement_noise", record.measurement_noise)
+        object.__setattr__(self, "process_noise", record.process_noise)
         object.__setattr__(self, "target_ids", tuple(self.target_ids))
+        object.__setattr__(self, "record", record)
 
     @property
     def n_steps(self) -> int:
         """Number of simulation steps in the budget (``B / tau``)."""
-        return int(np.floor(self.budget / self.time_step + 1e-9))
+        return self.record.n_steps
 
     @property
     def step_length(self) -> float:
@@ -100,11 +158,6 @@ class MissionSpec:
     def motion(self) -> ConstantVelocityModel:
         """The target motion model (``F``, ``Q`` form)."""
         return ConstantVelocityModel(self.time_step, self.process_noise_form)
-
-    @property
-    def c_per_step(self) -> float:
-        """Lower-right block of the per-step ``Q`` over ``q`` (``tau`` s or 1)."""
-        return self.motion.c_per_step
 
     @property
     def sensor(self) -> PositionMeasurementModel:
@@ -154,3 +207,12 @@ class Planner(Protocol):
     def act(self, observation: Observation) -> np.ndarray: ...
 
     def episode_info(self) -> dict[str, Any]: ...
+
+
+@runtime_checkable
+class TruthReader(Protocol):
+    """A reference planner that reads the true target states (``clairvoyant``): the simulator
+    hands them, before every ``act``, to a planner of this kind and to no other. No real mission
+    has them, so it is never flown."""
+
+    def see_truth(self, states: np.ndarray) -> None: ...

@@ -13,10 +13,11 @@ from typing import Any
 
 from hptrack.baselines.arvi import ArviPlanner, ArviSettings
 from hptrack.baselines.astar import AStarPlanner, AStarSettings
+from hptrack.baselines.clairvoyant import ClairvoyantPlanner
 from hptrack.baselines.coverage import CoveragePlanner, CoverageSettings
 from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.baselines.stationary import StationaryPlanner
-from hptrack.interface import InputError, Planner
+from hptrack.interface import InputError, Planner, TruthReader
 from hptrack.learning.policy_planner import AdfqPlanner, AdfqSettings, Sb3Planner, Sb3Settings
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.settings import NoSettings, PlannerSettings
@@ -29,6 +30,12 @@ class PlannerEntry:
     settings_type: type[PlannerSettings]
     factory: Callable[[Any], Planner]
     summary: str
+
+    @property
+    def reads_truth(self) -> bool:
+        """Whether the planner reads the true target states (a reference the simulator alone can
+        run; never flown)."""
+        return isinstance(self.factory, type) and issubclass(self.factory, TruthReader)
 
 
 PLANNERS: dict[str, PlannerEntry] = {
@@ -43,6 +50,11 @@ PLANNERS: dict[str, PlannerEntry] = {
         CoverageSettings,
         CoveragePlanner,
         "pursues one target (-o target=ID) with coverage sub-tasks",
+    ),
+    "clairvoyant": PlannerEntry(
+        NoSettings,
+        ClairvoyantPlanner,
+        "READS THE TRUE TARGET STATES: perfect-knowledge reference, simulation only",
     ),
     "arvi": PlannerEntry(ArviSettings, ArviPlanner, "Anytime Reduced Value Iteration"),
     "astar": PlannerEntry(AStarSettings, AStarPlanner, "A* with an information heuristic"),

@@ -2,7 +2,8 @@
 
 Each planner declares its settings as one :class:`PlannerSettings` subclass (pydantic: types,
 ranges, defaults, one docstring line per field with its unit). Options from the command line
-(``-o KEY=VALUE``, values read as YAML scalars) or from Python are validated into it, and a bad
+(``-o KEY=VALUE``, values read as integers, numbers, ``true``/``false``, ``none`` or text,
+:func:`hptrack.cli.common.parse_value`) or from Python are validated into it, and a bad
 value is refused with one line that names the planner, the option and the value::
 
     planner 'mcts': option exploration must be > 0, got -1
@@ -21,11 +22,21 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from typing import Any, ClassVar, Self
+from typing import Annotated, Any, ClassVar, Self
 
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from hptrack.interface import InputError
+from hptrack.interface import InputError, shown
+
+MAX_ITERATIONS = 10**9
+"""Most search iterations (or expansions, or nodes) per decision: at 1e4 to 1e5 a second, a
+billion take hours for one decision."""
+MAX_TIME_LIMIT_S = 3600.0
+"""Longest planning time per decision, s (an hour)."""
+Iterations = Annotated[int, Field(ge=1, le=MAX_ITERATIONS)]
+"""A per-decision effort count, bounded by :data:`MAX_ITERATIONS`."""
+TimeLimit = Annotated[float, Field(gt=0.0, le=MAX_TIME_LIMIT_S)]
+"""A per-decision planning time, s, bounded by :data:`MAX_TIME_LIMIT_S`."""
 
 _PHRASES = {
     "greater_than": "must be > {gt}",
@@ -35,6 +46,7 @@ _PHRASES = {
     "int_parsing": "must be an integer",
     "int_type": "must be an integer",
     "int_from_float": "must be a whole number",
+    "int_parsing_size": f"must be at most {MAX_ITERATIONS:g}",
     "float_parsing": "must be a number",
     "float_type": "must be a number",
     "finite_number": "must be a finite number",
@@ -101,11 +113,11 @@ class PlannerSettings(BaseModel):
                 raise InputError(
                     f"planner {planner!r}: unknown option {option} (its options: {known})"
                 ) from None
-            shown = f", got {first['input']!r}" if first["type"] != "missing" else ""
+            given = f", got {shown(first['input'])}" if first["type"] != "missing" else ""
             if not first["loc"]:  # a check across fields: the message names them
                 raise InputError(f"planner {planner!r}: {_phrase(first)}") from None
             raise InputError(
-                f"planner {planner!r}: option {option} {_phrase(first)}{shown}"
+                f"planner {planner!r}: option {option} {_phrase(first)}{given}"
             ) from None
 
     @classmethod

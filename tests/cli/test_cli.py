@@ -290,7 +290,7 @@ def test_missing_scenario_file_names_it(cli, tmp_path):
                     }
                 ],
             ),
-            ["targets.0.covariance", "log det"],
+            ["targets.0.covariance", "1e+150"],
         ),
         (dict(seed=True), ["seed", "boolean"]),
     ],
@@ -421,8 +421,26 @@ def test_a_bug_shows_its_traceback_and_exit_code_1(cli, monkeypatch):
     assert "This is a bug in hptrack" in result.err
 
 
-def test_planners_lists_every_planner_with_its_options(cli):
+def test_planners_lists_every_planner_with_each_options_default(cli):
+    from hptrack.cli.app import option_defaults, preset_changes
+
+    mcts = option_defaults("mcts")
+    assert (mcts["exploration"], mcts["preset"], mcts["backup"]) == ("0.5", "improved", "max")
+    assert mcts["iterations"] == "100000" and mcts["time_limit"] == "none"
+    assert preset_changes("mcts") == {"paper": {"backup": "sampled"}}
+    assert option_defaults("coverage") == {"target": "required"}
+    assert option_defaults("greedy") == {} and preset_changes("greedy") == {}
     result = cli("planners")
     assert result.code == 0
-    assert "mcts:" in result.out and "exploration" in result.out
-    assert "coverage:" in result.out and "target" in result.out
+    for shown in ("mcts", "exploration=0.5", "coverage", "target=required", "horizon=6"):
+        assert shown in result.out
+    assert "-o preset=paper sets" in result.out
+
+
+def test_simulate_json_names_the_subtasks_targets_by_id(cli, tmp_path):
+    path = scenario_file(tmp_path)
+    out = tmp_path / "c.json"
+    result = cli("simulate", path, "--planner", "coverage", "-o", "target=b", "--json", out)
+    assert result.code == 0, result.err
+    subtasks = json.loads(out.read_text())["info"]["subtasks"]
+    assert subtasks and all(s["target"] == "b" and "target_index" not in s for s in subtasks)

@@ -8,6 +8,7 @@ from scipy.stats import chi2
 from hptrack.coverage.estimator import coverage_cdf, coverage_outcome, estimate_coverage
 from hptrack.coverage.intercept import intercept_time
 from hptrack.interface import MissionSpec
+from hptrack.models.mission import mission_record
 from hptrack.models.motion import position_covariance_after
 from hptrack.scenario.random import random_prior
 
@@ -28,7 +29,7 @@ def test_p_cdf_rises_to_t_cutoff_and_not_after(seed, delay):
     cov, q = prior(seed, delay)
     est = estimate_coverage(cov, q, MISSION)
     k = est.cutoff_steps
-    long = coverage_cdf(cov, q, 0.5, MISSION.c_per_step, 30.0, 100.0, 4 * k + 200)
+    long = coverage_cdf(MISSION.record, cov, q, 4 * k + 200)
     assert k > 0
     assert np.all(np.diff(long[: k + 1]) > 0)
     assert long[k + 1] <= long[k]
@@ -43,7 +44,7 @@ def test_p_cdf_is_the_chi_squared_cdf_of_the_covered_area():
     sxx, sxy, syy = position_covariance_after(cov, q, float(k), 0.5, 0.5)
     area = 30.0 * 100.0 * k * 0.5 + math.pi * 50.0**2
     expected = chi2.cdf(area / (math.pi * math.sqrt(sxx * syy - sxy**2)), df=2)
-    got = coverage_cdf(cov, q, 0.5, 0.5, 30.0, 100.0, k + 1)[k]
+    got = coverage_cdf(MISSION.record, cov, q, k + 1)[k]
     assert got == pytest.approx(expected, rel=1e-12)
 
 
@@ -75,7 +76,7 @@ def test_budget_ending_before_the_coverage_starts_finds_nothing():
     cov, q = prior(1)
     est = estimate_coverage(cov, q, MISSION, remaining_time=-3.0)
     assert (est.p_find, est.cutoff_steps, est.expected_time) == (0.0, 0, 0.0)
-    assert coverage_outcome(cov, q, 0.5, 0.5, 30.0, 100.0, -1) == (0.0, 0.0, 0.0)
+    assert coverage_outcome(MISSION.record, cov, q, -1) == (0.0, 0.0, 0.0)
 
 
 def test_paper_text_noise_form_grows_faster():
@@ -122,18 +123,18 @@ def test_a_belief_that_never_grows_is_an_error_not_an_endless_loop():
 
 
 @numba.njit
-def _node_expansion(agent, mean, cov, q):
+def _node_expansion(mission, agent, mean, cov, q):
     t = intercept_time(agent[0], agent[1], mean[0], mean[1], mean[2], mean[3], 30.0)
     n = math.ceil(t / 0.5 - 1e-9)
-    return n, coverage_outcome(cov, q, 0.5, 0.5, 30.0, 100.0, 1800 - n)
+    return n, coverage_outcome(mission, cov, q, 1800 - n)
 
 
 def test_kernels_are_callable_from_numba():
     cov, q = prior(5)
     mean = np.array([800.0, -300.0, 1.0, 2.0])
-    n, (k, p, e) = _node_expansion(np.zeros(2), mean, cov, q)
+    n, (k, p, e) = _node_expansion(MISSION.record, np.zeros(2), mean, cov, q)
     assert n == math.ceil(intercept_time(0.0, 0.0, 800.0, -300.0, 1.0, 2.0, 30.0) / 0.5)
-    assert (k, p, e) == coverage_outcome(cov, q, 0.5, 0.5, 30.0, 100.0, 1800 - n)
+    assert (k, p, e) == coverage_outcome(MISSION.record, cov, q, 1800 - n)
 
 
 def test_the_mission_constants_are_the_ones_estimated_with():
@@ -142,6 +143,7 @@ def test_the_mission_constants_are_the_ones_estimated_with():
         time_step=0.25, agent_speed=20.0, sensor_diameter=80.0, process_noise_form="paper_text"
     )
     est = estimate_coverage(cov, q, mission, remaining_time=400.0)
-    k, p, e = coverage_outcome(cov, q, 0.25, 1.0, 20.0, 80.0, 1600)
+    record = mission_record(0.25, 900.0, 20.0, 80.0, 10.0 * np.eye(2), [q], False)
+    k, p, e = coverage_outcome(record, cov, q, 1600)
     assert (est.cutoff_steps, est.p_find, est.expected_time) == (k, p, e * 0.25)
     assert est.p_find != estimate_coverage(cov, q, MISSION, remaining_time=400.0).p_find

@@ -18,12 +18,12 @@ from hptrack.coverage.sharp_estimator import (
 )
 from hptrack.experiments.coverage_validation import draw_case, first_detections, plan_coverage
 from hptrack.interface import MissionSpec
-from hptrack.models.motion import predict_covariance
+from hptrack.models.mission import predict_covariance_on
 
 MISSION = MissionSpec()
 """The paper's constants: tau 0.5 s, v_a 30 m/s, w 100 m, continuous-form Q."""
 TAU, SPEED, W, R = 0.5, 30.0, 100.0, 50.0
-CPS = MISSION.c_per_step
+RECORD = MISSION.record
 
 
 def start_of_coverage(case_index, delay_s, agent=(0.0, 0.0)):
@@ -46,7 +46,7 @@ def reference_model(cov, q, n, approach, cutoff):
     pos = np.empty((k_fine.size, 2, 2))
     out = np.empty((4, 4))
     for i, k in enumerate(k_fine):
-        predict_covariance(cov, q, k, TAU, CPS, out)
+        predict_covariance_on(RECORD, cov, q, k, out)
         pos[i] = out[:2, :2]
     det = np.linalg.det(pos)
     lam = np.linalg.eigvalsh(cov[:2, :2])
@@ -101,11 +101,11 @@ def test_a_static_round_belief_covers_the_paper_area_less_two_thirds_of_the_foot
     # that the first turn covers again.
     sigma2 = 150.0**2
     cov = np.diag([sigma2, sigma2, 0.0, 0.0])
-    k_steps, p, e = sharp_coverage_outcome(cov, 0.0, TAU, CPS, SPEED, W, 300, 0, 0.0, 0.0)
+    k_steps, p, e = sharp_coverage_outcome(RECORD, cov, 0.0, 300, 0, 0.0, 0.0)
     assert k_steps == 300  # the budget, as the paper's estimator
     area = SPEED * W * 300 * TAU + math.pi * R * R / 3.0
     assert p == pytest.approx(-math.expm1(-area / (2 * math.pi * sigma2)), rel=1e-12)
-    paper = coverage_outcome(cov, 0.0, TAU, CPS, SPEED, W, 300)
+    paper = coverage_outcome(RECORD, cov, 0.0, 300)
     assert paper[1] == pytest.approx(
         -math.expm1(-(area + 2 * math.pi * R * R / 3) / (2 * math.pi * sigma2)), rel=1e-12
     )
@@ -117,8 +117,8 @@ def test_a_static_round_belief_covers_the_paper_area_less_two_thirds_of_the_foot
 @pytest.mark.parametrize("case, delay", [(2, 0.0), (1, 100.0), (5, 200.0)])
 def test_the_kernel_computes_its_model_as_a_brute_force_integration_does(case, delay):
     cov, q, n, approach = start_of_coverage(case, delay)
-    k, p, e = sharp_coverage_outcome(cov, q, TAU, CPS, SPEED, W, 10_000_000, n, *approach)
-    assert k == coverage_outcome(cov, q, TAU, CPS, SPEED, W, 10_000_000)[0]
+    k, p, e = sharp_coverage_outcome(RECORD, cov, q, 10_000_000, n, *approach)
+    assert k == coverage_outcome(RECORD, cov, q, 10_000_000)[0]
     ref_p, ref_e = reference_model(cov, q, n, approach, int(k))
     assert p == pytest.approx(ref_p, abs=1e-3)
     assert e == pytest.approx(ref_e, rel=5e-3)
@@ -181,10 +181,10 @@ def test_the_paper_estimator_is_unchanged():
 
 def test_budget_truncation_and_a_budget_that_ends_before_the_coverage():
     cov, q, n, approach = start_of_coverage(3, 100.0)
-    full = sharp_coverage_outcome(cov, q, TAU, CPS, SPEED, W, 10_000_000, n, *approach)
-    short = sharp_coverage_outcome(cov, q, TAU, CPS, SPEED, W, 40, n, *approach)
+    full = sharp_coverage_outcome(RECORD, cov, q, 10_000_000, n, *approach)
+    short = sharp_coverage_outcome(RECORD, cov, q, 40, n, *approach)
     assert short[0] == 40 and short[1] < full[1] and short[2] < full[2]
-    assert sharp_coverage_outcome(cov, q, TAU, CPS, SPEED, W, -1, n, *approach) == (0.0, 0.0, 0.0)
+    assert sharp_coverage_outcome(RECORD, cov, q, -1, n, *approach) == (0.0, 0.0, 0.0)
     est = estimate_sharp(cov, q, MISSION, n, approach, remaining_time=20.0)
     assert (est.cutoff_steps, est.p_find, est.budget_limited) == (40, short[1], True)
     assert est.expected_time == pytest.approx(short[2] * TAU)
@@ -197,8 +197,8 @@ def test_budget_truncation_and_a_budget_that_ends_before_the_coverage():
 
 def test_without_a_flight_the_approach_is_ignored_and_nothing_is_found_in_it():
     cov, q, _, _ = start_of_coverage(6, 200.0)
-    a = sharp_coverage_outcome(cov, q, TAU, CPS, SPEED, W, 10_000_000, 0, 0.0, 0.0)
-    b = sharp_coverage_outcome(cov, q, TAU, CPS, SPEED, W, 10_000_000, 0, 5.0, -3.0)
+    a = sharp_coverage_outcome(RECORD, cov, q, 10_000_000, 0, 0.0, 0.0)
+    b = sharp_coverage_outcome(RECORD, cov, q, 10_000_000, 0, 5.0, -3.0)
     assert a == b
     k, p, e = a
     assert 0.0 < e < k and 0.0 < p < 1.0
@@ -235,17 +235,17 @@ def test_the_subtask_exposes_the_sharp_estimate_of_its_own_flight():
 
 
 @numba.njit
-def _node_expansion(agent, mean, cov, q, left):
+def _node_expansion(mission, agent, mean, cov, q, left):
     n = intercept_steps(agent[0], agent[1], mean[0], mean[1], mean[2], mean[3], 30.0, 0.5, 50.0)
     ax, ay = approach_step(agent[0], agent[1], mean[0], mean[1], mean[2], mean[3], 30.0, 0.5, n)
     start = np.empty((4, 4))
-    predict_covariance(cov, q, n, 0.5, 0.5, start)
-    return n, sharp_coverage_outcome(start, q, 0.5, 0.5, 30.0, 100.0, left - n, n, ax, ay)
+    predict_covariance_on(mission, cov, q, n, start)
+    return n, sharp_coverage_outcome(mission, start, q, left - n, n, ax, ay)
 
 
 def test_the_kernel_is_callable_from_numba_like_the_paper_one():
     case = draw_case(7, 0)
-    n, (k, p, e) = _node_expansion(np.zeros(2), case.mean, case.covariance, case.q, 1800)
+    n, (k, p, e) = _node_expansion(RECORD, np.zeros(2), case.mean, case.covariance, case.q, 1800)
     est = estimate_sharp(
         MISSION.motion.predict(case.mean[None], case.covariance[None], case.q, n * TAU)[1][0],
         case.q,

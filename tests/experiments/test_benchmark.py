@@ -74,7 +74,7 @@ def test_summary_and_reductions_arithmetic(tmp_path):
     cell = summary["greedy"][2]
     u = [r.uncertainty for r in store.rows() if r.key.planner == "greedy" and r.key.n_targets == 2]
     assert cell["mean"] == pytest.approx(np.mean(u)) and cell["std"] == pytest.approx(np.std(u))
-    red = reductions(summary)[("greedy", "stationary")][2]
+    red = reductions(summary, "greedy")[("greedy", "stationary")][2]
     base = summary["stationary"][2]["mean"]
     assert red == pytest.approx(100 * (base - cell["mean"]) / base)
 
@@ -109,12 +109,12 @@ def test_a_different_option_never_reuses_another_settings_rows(tmp_path):
     assert run_benchmark(other, store) == 1  # another horizon: its own episode
     rows = store.rows()
     assert len(rows) == 2
-    horizons = sorted(json.loads(r.key.settings)["horizon"] for r in rows)
+    horizons = sorted(json.loads(r.key.planner_settings)["horizon"] for r in rows)
     assert horizons == [2, 3]
-    assert len({r.key.settings_hash for r in rows}) == 2
+    assert len({r.key.planner_settings_hash for r in rows}) == 2
     assert (
-        rows[0].key.settings_hash
-        == planner_settings("astar", json.loads(rows[0].key.settings)).digest()
+        rows[0].key.planner_settings_hash
+        == planner_settings("astar", json.loads(rows[0].key.planner_settings)).digest()
     )
 
 

@@ -28,8 +28,8 @@ def app():
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--targets", "0", "--steps", "10"], "--targets must be at least 1, got 0"),
-        (["--targets", "2", "--steps", "0"], "--steps must be at least 1, got 0"),
+        (["--targets", "0", "--steps", "10"], "--targets must be between 1 and 62, got 0"),
+        (["--targets", "2", "--steps", "0"], "--steps must be between 1 and 1e+10, got 0"),
         (["--targets", "2", "--steps", "10", "--seed", "-1"], "--seed"),
         (
             ["--targets", "2", "--steps", "10", "--validation-scenarios", "0"],
@@ -123,3 +123,37 @@ def test_ppo_run_resumes_without_repeating_entries(tmp_path):
     assert [e["step"] for e in curve if e["kind"] == "validation"] == [0, 80, 160, 200]
     assert [e["episode"] for e in curve if e["kind"] == "episode"] == list(range(1, 11))
     assert (tmp_path / "best.zip").exists()
+
+
+def test_adfq_below_the_warm_up_is_refused(app, tmp_path):
+    out = tmp_path / "r"
+    args = ["learn", "adfq", "--targets", "2", "--steps", "3000", "--out", str(out)]
+    result = CliRunner().invoke(app, args)
+    assert isinstance(result.exception, InputError)
+    assert "--steps 3000 is not above the warm-up of 10,000 steps" in str(result.exception)
+    assert not (out / "best.pt").exists()
+
+
+def test_ppo_says_when_it_rounds_the_steps_up(app, tmp_path, monkeypatch):
+    import hptrack.cli.learn as learn_cli
+    import hptrack.learning.sb3 as sb3
+
+    assert [sb3.trained_steps(s, 1800) for s in (1, 1800, 1801, 3000, 3600)] == [
+        1800,
+        1800,
+        3600,
+        3600,
+        3600,
+    ]
+    seen = {}
+    monkeypatch.setattr(sb3, "PpoTrainer", lambda task, config, out: config)
+    monkeypatch.setattr(
+        learn_cli, "_train", lambda config, name, out, total: seen.update(total=total)
+    )
+    args = ["learn", "sb3-ppo", "--targets", "2", "--out", str(tmp_path / "r")]
+    result = CliRunner().invoke(app, [*args, "--steps", "3000"])
+    assert result.exit_code == 0, result.output
+    assert "whole rollouts of 1,800 steps: --steps 3,000 trains 3,600 steps" in result.output
+    assert seen == {"total": 3600}
+    result = CliRunner().invoke(app, [*args, "--steps", "3600"])
+    assert result.exit_code == 0 and "rollouts" not in result.output

@@ -95,3 +95,14 @@ def test_a_restart_with_other_options_is_refused(tmp_path):
             ),
             tmp_path,
         )
+
+
+def test_a_run_that_cannot_leave_the_warm_up_is_refused_unless_allowed(tmp_path):
+    with pytest.raises(InputError) as err:
+        Trainer(TASK, _config(50), tmp_path / "a")  # warm-up of 50 steps
+    message = str(err.value)
+    assert "--steps 50 is not above the warm-up of 50 steps" in message
+    assert "--allow-untrained" in message and "\n" not in message
+    assert not (tmp_path / "a" / "config.json").exists()
+    summary = Trainer(TASK, _config(50), tmp_path / "b", allow_untrained=True).run()
+    assert summary["steps"] == 50

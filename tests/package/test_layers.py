@@ -7,6 +7,7 @@ from pathlib import Path
 import hptrack
 
 LAYERS = [
+    "_numba_cache",
     "models",
     "interface",
     "settings",

@@ -9,9 +9,10 @@ from test_search_toys import GAMBLE, Bandit, Gamble, gamble_q_exact
 
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.motion import position_covariance_after
-from hptrack.planning import search, search_mdp
+from hptrack.planning import SearchOptions, search, search_mdp
+from hptrack.planning.backups import Expected, Max, Robust, back_max, backup_of
 from hptrack.planning.search import _root_outcome
-from hptrack.planning.subtask_mdp import SubtaskEnv, intercept_of, is_available, new_memo
+from hptrack.planning.subtask_mdp import intercept_of, is_available
 from hptrack.planning.subtask_rollout import (
     MostUncertain,
     Nearest,
@@ -20,8 +21,9 @@ from hptrack.planning.subtask_rollout import (
     nearest,
     uniform_no_follow,
 )
-from hptrack.planning.tree import backup as back_up
 from hptrack.planning.tree import new_tree
+
+MAX = SearchOptions(backup=Max())
 
 
 @pytest.mark.parametrize("p", [0.3, 0.5, 0.9])
@@ -33,7 +35,7 @@ def test_expected_backup_weights_the_outcomes_by_their_known_probability(p):
     root = (np.array([-1, 0], dtype=np.int64),)
     for sims in (3, 4, 50):
         result = search_mdp(
-            env, root, 1, 2, np.zeros(1), iterations=sims, seed=2, backup="expected"
+            env, root, 1, 2, np.zeros(1), SearchOptions(backup=Expected()), iterations=sims, seed=2
         )
         assert result.root.values[0] == pytest.approx(p, abs=1e-15)
     sampled = search_mdp(env, root, 1, 2, np.zeros(1), iterations=50, seed=2)
@@ -46,27 +48,32 @@ def test_max_backup_gives_the_exact_expectimax_values_of_the_gamble():
     (they average in the worse actions tried below)."""
     exact = [gamble_q_exact(0, 0, a) for a in range(3)]
     root = (np.zeros(2, dtype=np.int64),)
-    found = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5, backup="max")
+    found = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), MAX, iterations=100000, seed=5)
     np.testing.assert_allclose(found.root.values, exact, rtol=1e-12)
     for backup in ("sampled", "expected"):
-        mean = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5, backup=backup)
+        options = SearchOptions(backup=backup_of(backup))
+        mean = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), options, iterations=100000, seed=5)
         assert np.all(mean.root.values < np.array(exact) - 0.05)
 
 
 def test_max_backup_matches_expectimax_on_the_subtask_mdp():
     exact = expectimax(two_targets())
-    result = search(two_targets(), iterations=30000, seed=0, backup="max")
+    result = search(two_targets(), MAX, iterations=30000, seed=0)
     np.testing.assert_allclose(result.root.values, [exact[0], exact[1]], rtol=1e-9)
-    after = search(two_targets(current_action=0), iterations=30000, seed=1, backup="max")
+    after = search(two_targets(current_action=0), MAX, iterations=30000, seed=1)
     exact_after = expectimax(two_targets(), first=(0, True))
     np.testing.assert_allclose(
         after.after_find.values, [exact_after[a] for a in after.after_find.actions], rtol=1e-9
     )
 
 
-def test_unknown_backup_is_refused():
+def test_unknown_backup_and_root_split_are_refused():
     with pytest.raises(ValueError, match="backup must be one of"):
-        search(two_targets(), iterations=10, backup="median")
+        backup_of("median")
+    with pytest.raises(ValueError, match="max_weight must be in"):
+        backup_of("max", 1.5)
+    with pytest.raises(ValueError, match="root_split must be one of"):
+        search(two_targets(), SearchOptions(root_split="odd"), iterations=10)
 
 
 def _greedy_cases():
@@ -74,16 +81,20 @@ def _greedy_cases():
     their available actions and the greedy rules' scores computed here: the position log det
     on arrival at the belief mean (numpy) and the intercept steps."""
     problem = six_targets(3)
-    env = SubtaskEnv(problem.model(), new_memo(6, problem.n_steps))
+    env = problem.env()
     for step, last in ((0, -1), (300, 2), (900, 4)):
         state = problem.root_state()
         state[0][0], state[0][2] = step, last
         available = [a for a in range(6) if is_available(env, state, a)]
-        steps = {a: intercept_of(env.model, state[1], a, step) for a in available if a != last}
+        steps = {a: intercept_of(env, state[1], a, step) for a in available if a != last}
         uncertainty = {
             a: logdet_xy(
                 *position_covariance_after(
-                    problem.covariances[a], problem.process_noise[a], float(step + k), 0.5, 0.5
+                    problem.covariances[a],
+                    problem.mission.process_noise[a],
+                    float(step + k),
+                    0.5,
+                    0.5,
                 )
             )
             for a, k in steps.items()
@@ -113,7 +124,7 @@ def test_greedy_rollouts_pick_their_best_target_other_than_the_one_just_found(po
 
 def test_most_uncertain_rollout_follows_only_when_nothing_else_is_left():
     problem = two_targets()
-    env = SubtaskEnv(problem.model(), new_memo(2, problem.n_steps))
+    env = problem.env()
     state = problem.root_state()
     state[0][1] = 0b01  # target 1 missed: only target 0, just found, is left
     state[0][2] = 0
@@ -156,8 +167,12 @@ def test_robust_backup_finds_the_gamble_optimum_with_values_between_mean_and_max
     and its root values lie between the mean backup's (pessimistic) and the exact ones."""
     exact = np.array([gamble_q_exact(0, 0, a) for a in range(3)])
     root = (np.zeros(2, dtype=np.int64),)
-    robust = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5, backup="robust")
-    mean = search_mdp(GAMBLE, root, 3, 4, np.zeros(1), iterations=100000, seed=5, backup="expected")
+    robust = search_mdp(
+        GAMBLE, root, 3, 4, np.zeros(1), SearchOptions(backup=Robust()), iterations=100000, seed=5
+    )
+    mean = search_mdp(
+        GAMBLE, root, 3, 4, np.zeros(1), SearchOptions(backup=Expected()), iterations=100000, seed=5
+    )
     assert robust.best_action == int(np.argmax(exact))
     assert np.all(robust.root.values <= exact + 1e-9)
     assert np.all(robust.root.values >= mean.root.values - 1e-9)
@@ -175,14 +190,14 @@ def test_mixmax_backup_mixes_the_best_action_and_the_mean_return(weight):
     tree.a_child[0, 0] = 1
     path_state, path_found = np.array([0, 1]), np.array([True, True])
     for x, ret in ((1, -10.0), (2, -20.0)):
-        back_up(tree, path_state, np.array([0, x]), path_found, 2, ret, 2, weight)
+        back_max(Max(weight), tree, path_state, np.array([0, x]), path_found, 2, ret)
     assert tree.a_value[0] == weight * -10.0 + (1.0 - weight) * -15.0
     assert list(tree.a_value[1:3]) == [-10.0, -20.0]
 
 
 def test_no_follow_rollout_draws_uniformly_among_the_targets_not_just_found():
     problem = six_targets()
-    env = SubtaskEnv(problem.model(), new_memo(6, problem.n_steps))
+    env = problem.env()
     state = problem.root_state()
     state[0][2] = 3  # target 3 was just found
     rng = np.array([7], dtype=np.uint64)
@@ -212,8 +227,8 @@ def test_even_root_split_alternates_and_the_weighted_split_follows_the_probabili
 
 def test_weighted_root_split_gives_the_likely_outcome_more_simulations():
     problem = six_targets(current_action=0)
-    even = search(problem, iterations=4000, seed=1, backup="max")
-    weighted = search(problem, iterations=4000, seed=1, backup="max", weighted_root=True)
+    even = search(problem, MAX, iterations=4000, seed=1)
+    weighted = search(problem, MAX._replace(root_split="weighted"), iterations=4000, seed=1)
     p = even.root.p_find[0]
     assert 0.5 < p < 1.0
     share = weighted.after_find.visits.sum() / (
@@ -249,9 +264,9 @@ def test_common_rollouts_value_siblings_with_the_same_random_decisions():
                     3,
                     4,
                     np.zeros(1),
+                    SearchOptions(common_rollouts=common),
                     iterations=4,
                     seed=seed,
-                    common_rollouts=common,
                 ).root.values
             )
             for seed in range(20)

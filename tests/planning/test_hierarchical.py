@@ -1,5 +1,7 @@
 """The hierarchical planner in the simulator (paper Fig. 2, Sec. IV-C-4)."""
 
+import json
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -7,7 +9,7 @@ from typer.testing import CliRunner
 from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.cli.app import app
 from hptrack.interface import InputError
-from hptrack.planning import hierarchical
+from hptrack.planning import hierarchical, subtask_search
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.scenario import random_scenario
 from hptrack.sim.episode import run_episode
@@ -99,9 +101,10 @@ def test_settings_default_effort_and_identity():
     timed = MctsSettings(time_limit=1.0)
     assert (timed.iterations, timed.time_limit) == (None, 1.0)
     assert default.preset == "improved"  # the default since the quality-against-time benchmark
-    assert (
-        default.canonical()
-        == '{"backup":"max","exploration":0.5,"iterations":100000,"time_limit":null}'
+    assert default.canonical() == (
+        '{"backup":"max","common_rollouts":false,"dwell":0.0,"estimator":"paper",'
+        '"exploration":0.5,"iterations":100000,"max_weight":1.0,"rollout":"uniform",'
+        '"rollout_epsilon":0.1,"root_split":"even","threads":1,"time_limit":null}'
     )
     assert default.digest() != timed.digest()
     assert MctsSettings.from_options("mcts", default.as_json()) == default
@@ -111,15 +114,15 @@ def test_timed_runs_warm_the_kernels_before_the_first_search(monkeypatch):
     """The first timed search of a process must not pay the kernels' loading: reset runs a
     tiny search first (once per process)."""
     calls = []
-    monkeypatch.setattr(hierarchical, "_warmed", set())
-    real = hierarchical.search
-    monkeypatch.setattr(
-        hierarchical, "search", lambda *a, **k: calls.append(k.get("iterations")) or real(*a, **k)
-    )
+    monkeypatch.setattr(subtask_search, "_warmed", set())
+    real = subtask_search.search
+    spy = lambda *a, **k: calls.append(k.get("iterations")) or real(*a, **k)  # noqa: E731
+    monkeypatch.setattr(subtask_search, "search", spy)
+    monkeypatch.setattr(hierarchical, "search", spy)
     scenario = random_scenario(2, seed=0).model_copy(update={"budget": 20.0})
     run_episode(scenario, mcts(time_limit=0.05))
     assert calls[:2] == [64, 64]  # the warm-up's two searches (first plan, re-plan)
-    assert hierarchical._warmed
+    assert subtask_search._warmed
     calls.clear()
     run_episode(scenario, mcts(time_limit=0.05))
     assert 64 not in calls
@@ -145,10 +148,17 @@ def test_simulate_command_with_mcts(tmp_path):
     assert "mcts mission" in result.output
 
 
-def test_presets_resolve_to_their_options_and_the_paper_keeps_its_identity():
+def test_presets_resolve_to_their_options_and_the_identity_is_every_option():
     paper = MctsSettings.from_options("mcts", {"preset": "paper"})
     assert (paper.backup, paper.rollout) == ("sampled", "uniform")
-    assert paper.canonical() == '{"exploration":0.5,"iterations":100000,"time_limit":null}'
+    assert json.loads(paper.canonical()) == {
+        **hierarchical.PRESETS["paper"],
+        "exploration": 0.5,
+        "iterations": 100_000,
+        "time_limit": None,
+        "rollout_epsilon": 0.1,
+        "threads": 1,
+    }
     improved = MctsSettings.from_options("mcts", {"preset": "improved"})
     assert {
         k: getattr(improved, k) for k in hierarchical.PRESETS["improved"]
@@ -161,7 +171,6 @@ def test_presets_resolve_to_their_options_and_the_paper_keeps_its_identity():
         "mcts", {"preset": "improved", "backup": "sampled", "rollout": "uniform"}
     )
     assert same.canonical() == paper.canonical()  # the same search, the same results
-    assert "rollout_epsilon" not in MctsSettings(backup="max").canonical()
     assert (
         MctsSettings(rollout="most_uncertain", rollout_epsilon=0.2).canonical()
         != MctsSettings(rollout="most_uncertain").canonical()
@@ -192,19 +201,20 @@ def test_paper_search_follows_the_first_find_at_low_effort_and_the_max_backup_do
 
 
 def test_a_stored_identity_means_the_same_search_whatever_the_default_preset(monkeypatch):
-    """Options left out of a canonical text have the paper's value, so a result stored for the
-    paper's search is rebuilt as the paper's search even if the default preset changes."""
+    """A canonical text names every option, so a stored result is rebuilt as the search that
+    made it even if the default preset changes, under the preset that stands for it."""
     paper = MctsSettings.from_options("mcts", {"preset": "paper", "iterations": 300})
     improved = MctsSettings.from_options("mcts", {"preset": "improved", "iterations": 300})
+    other = MctsSettings.from_options("mcts", {"backup": "expected", "iterations": 300})
     for default in ("paper", "improved"):
         monkeypatch.setattr(hierarchical, "DEFAULT_PRESET", default)
-        for settings in (paper, improved):
+        for settings in (paper, improved, other):
             again = MctsSettings.from_canonical(settings.canonical())
-            assert (again.backup, again.rollout, again.canonical()) == (
-                settings.backup,
-                settings.rollout,
-                settings.canonical(),
-            )
+            assert again.model_dump(exclude={"preset"}) == settings.model_dump(exclude={"preset"})
+            assert again.canonical() == settings.canonical()
+        assert MctsSettings.from_canonical(paper.canonical()).preset == "paper"
+        assert MctsSettings.from_canonical(improved.canonical()).preset == "improved"
+        assert MctsSettings.from_canonical(other.canonical()).preset == default
 
 
 def test_dwell_follows_the_target_just_found_for_its_length_then_flies_the_plan():
@@ -232,5 +242,40 @@ def test_dwell_follows_the_target_just_found_for_its_length_then_flies_the_plan(
     assert again.uncertainty == record.uncertainty
     settings = MctsSettings(preset="improved", dwell=10.0)
     assert '"dwell":10.0' in settings.canonical()
-    assert "dwell" not in MctsSettings(preset="improved").canonical()
+    assert '"dwell":0.0' in MctsSettings(preset="improved").canonical()
     assert MctsSettings.from_canonical(settings.canonical()).dwell == 10.0
+
+
+def test_options_keep_their_names_from_the_settings_to_the_records():
+    """Every field of the search's and the sub-task MDP's option records is the planner option
+    of the same name (the backup and the rollout as the instances the kernels take)."""
+    from hptrack.planning.backups import Max
+    from hptrack.planning.search import SearchOptions
+    from hptrack.planning.subtask_mdp import SubtaskOptions
+    from hptrack.planning.subtask_rollout import Nearest
+
+    settings = MctsSettings(
+        exploration=0.7,
+        backup="max",
+        max_weight=0.5,
+        root_split="weighted",
+        common_rollouts=True,
+        rollout="nearest",
+        rollout_epsilon=0.3,
+        estimator="sharp",
+        dwell=12.5,
+    )
+    assert set(SearchOptions._fields) | set(SubtaskOptions._fields) <= set(
+        MctsSettings.model_fields
+    )
+    assert settings.search_options() == SearchOptions(
+        exploration=0.7,
+        backup=Max(0.5),
+        root_split="weighted",
+        common_rollouts=True,
+        rollout=Nearest(0.3),
+    )
+    assert settings.subtask_options() == SubtaskOptions(estimator="sharp", dwell=12.5)
+    paper = MctsSettings(preset="paper")
+    assert paper.search_options() == SearchOptions()
+    assert paper.subtask_options() == SubtaskOptions()

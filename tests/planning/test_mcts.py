@@ -7,15 +7,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from hptrack.models.mission import mission_record
 from hptrack.planning import PlanningProblem, search
-from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import SearchOptions, run_simulations
 from hptrack.planning.subtask_mdp import (
-    SubtaskEnv,
     apply_outcome,
     expand_action,
     is_available,
-    new_memo,
     new_work,
     terminal_value,
 )
@@ -34,44 +32,24 @@ def two_targets(budget=400.0, **kw):
     """Target 0 near the agent, target 1 5 km away on the other side: pursuing the near one
     first wins (found after a short flight, then the long trip) by more than 3 in E[U]."""
     means = np.array([[300.0, 0.0, 0.0, 0.5], [-5000.0, 0.0, 0.0, -0.5]])
-    return PlanningProblem(
-        np.zeros(2),
-        means,
-        np.array([prior(), prior(900.0, 2000.0, -0.5)]),
-        np.array([3e-4, 2e-4]),
-        budget,
-        TAU,
-        TAU,
-        30.0,
-        100.0,
-        10.0 * np.eye(2),
-        **kw,
-    )
+    mission = mission_record(TAU, 900.0, 30.0, 100.0, 10.0 * np.eye(2), np.array([3e-4, 2e-4]))
+    covs = np.array([prior(), prior(900.0, 2000.0, -0.5)])
+    return PlanningProblem(mission, np.zeros(2), means, covs, budget, **kw)
 
 
 def six_targets(seed=0, **kw):
     rng = np.random.default_rng(seed)
     means = np.hstack([rng.uniform(-1000, 1000, (6, 2)), rng.uniform(-3, 3, (6, 2))])
     covs = np.array([prior(*rng.uniform(500, 2000, 2), rng.uniform(-0.8, 0.8)) for _ in range(6)])
-    return PlanningProblem(
-        np.zeros(2),
-        means,
-        covs,
-        rng.uniform(1e-4, 5e-4, 6),
-        900.0,
-        TAU,
-        TAU,
-        30.0,
-        100.0,
-        10.0 * np.eye(2),
-        **kw,
-    )
+    q = rng.uniform(1e-4, 5e-4, 6)
+    mission = mission_record(TAU, 900.0, 30.0, 100.0, 10.0 * np.eye(2), q)
+    return PlanningProblem(mission, np.zeros(2), means, covs, 900.0, **kw)
 
 
 def expectimax(problem, first=None):
     """Exact values ``-E[U]`` of the root's actions under the optimal policy (small MDPs), or
     with ``first = (action, found)`` of the actions after that first sub-task."""
-    env = SubtaskEnv(problem.model(), new_memo(problem.n_targets, problem.n_steps))
+    env = problem.env()
     work = new_work()
 
     def value(state):
@@ -152,12 +130,11 @@ def test_same_seed_and_iterations_give_the_same_plan():
 
 def test_tree_is_independent_of_chunking_and_initial_capacity():
     problem = six_targets(1)
-    model = problem.model()
     root = problem.root_state()
 
     def run(chunks, capacity):
         tree = new_tree(12345, capacity)
-        env = SubtaskEnv(model, new_memo(6, problem.n_steps))
+        env = problem.env()
         state = tuple(a.copy() for a in root)
         for n in chunks:
             while n:
@@ -167,11 +144,10 @@ def test_tree_is_independent_of_chunking_and_initial_capacity():
                     root,
                     state,
                     new_work(),
-                    UniformRandom(),
+                    SearchOptions(),
                     6,
                     problem.n_steps + 2,
                     -1,
-                    SearchOptions(0.5, 0, 1.0, False, False),
                     n,
                 )
                 if n:

@@ -7,17 +7,20 @@ import pytest
 
 from hptrack.coverage.estimator import coverage_outcome
 from hptrack.models.measurement import PositionMeasurementModel
+from hptrack.models.mission import mission_record
 from hptrack.models.motion import ConstantVelocityModel
 from hptrack.planning.subtask_mdp import (
     I_LAST,
     I_MASK,
     I_STEP,
     PlanningProblem,
-    SubtaskEnv,
+    SubtaskOptions,
     apply_outcome,
+    dwell_steps,
     expand_action,
     intercept_of,
     is_available,
+    n_actions,
     new_memo,
     new_work,
     terminal_value,
@@ -33,27 +36,24 @@ def prior(var_x=1500.0, var_y=900.0, rho=0.4, var_v=(0.3, 0.45)):
     return cov
 
 
-def make_problem(means, covs, budget=900.0, c_per_step=TAU, q=3e-4, **kw):
+def mission(n, q=3e-4, continuous=True):
+    return mission_record(TAU, 900.0, SPEED, W, R, np.full(n, q), continuous)
+
+
+MISSION = mission(1)
+
+
+def make_problem(means, covs, budget=900.0, continuous=True, q=3e-4, **kw):
     means = np.asarray(means, dtype=float)
     n = len(means)
     return PlanningProblem(
-        np.zeros(2),
-        means,
-        np.asarray(covs, dtype=float),
-        np.full(n, q),
-        budget,
-        TAU,
-        c_per_step,
-        SPEED,
-        W,
-        R,
-        **kw,
+        mission(n, q, continuous), np.zeros(2), means, np.asarray(covs, dtype=float), budget, **kw
     )
 
 
-def predict(cov, q, k, c_per_step=TAU):
+def predict(cov, q, k, continuous=True):
     """Eq. (1) one step at a time."""
-    form = "continuous" if c_per_step == TAU else "paper_text"
+    form = "continuous" if continuous else "paper_text"
     model = ConstantVelocityModel(TAU, form)
     f, qq = model.transition(), model.process_noise(q)
     for _ in range(k):
@@ -85,10 +85,11 @@ def hand_estimate(cov, q, max_steps):
     return k, ps[-1], (k * ps[-1] - sum(ps[:-1])) / ps[-1]
 
 
-def setup(problem):
-    """``env``, the root state and its arrays ``(si, sf, cov, step)`` (views of the state)."""
+def setup(problem, dwell=0.0):
+    """``env`` (with a dwell of ``dwell`` s), the root state and its arrays ``(si, sf, cov,
+    step)`` (views of the state)."""
     state = problem.root_state()
-    env = SubtaskEnv(problem.model(), new_memo(problem.n_targets, problem.n_steps))
+    env = problem.env(SubtaskOptions(dwell=dwell))
     return env, state, *state
 
 
@@ -104,7 +105,7 @@ def test_interception_and_budget_truncation_by_hand():
     got = [expand_action(env, state, a, new_work()) for a in (0, 1)]
     for a, ic in ((0, 67), (1, 75)):
         k, p, expected = hand_estimate(predict(covs[a], 3e-4, ic), 3e-4, 200 - ic)
-        assert intercept_of(env.model, sf, a, 0) == ic
+        assert intercept_of(env, sf, a, 0) == ic
         assert got[a][0] == pytest.approx(p, rel=1e-12)
         assert got[a][1:] == (ic + round(expected), ic + k)
     assert got[0][2] == 187
@@ -129,7 +130,7 @@ def test_find_miss_and_terminal_transitions_by_hand():
     means = np.array([[600.0, 800.0, 2.0, -1.0], [-500.0, 0.0, 0.0, 1.5]])
     problem = make_problem(means, covs)
     env, state, si, sf, cov, step = setup(problem)
-    model = env.model
+    model = env
     work = new_work()
     p, find_steps, miss_steps = expand_action(env, state, 0, work)
     # find target 0: its belief is the posterior of a measurement at the end of the sub-task
@@ -141,7 +142,7 @@ def test_find_miss_and_terminal_transitions_by_hand():
     np.testing.assert_array_equal(cov[1], covs[1])  # grows implicitly from its base
     assert list(step) == [t1, 0]
     # pursue target 1 from target 0's estimated position (no memo: 1 is still at its base)
-    ic1 = intercept_of(model, sf, 1, si[I_STEP])
+    ic1 = intercept_of(env, sf, 1, si[I_STEP])
     p1, find1, miss1 = expand_action(env, state, 1, work)
     t_start = t1 + ic1
     k, p_hand, expected = hand_estimate(predict(covs[1], q, t_start), q, model.n_steps - t_start)
@@ -169,14 +170,14 @@ def test_intercept_of_a_moving_mean_from_a_later_state():
     1150 / 27 s = 42.59 s -> 86 steps."""
     problem = make_problem([[1000, 0, 3, 0], [0, 0, 0, 0]], [prior(), prior()])
     env, state, si, sf, cov, step = setup(problem)
-    assert intercept_of(env.model, sf, 0, 100) == 86
+    assert intercept_of(env, sf, 0, 100) == 86
 
 
 def test_follow_to_the_end_after_a_find():
     q = 3e-4
     problem = make_problem([[900, 0, 1, 1], [0, 900, 0, 0]], [prior(), prior()])
     env, state, si, sf, cov, step = setup(problem)
-    model = env.model
+    model = env
     work = new_work()
     _, find_steps, _ = expand_action(env, state, 0, work)
     apply_outcome(env, state, 0, True, find_steps, work)
@@ -196,7 +197,7 @@ def test_a_sub_task_lasts_at_least_one_step():
     tiny = np.diag([1.0, 1.0, 0.01, 0.01])
     problem = make_problem([[0, 0, 0, 0]], [tiny])
     env, state, *_ = setup(problem)
-    cutoff, p, expected = coverage_outcome(tiny, 3e-4, TAU, TAU, SPEED, W, 1800)
+    cutoff, p, expected = coverage_outcome(MISSION, tiny, 3e-4, 1800)
     assert (p, expected) == (1.0, 0.0)
     assert expand_action(env, state, 0, new_work()) == (1.0, 1, cutoff)
 
@@ -207,7 +208,7 @@ def test_memo_gives_the_same_expansion():
     first = [expand_action(env, state, a, new_work()) for a in (0, 1)]
     assert (env.memo.cutoff >= 0).sum() == 2
     again = [expand_action(env, state, a, new_work()) for a in (0, 1)]
-    other = SubtaskEnv(env.model, new_memo(2, env.model.n_steps))
+    other = env._replace(memo=new_memo(2, env.n_steps))
     fresh = [expand_action(other, state, a, new_work()) for a in (0, 1)]
     assert first == again == fresh
 
@@ -218,23 +219,18 @@ def test_memo_gives_the_same_expansion():
         (dict(means=np.zeros((2, 3))), "shape"),
         (dict(covariances=np.zeros((1, 4, 4))), "covariances"),
         (dict(remaining_budget=0.0), "remaining_budget"),
-        (dict(measurement_noise=-np.eye(2)), "positive definite"),
         (dict(available=[True, False], current_action=1), "current_action"),
         (dict(last_found=2), "last_found"),
+        (dict(mission=mission(0)), "1 to 62 targets"),
     ],
 )
 def test_problem_validation(change, message):
     base = dict(
+        mission=mission(2),
         agent_position=np.zeros(2),
         means=np.zeros((2, 4)),
         covariances=np.array([prior()] * 2),
-        process_noise=np.full(2, 3e-4),
         remaining_budget=900.0,
-        time_step=TAU,
-        c_per_step=TAU,
-        agent_speed=SPEED,
-        sensor_diameter=W,
-        measurement_noise=R,
     )
     with pytest.raises(ValueError, match=message):
         PlanningProblem(**(base | change))
@@ -257,9 +253,10 @@ def test_dwell_measures_the_target_just_found_at_every_step_and_keeps_it_last():
     so it can be followed or dwelt on again."""
     q = 3e-4
     means = [[900, 0, 1, 1], [0, 900, 0, 0]]
-    problem = make_problem(means, [prior(), prior()], dwell_time=10.0)
-    assert (problem.dwell_steps, problem.n_actions) == (20, 3)
-    env, state, si, sf, cov, step = setup(problem)
+    problem = make_problem(means, [prior(), prior()])
+    assert n_actions(2, SubtaskOptions(dwell=10.0)) == 3
+    env, state, si, sf, cov, step = setup(problem, dwell=10.0)
+    assert env.dwell_steps == 20
     work = new_work()
     assert not is_available(env, state, 2)  # nothing found yet
     _, find_steps, _ = expand_action(env, state, 0, work)
@@ -275,7 +272,7 @@ def test_dwell_measures_the_target_just_found_at_every_step_and_keeps_it_last():
     assert (si[I_STEP], si[I_LAST], step[0], si[I_MASK]) == (end, 0, end, 0b11)
     np.testing.assert_allclose(sf, [900 + end * TAU, end * TAU])
     # dwelling, then following to the end, is following from the find to the end
-    left = env.model.n_steps - end
+    left = env.n_steps - end
     apply_outcome(env, state, 0, True, expand_action(env, state, 0, work)[1], work)
     followed = make_problem(means, [prior(), prior()])
     env2, state2, si2, sf2, cov2, step2 = setup(followed)
@@ -286,20 +283,19 @@ def test_dwell_measures_the_target_just_found_at_every_step_and_keeps_it_last():
 
 
 def test_dwell_is_available_only_after_a_find_and_before_the_budget_ends():
-    problem = make_problem(
-        [[0, 0, 0, 0]], [prior()], budget=30.0, last_found=0, dwell_time=14.75
-    )  # 29.5 steps: the nearest whole step, 30
-    assert problem.dwell_steps == 30
-    env, state, *_ = setup(problem)
+    problem = make_problem([[0, 0, 0, 0]], [prior()], budget=30.0, last_found=0)
+    assert dwell_steps(TAU, 14.75) == 30  # 29.5 steps: the nearest whole step, 30
+    env, state, *_ = setup(problem, dwell=14.75)
     assert is_available(env, state, 1)  # 30 < 60 steps left
-    short = make_problem([[0, 0, 0, 0]], [prior()], budget=15.0, last_found=0, dwell_time=14.75)
-    env, state, *_ = setup(short)
+    short = make_problem([[0, 0, 0, 0]], [prior()], budget=15.0, last_found=0)
+    env, state, *_ = setup(short, dwell=14.75)
     assert not is_available(env, state, 1)  # 30 steps is the whole budget: that is the follow
-    off = make_problem([[0, 0, 0, 0]], [prior()], last_found=0)
-    assert (off.dwell_steps, off.n_actions) == (0, 1)
-    assert make_problem([[0, 0, 0, 0]], [prior()], dwell_time=0.1).dwell_steps == 1
+    env, state, *_ = setup(make_problem([[0, 0, 0, 0]], [prior()], last_found=0))
+    assert not is_available(env, state, 1)  # no dwell action without the option
+    assert (dwell_steps(TAU, 0.0), n_actions(1, SubtaskOptions())) == (0, 1)
+    assert dwell_steps(TAU, 0.1) == 1
     with pytest.raises(ValueError, match="current_action=1"):
-        make_problem([[0, 0, 0, 0]], [prior()], dwell_time=10.0, current_action=1)
-    with pytest.raises(ValueError, match="dwell_time"):
-        make_problem([[0, 0, 0, 0]], [prior()], dwell_time=-1.0)
-    make_problem([[0, 0, 0, 0]], [prior()], dwell_time=10.0, last_found=0, current_action=1)
+        make_problem([[0, 0, 0, 0]], [prior()], current_action=1)  # nothing found: no dwell
+    with pytest.raises(ValueError, match="dwell must be"):
+        dwell_steps(TAU, -1.0)
+    make_problem([[0, 0, 0, 0]], [prior()], last_found=0, current_action=1)

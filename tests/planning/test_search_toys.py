@@ -229,7 +229,10 @@ def test_a_toy_search_leaves_the_disk_cache_usable_by_another_process():
     subprocess.run(
         [sys.executable, "-c", f"import numpy as np; {toy}"],
         check=True,
-        env={**os.environ, "PYTHONPATH": str(here)},
+        env={
+            **os.environ,
+            "PYTHONPATH": os.pathsep.join([str(here), os.environ.get("PYTHONPATH", "")]),
+        },
         cwd=here,
     )
     plan = (
@@ -240,3 +243,28 @@ def test_a_toy_search_leaves_the_disk_cache_usable_by_another_process():
         "make_planner('mcts', {'iterations': 200}))"
     )
     subprocess.run([sys.executable, "-c", plan], check=True, cwd=here.parent.parent)
+
+
+def test_a_bandit_of_300_arms_keeps_every_action_index():
+    """300 sure arms (``p = 1``), arm 217 pays 1, the others 0: after the root's rollout, UCB1
+    tries each arm once (the first unvisited slot first), so 301 simulations give every arm one
+    visit valued exactly, and the best is 217, an index past ``int8``."""
+    n = 300
+    win = np.zeros(n)
+    win[217] = 1.0
+    result = bandit_search(np.ones(n), win, np.zeros(n), n + 1, 0)
+    assert result.root.actions.tolist() == list(range(n))
+    assert result.root.visits.tolist() == [1] * n
+    np.testing.assert_array_equal(result.root.values, win)
+    assert result.best_action == 217
+    more = bandit_search(np.ones(n), win, np.zeros(n), 2000, 0)
+    assert more.best_action == 217 and int(np.argmax(more.root.visits)) == 217
+
+
+def test_an_mdp_declaring_more_actions_than_the_tree_holds_is_refused():
+    from hptrack.planning import MAX_ACTIONS
+
+    env = Bandit(np.ones(1), np.ones(1), np.zeros(1))
+    root = (np.array([-1, 0], dtype=np.int64),)
+    with pytest.raises(ValueError, match=f"declares {MAX_ACTIONS + 1} actions; the search takes"):
+        search_mdp(env, root, MAX_ACTIONS + 1, 2, np.zeros(1), iterations=1)

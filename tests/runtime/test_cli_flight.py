@@ -53,6 +53,7 @@ def test_replay_writes_the_figure_and_the_summary(flight_cli, flight_scenario, t
         (["fly", "{scenario}", "--rate", "5"], "--rate"),
         (["fly", "{scenario}", "--deadline", "0"], "--deadline"),
         (["fly", "{scenario}", "--planner", "nope"], "unknown planner"),
+        (["fly", "{scenario}", "--planner", "clairvoyant"], "reads the true target states"),
         (["fly", "{scenario}", "--detections", "tcp://x:1"], "--detections"),
     ],
 )

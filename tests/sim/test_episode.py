@@ -169,3 +169,20 @@ def test_the_planners_episode_info_is_stored_with_the_record():
     assert record.planner == "counting"
     assert record.info["acts"] == 10  # one waypoint per step of the 5 s budget
     assert record.info["settings"] == {}
+
+
+def test_the_json_summary_names_targets_by_id_in_the_subtask_log():
+    from hptrack.sim.record import subtasks_with_ids
+
+    log = [
+        {"target_index": 1, "start_step": 0, "plan_after_find": 2, "plan_after_miss": None},
+        {"dwell": 1, "start_step": 9, "plan_after_dwell": 0},
+        {"follow": 0, "start_step": 20},
+        {"follow": None, "start_step": 30},
+    ]
+    assert subtasks_with_ids(log, ("a", "b")) == [
+        {"target": "b", "start_step": 0, "plan_after_find": "dwell", "plan_after_miss": None},
+        {"dwell": "b", "start_step": 9, "plan_after_dwell": "a"},
+        {"follow": "a", "start_step": 20},
+        {"follow": None, "start_step": 30},
+    ]

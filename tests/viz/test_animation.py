@@ -80,12 +80,20 @@ def test_subtask_labels_follow_the_planner_log():
 def test_gif_has_one_frame_per_stride_and_the_figure_size(short_mission, tmp_path):
     _, record = short_mission
     path = tmp_path / "mission.gif"
-    calls = []
+    calls, encoded = [], []
     frames = animate_mission(
-        record, path, stride=7, fps=10, progress=lambda done, total: calls.append((done, total))
+        record,
+        path,
+        stride=7,
+        fps=10,
+        progress=lambda done, total: calls.append((done, total)),
+        encoding=lambda done, total: encoded.append((done, total, path.stat().st_size)),
     )
     assert frames == 19  # steps 0, 7, ..., 119, then 120
     assert calls == [(i, 19) for i in range(1, 20)]
+    # then each frame encoded, before the file is written
+    assert [(done, total) for done, total, _ in encoded] == [(i, 19) for i in range(1, 20)]
+    assert all(size == 0 for *_, size in encoded)
     with Image.open(path) as gif:
         assert gif.n_frames == 19
         assert gif.size == (480, 532)  # 6 in x 6.65 in (map, title, legends) at 80 dpi

@@ -52,22 +52,34 @@ def test_mission_figure_says_what_it_shows(short_mission, tmp_path):
     labels = [t.get_text() for t in artists["legend"].get_texts()]
     assert labels == [
         *record.target_ids,
-        "95 % belief ellipse (t = 0, 20, 40, 60 s)",
+        "95 % belief, t = 0 s",
+        "95 % belief, t = 20 s",
+        "95 % belief, t = 40 s",
+        "95 % belief, t = 60 s",
         "agent start",
         "agent end",
         "target start",
         "target end",
         "target measured",
     ]
+    assert ax.get_title() == (
+        "greedy, n = 2 targets, seed 1, 60 s\n"
+        f"U = {record.uncertainty:.2f} (Σ log det Σxy, Σxy in m²)"
+    )
     assert ax.get_aspect() == 1.0
-    assert len(artists["ellipses"]) == 4 * len(record.target_ids)
-    assert all(e.get_linestyle() == "--" for e in artists["ellipses"])
+    # one line style per time, the same for every target at that time
+    styles = [e.get_linestyle() for e in artists["ellipses"]]
+    assert styles == [s for s in (":", "-.", "--", "-") for _ in record.target_ids]
     measured = np.flatnonzero(record.detections.any(axis=0))
     assert len(artists["detections"]) == measured.size
     for scatter, i in zip(artists["detections"], measured, strict=True):
         np.testing.assert_allclose(
             scatter.get_offsets(), record.true_states[record.detections[:, i], i, :2]
         )
+    # the targets are drawn over the agent's path; the agent's end diamond is hollow
+    assert min(line.get_zorder() for line in artists["targets"]) > artists["agent"].get_zorder()
+    end = [line for line in ax.lines if line.get_marker() == "D"]
+    assert len(end) == 1 and end[0].get_markerfacecolor() == "none"
     path = tmp_path / "mission.png"
     save_mission_figure(record, str(path))
     assert path.read_bytes()[:4] == b"\x89PNG"
@@ -80,7 +92,8 @@ def test_trajectories_share_limits_and_one_time_colour_bar(short_mission, tmp_pa
     plot_trajectories(fig, [record, later], ["first", "second"])
     panels = [ax for ax in fig.axes if ax.get_title()]
     assert [ax.get_title() for ax in panels] == ["first", "second"]
-    assert len(fig.axes) == 3  # two panels and one colour bar
+    assert len(fig.axes) == 2  # two panels, and one colour bar beside the last
+    assert [len(ax.child_axes) for ax in fig.axes] == [0, 1]
     assert panels[0].get_xlim() == panels[1].get_xlim()
     assert panels[0].get_ylim() == panels[1].get_ylim()
     assert all(ax.get_aspect() == 1.0 for ax in panels)

@@ -45,6 +45,7 @@ from hptrack.baselines.information import (
     step_costs,
 )
 from hptrack.models.beliefs import position_logdet
+from hptrack.settings import Iterations, TimeLimit
 
 if TYPE_CHECKING:
     from hptrack.interface import Observation
@@ -54,7 +55,7 @@ _MAX_GRID_CELLS = 512
 
 
 class ArviSettings(PrimitiveSettings):
-    """ARVI settings (defaults: ``docs/baselines.md`` and the README's timing table).
+    """ARVI settings (defaults: ``docs/baselines.md``).
 
     Attributes:
         horizon: planning horizon in motion primitives (count; 12 x 5 s = 60 s).
@@ -74,8 +75,8 @@ class ArviSettings(PrimitiveSettings):
     horizon: Annotated[int, Field(ge=1, le=1000)] = 12
     delta_schedule_m: Schedule = (math.inf, 150.0, 100.0, 75.0, 50.0)
     epsilon_schedule: Schedule = (math.inf,)
-    max_nodes_per_level: Annotated[int, Field(ge=1)] = 2000
-    time_limit_s: Annotated[float | None, Field(gt=0.0)] = None
+    max_nodes_per_level: Iterations = 2000
+    time_limit_s: TimeLimit | None = None
     cost: CostKind = "difference"
 
     effort_fields = {"time_limit": "time_limit_s"}

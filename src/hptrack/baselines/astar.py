@@ -47,13 +47,14 @@ from hptrack.baselines.information import (
     rollout_children,
 )
 from hptrack.models.beliefs import position_logdet
+from hptrack.settings import TimeLimit
 
 if TYPE_CHECKING:
     from hptrack.interface import MissionSpec, Observation
 
 
 class AStarSettings(PrimitiveSettings):
-    """A* settings (defaults: ``docs/baselines.md`` and the README's timing table).
+    """A* settings (defaults: ``docs/baselines.md``).
 
     Attributes:
         horizon: planning horizon in motion primitives (count; 6 x 5 s = 30 s).
@@ -66,7 +67,7 @@ class AStarSettings(PrimitiveSettings):
     horizon: Annotated[int, Field(ge=1, le=100)] = 6
     max_expansions: Annotated[int, Field(ge=1, le=10_000_000)] = 2000
     heuristic_weight: Annotated[float, Field(ge=0.0)] = 1.0
-    time_limit_s: Annotated[float | None, Field(gt=0.0)] = None
+    time_limit_s: TimeLimit | None = None
     cost: CostKind = "difference"
 
     effort_fields = {"iterations": "max_expansions", "time_limit": "time_limit_s"}
@@ -74,48 +75,25 @@ class AStarSettings(PrimitiveSettings):
 
 @numba.njit(cache=True)
 def _expand_node(
-    node,
-    first,
-    positions,
-    covariances,
-    uncertainty,
-    g,
-    levels,
-    parents,
-    controls,
-    f,
-    step_displacements,
-    all_means,
-    n_steps,
-    horizon,
-    difference,
-    weight,
-    process_noise,
-    tau,
-    c_per_step,
-    noise,
-    radius,
-    step_length,
-    maps_a,
-    maps_g,
-    maps_h,
-    maps_len,
+    node, first, nodes, f, step_displacements, all_means, n_steps, horizon, cost, mission, follow
 ):
-    """Expand ``node`` into the node slots ``first .. first + C - 1`` and write their ``f``."""
+    """Expand ``node`` into the node slots ``first .. first + C - 1`` and write their ``f``.
+
+    ``nodes`` is the node arrays ``(positions, covariances, uncertainty, g, levels, parents,
+    controls)``; ``cost`` is ``(difference, heuristic weight)``; ``mission`` the mission record
+    and ``follow`` its Riccati tables (the heuristic's)."""
+    positions, covariances, uncertainty, g, levels, parents, controls = nodes
+    difference, weight = cost
     n_controls = step_displacements.shape[0]
     level = levels[node]
     last = first + n_controls
     rollout_children(
+        mission,
         positions[node : node + 1],
         covariances[node : node + 1],
         np.arange(n_controls),
         step_displacements,
         all_means[level * n_steps : (level + 1) * n_steps + 1],
-        process_noise,
-        tau,
-        c_per_step,
-        noise,
-        radius,
         True,
         covariances[first:last],
         uncertainty[first:last],
@@ -138,21 +116,13 @@ def _expand_node(
         boundaries = np.arange(level + 2, horizon + 1) * n_steps
     bounds = np.zeros((n_controls, boundaries.shape[0]))
     bound_children(
+        mission,
+        follow,
         positions[first:last],
         covariances[first:last],
         (level + 1) * n_steps,
         boundaries,
         all_means,
-        process_noise,
-        tau,
-        c_per_step,
-        noise,
-        step_length,
-        radius,
-        maps_a,
-        maps_g,
-        maps_h,
-        maps_len,
         bounds,
     )
     for c in range(n_controls):
@@ -201,6 +171,8 @@ class AStarPlanner(PrimitivePlanner):
         ]
         h = root_bounds[0] - uncertainty[0] if difference else root_bounds.sum()
         f = np.empty(n_controls)
+        nodes = (positions, covariances, uncertainty, g, levels, parents, controls)
+        cost = (difference, float(params.heuristic_weight))
         # Entries (f, sequence code, node): the code orders sequences lexicographically with
         # hover first and a prefix before its extensions, so ties in f prefer hover.
         radix = n_controls + 1
@@ -221,30 +193,15 @@ class AStarPlanner(PrimitivePlanner):
             _expand_node(
                 node,
                 n_nodes,
-                positions,
-                covariances,
-                uncertainty,
-                g,
-                levels,
-                parents,
-                controls,
+                nodes,
                 f,
                 self.step_displacements,
                 means,
                 k,
                 horizon,
-                difference,
-                params.heuristic_weight,
-                mission.process_noise,
-                mission.time_step,
-                mission.c_per_step,
-                np.ascontiguousarray(mission.measurement_noise),
-                mission.sensor_radius,
-                mission.step_length,
-                self.bound.maps_a,
-                self.bound.maps_g,
-                self.bound.maps_h,
-                self.bound.maps_len,
+                cost,
+                mission.record,
+                self.bound.follow,
             )
             place = radix ** (horizon - 1 - level)
             for c, f_child in enumerate(f.tolist()):

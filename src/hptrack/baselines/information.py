@@ -42,8 +42,9 @@ import numpy as np
 
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.measurement import update_covariance
-from hptrack.models.motion import predict_covariance, predicted_positions
-from hptrack.models.riccati import measured_covariance, riccati_table
+from hptrack.models.mission import follow_tables, predict_covariance_on
+from hptrack.models.motion import predicted_positions
+from hptrack.models.riccati import measured_covariance
 
 if TYPE_CHECKING:
     from hptrack.interface import MissionSpec
@@ -61,21 +62,18 @@ def mean_positions(means: np.ndarray, time_step: float, n_sub_steps: int) -> np.
 
 @numba.njit(cache=True)
 def rollout_children(
+    mission,
     positions,
     covariances,
     children,
     step_displacements,
     level_means,
-    process_noise,
-    tau,
-    c_per_step,
-    noise,
-    radius,
     store,
     out_covariances,
     out_uncertainty,
 ):
-    """Compiled kernel of :func:`expand`: children ``a C + c`` listed in ``children``.
+    """Compiled kernel of :func:`expand`: children ``a C + c`` listed in ``children``
+    (``mission``: the mission record).
 
     Writes each child's total ``log det Sigma^xy`` to ``out_uncertainty`` and, if ``store``, its
     covariances to ``out_covariances`` (same order as ``children``).
@@ -83,6 +81,8 @@ def rollout_children(
     n_controls = step_displacements.shape[0]
     n_targets = covariances.shape[1]
     n_steps = level_means.shape[0] - 1
+    process_noise, noise = mission.process_noise, mission.measurement_noise
+    radius = mission.footprint_radius
     radius2 = radius * radius
     reach = 0.0
     for c in range(n_controls):
@@ -110,8 +110,8 @@ def rollout_children(
                 gap0 = math.hypot(level_means[0, i, 0] - px, level_means[0, i, 1] - py)
                 if gap0 > reach + drift + radius:
                     far_cov[i] = covariances[a, i]
-                    predict_covariance(
-                        far_cov[i], process_noise[i], n_steps, tau, c_per_step, far_cov[i]
+                    predict_covariance_on(
+                        mission, far_cov[i], process_noise[i], n_steps, far_cov[i]
                     )
                     far_logdet[i] = logdet_xy(far_cov[i, 0, 0], far_cov[i, 0, 1], far_cov[i, 1, 1])
                     far_node[i] = a
@@ -127,11 +127,11 @@ def rollout_children(
                 ex = px + s * dx - level_means[s, i, 0]
                 ey = py + s * dy - level_means[s, i, 1]
                 if ex * ex + ey * ey <= radius2:
-                    predict_covariance(p, process_noise[i], gap, tau, c_per_step, p)
+                    predict_covariance_on(mission, p, process_noise[i], gap, p)
                     update_covariance(p, noise, p)
                     gap = 0
             if gap > 0:
-                predict_covariance(p, process_noise[i], gap, tau, c_per_step, p)
+                predict_covariance_on(mission, p, process_noise[i], gap, p)
             total += logdet_xy(p[0, 0], p[0, 1], p[1, 1])
             if store:
                 out_covariances[j, i] = p
@@ -151,16 +151,12 @@ def _run_rollout(
     out_covariances = np.empty((children.shape[0] if store else 0, n_targets, 4, 4))
     out_uncertainty = np.empty(children.shape[0])
     rollout_children(
+        mission.record,
         np.ascontiguousarray(positions, dtype=float),
         np.ascontiguousarray(covariances, dtype=float),
         np.asarray(children, dtype=np.int64),
         np.ascontiguousarray(step_displacements, dtype=float),
         np.ascontiguousarray(level_means, dtype=float),
-        mission.process_noise,
-        mission.time_step,
-        mission.c_per_step,
-        np.ascontiguousarray(mission.measurement_noise),
-        mission.sensor_radius,
         store,
         out_covariances,
         out_uncertainty,
@@ -260,25 +256,12 @@ def step_costs(
 
 
 @numba.njit(cache=True)
-def bound_children(
-    positions,
-    covariances,
-    start,
-    boundaries,
-    all_means,
-    process_noise,
-    tau,
-    c_per_step,
-    noise,
-    step_length,
-    radius,
-    maps_a,
-    maps_g,
-    maps_h,
-    maps_len,
-    out,
-):
-    """Compiled kernel of :meth:`RiccatiBound.lower_bounds`; adds the bounds to ``out``."""
+def bound_children(mission, follow, positions, covariances, start, boundaries, all_means, out):
+    """Compiled kernel of :meth:`RiccatiBound.lower_bounds` (``mission``: the mission record,
+    ``follow``: its :class:`~hptrack.models.mission.FollowTables`); adds the bounds to
+    ``out``."""
+    process_noise, noise = mission.process_noise, mission.measurement_noise
+    step_length, radius = mission.step_length, mission.footprint_radius
     n_nodes, n_targets = covariances.shape[:2]
     n_total = all_means.shape[0] - 1
     p = np.empty((4, 4))
@@ -298,15 +281,15 @@ def bound_children(
                 length = boundaries[b] - start
                 p[:, :] = covariances[j, i]
                 if first > length:
-                    predict_covariance(p, process_noise[i], length, tau, c_per_step, p)
+                    predict_covariance_on(mission, p, process_noise[i], length, p)
                     out[j, b] += logdet_xy(p[0, 0], p[0, 1], p[1, 1])
                 else:
-                    predict_covariance(p, process_noise[i], first, tau, c_per_step, p)
+                    predict_covariance_on(mission, p, process_noise[i], first, p)
                     measured_covariance(
-                        maps_a[i],
-                        maps_g[i],
-                        maps_h[i],
-                        maps_len[i],
+                        follow.a[i],
+                        follow.g[i],
+                        follow.h[i],
+                        follow.length[i],
                         length - first,
                         p,
                         noise,
@@ -334,15 +317,7 @@ class RiccatiBound:
 
     def __init__(self, mission: MissionSpec, max_sub_steps: int) -> None:
         self.mission = mission
-        noise = np.ascontiguousarray(mission.measurement_noise)
-        tables = [
-            riccati_table(
-                float(q), mission.time_step, mission.c_per_step, noise, max(max_sub_steps, 1)
-            )
-            for q in mission.process_noise
-        ]
-        self.maps_a, self.maps_g, self.maps_h = (np.stack([t[k] for t in tables]) for k in range(3))
-        self.maps_len = np.array([t[3] for t in tables], dtype=np.int64)
+        self.follow = follow_tables(mission.record, max(max_sub_steps, 1))
 
     def lower_bounds(
         self,
@@ -362,23 +337,14 @@ class RiccatiBound:
             all_means: ``(S + 1, n, 2)`` predicted mean positions (:func:`mean_positions`), m.
         """
         out = np.zeros((positions.shape[0], len(boundaries)))
-        m = self.mission
         bound_children(
+            self.mission.record,
+            self.follow,
             np.ascontiguousarray(positions, dtype=float),
             np.ascontiguousarray(covariances, dtype=float),
             int(start),
             np.asarray(boundaries, dtype=np.int64),
             np.ascontiguousarray(all_means),
-            m.process_noise,
-            m.time_step,
-            m.c_per_step,
-            np.ascontiguousarray(m.measurement_noise),
-            m.step_length,
-            m.sensor_radius,
-            self.maps_a,
-            self.maps_g,
-            self.maps_h,
-            self.maps_len,
             out,
         )
         return out

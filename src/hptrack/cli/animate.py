@@ -1,4 +1,5 @@
-"""``hptrack animate``: a saved episode record as a GIF (or MP4 with ffmpeg), with a progress bar.
+"""``hptrack animate``: a saved episode record as a GIF (or MP4 with ffmpeg), with progress of
+the drawing and then of the GIF's encoding.
 
 :func:`write_animation` is the same rendering for other commands (``simulate --animate``).
 """
@@ -11,9 +12,9 @@ from typing import Annotated
 
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
 
-from hptrack.cli.common import check_output_path, console
+from hptrack.cli.common import check_memory, check_output_path, console, progress_display
 from hptrack.interface import InputError
 from hptrack.sim.record import EpisodeRecord
 
@@ -23,6 +24,8 @@ def load_record(path: Path) -> EpisodeRecord:
     if not path.is_file():
         raise InputError(f"RECORD {str(path)!r}: no such file")
     try:
+        with zipfile.ZipFile(path) as archive:  # a zip bomb is refused before it is expanded
+            check_memory(sum(item.file_size for item in archive.infolist()), f"RECORD {path}")
         return EpisodeRecord.load(path)
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as err:
         reason = " ".join(str(err).split()) or type(err).__name__
@@ -46,22 +49,32 @@ def write_animation(record: EpisodeRecord, path: Path, stride: int = 5, fps: int
     from hptrack.viz.animation import animate_mission
 
     path = Path(path)
-    with Progress(
+    with progress_display(
+        "animation",
+        "frames",
         TextColumn("[bold]animation"),
         BarColumn(),
         MofNCompleteColumn(),
-        TextColumn("frames"),
+        TextColumn("frames {task.description}"),
         TimeRemainingColumn(),
-        console=console,
         transient=True,
     ) as progress:
-        task = progress.add_task("", total=None)
+        drawing = progress.add_task("drawn", total=None)
+        encoding = None
+
+        def encoded(done: int, total: int) -> None:
+            nonlocal encoding
+            if encoding is None:
+                encoding = progress.add_task(f"encoded into {path.suffix[1:].upper()}", total=total)
+            progress.update(encoding, completed=done)
+
         frames = animate_mission(
             record,
             path,
             stride=stride,
             fps=fps,
-            progress=lambda done, total: progress.update(task, completed=done, total=total),
+            progress=lambda done, total: progress.update(drawing, completed=done, total=total),
+            encoding=encoded,
         )
     console.print(
         f"animation written to {escape(str(path))} ({frames} frames, "

@@ -7,9 +7,11 @@ its traceback, a line asking to report it, and exit code 1.
 
 from __future__ import annotations
 
+import errno
 import math
 import sys
 import traceback
+import typing
 from pathlib import Path
 from typing import Annotated
 
@@ -20,7 +22,6 @@ from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
-    Progress,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
@@ -30,14 +31,18 @@ from rich.table import Table
 from hptrack import __version__
 from hptrack.cli.common import (
     SETTING_HELP,
+    check_figure_path,
     check_output_path,
     check_seed,
     console,
     error_console,
     planner_settings_for,
+    progress_display,
     write_json,
+    writing,
 )
-from hptrack.interface import InputError
+from hptrack.interface import InputError, one_line
+from hptrack.models.mission import MAX_TARGETS
 from hptrack.registry import PLANNERS, make_planner
 from hptrack.scenario import Scenario, load_scenario, random_scenario, save_scenario
 from hptrack.scenario.model import MAX_STEPS
@@ -87,8 +92,8 @@ def _load_or_random(
     if (path is None) == (not random):
         raise InputError("give either a SCENARIO file or --random")
     if random:
-        if not 1 <= targets <= 62:
-            raise InputError(f"--targets must be between 1 and 62, got {targets}")
+        if not 1 <= targets <= MAX_TARGETS:
+            raise InputError(f"--targets must be between 1 and {MAX_TARGETS}, got {targets}")
         return random_scenario(targets, seed=seed, homogeneous=homogeneous)
     scenario = load_scenario(path)
     return scenario if seed is None else scenario.with_seed(seed)
@@ -141,8 +146,9 @@ def simulate(
     check_seed(seed)
     if belief_stride < 1:
         raise InputError(f"--belief-stride must be a positive integer, got {belief_stride}")
-    for path, name in ((json_path, "--json"), (plot, "--plot"), (record_path, "--record")):
+    for path, name in ((json_path, "--json"), (record_path, "--record")):
         check_output_path(path, name)
+    check_figure_path(plot, "--plot")
     if animate_path is not None:
         from hptrack.cli.animate import check_animation_output
 
@@ -152,29 +158,23 @@ def simulate(
         seed = draw_seed()
     scenario = _load_or_random(scenario_path, random, targets, seed, homogeneous)
     settings = planner_settings_for((planner,), option, iterations, time_limit)[planner]
-    need = record_bytes(len(scenario.targets), scenario.n_steps, belief_stride)
-    if need > MAX_RECORD_BYTES:
-        stride = math.ceil(belief_stride * need / MAX_RECORD_BYTES)
-        raise InputError(
-            f"the mission of {scenario.n_steps:,} steps needs about "
-            f"{need / 2**30:.1f} GiB for its record; use --belief-stride {stride} "
-            f"or more, or a shorter budget (at most {MAX_STEPS:,} steps)"
-        )
+    _check_record_size(len(scenario.targets), scenario.n_steps, belief_stride)
     if drawn:
         console.print(f"seed {seed} (drawn; pass --seed {seed} to repeat this mission)")
     agent = make_planner(planner, settings)
-    with Progress(
-        TextColumn("[bold]{task.description}"),
+    with progress_display(
+        f"{planner} mission",
+        "steps",
+        TextColumn(f"[bold]{escape(planner)} mission"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("steps"),
         TimeElapsedColumn(),
         TextColumn("left"),
         TimeRemainingColumn(),
-        console=console,
         transient=True,
     ) as progress:
-        task = progress.add_task(escape(f"{planner} mission"), total=scenario.n_steps)
+        task = progress.add_task("", total=scenario.n_steps)
         record = run_episode(
             scenario,
             agent,
@@ -189,16 +189,44 @@ def simulate(
             json_path, {**record.summary(), "scenario_seed": scenario.seed, "seed_drawn": drawn}
         )
     if record_path:
-        record.save(record_path)
+        with writing(record_path, "--record"):
+            record.save(record_path)
     if plot:
         from hptrack.viz.mission import save_mission_figure
 
-        save_mission_figure(record, str(plot))
+        with writing(plot, "--plot"):
+            save_mission_figure(record, str(plot))
         console.print(f"figure written to {escape(str(plot))}")
     if animate_path is not None:
         from hptrack.cli.animate import write_animation
 
         write_animation(record, animate_path)
+
+
+def _check_record_size(n_targets: int, n_steps: int, belief_stride: int) -> None:
+    """Refuse, before the mission, a record larger than :data:`MAX_RECORD_BYTES`, naming the
+    smallest ``--belief-stride`` that fits (the per-step part does not shrink with it)."""
+    need = record_bytes(n_targets, n_steps, belief_stride)
+    if need <= MAX_RECORD_BYTES:
+        return
+    fixed = record_bytes(n_targets, n_steps, n_steps + 1)
+    advice = f"a shorter budget (at most {MAX_STEPS:,} steps)"
+    if fixed <= MAX_RECORD_BYTES:
+        stride = belief_stride
+        while record_bytes(n_targets, n_steps, stride) > MAX_RECORD_BYTES:
+            stride = max(stride + 1, 2 * stride)
+        low = stride // 2
+        while low + 1 < stride:  # the smallest stride that fits
+            mid = (low + stride) // 2
+            if record_bytes(n_targets, n_steps, mid) <= MAX_RECORD_BYTES:
+                stride = mid
+            else:
+                low = mid
+        advice = f"--belief-stride {stride} or more, or " + advice
+    raise InputError(
+        f"the mission of {n_steps:,} steps needs about {need / 2**30:.1f} GiB for its "
+        f"record (at most {MAX_RECORD_BYTES / 2**30:g} GiB); use {advice}"
+    )
 
 
 def _print_summary(record) -> None:
@@ -230,10 +258,11 @@ def scenario_random(
 ) -> None:
     """Write the paper's random scenario (Sec. V) to a YAML file."""
     check_seed(seed)
-    if not 1 <= targets <= 62:
-        raise InputError(f"--targets must be between 1 and 62, got {targets}")
+    if not 1 <= targets <= MAX_TARGETS:
+        raise InputError(f"--targets must be between 1 and {MAX_TARGETS}, got {targets}")
     check_output_path(output, "--output")
-    save_scenario(random_scenario(targets, seed=seed, homogeneous=homogeneous), output)
+    with writing(output, "--output"):
+        save_scenario(random_scenario(targets, seed=seed, homogeneous=homogeneous), output)
     console.print(f"{targets}-target scenario (seed {seed}) written to {escape(str(output))}")
 
 
@@ -246,14 +275,63 @@ def scenario_check(path: Annotated[Path, typer.Argument(help="Scenario YAML file
     )
 
 
+def _shown(value: object) -> str:
+    """An option value as a user would type it after ``-o KEY=``."""
+    if value is None:
+        return "none"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, list | tuple):
+        return ",".join(map(_shown, value))
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def option_defaults(name: str) -> dict[str, str]:
+    """Each option of planner ``name`` with its default as the planner resolves it (an option
+    without a default shows ``required``)."""
+    settings_type = PLANNERS[name].settings_type
+    try:
+        resolved = settings_type.from_options(name, {}).as_json()
+    except InputError:  # a required option: show the declared defaults
+        resolved = {
+            key: "required" if field.is_required() else field.default
+            for key, field in settings_type.model_fields.items()
+        }
+    return {key: value if value == "required" else _shown(value) for key, value in resolved.items()}
+
+
+def preset_changes(name: str) -> dict[str, dict[str, str]]:
+    """For a planner with a ``preset`` option: per other preset, the defaults it changes."""
+    field = PLANNERS[name].settings_type.model_fields.get("preset")
+    if field is None:
+        return {}
+    base = option_defaults(name)
+    out = {}
+    for preset in typing.get_args(field.annotation):
+        if preset != base["preset"]:
+            other = PLANNERS[name].settings_type.from_options(name, {"preset": preset}).as_json()
+            out[preset] = {
+                k: _shown(v)
+                for k, v in other.items()
+                if k != "preset" and k in base and _shown(v) != base[k]
+            }
+    return out
+
+
 @app.command("planners")
 def list_planners() -> None:
-    """List the registered planners."""
+    """List the registered planners, each option with its default (set with -o KEY=VALUE)."""
+    table = Table(title="planners (set an option with -o KEY=VALUE)", show_lines=True)
+    table.add_column("planner", style="bold", no_wrap=True)
+    table.add_column("what it does")
+    table.add_column("options (defaults)", overflow="fold")
     for name, entry in PLANNERS.items():
-        console.print(
-            f"{name}: {entry.summary}; options: "
-            f"{', '.join(entry.settings_type.model_fields) or 'none'}"
-        )
+        lines = [", ".join(f"{k}={v}" for k, v in option_defaults(name).items()) or "none"]
+        for preset, changes in preset_changes(name).items():
+            changed = ", ".join(f"{k}={v}" for k, v in changes.items())
+            lines.append(f"-o preset={preset} sets {changed}")
+        table.add_row(escape(name), escape(entry.summary), escape("\n".join(lines)))
+    console.print(table)
 
 
 def _register_commands() -> None:
@@ -288,8 +366,13 @@ def _given(err: Exception, argv: list[str]) -> str:
     return ""
 
 
+WRITE_ERRNOS = (errno.ENOSPC, errno.EROFS, errno.EDQUOT, errno.EFBIG, errno.EIO)
+"""Errors of a write the machine refused (disk full, read-only, quota, too large, I/O): one
+line naming the file, never a traceback."""
+
+
 def _refuse(message: str) -> None:
-    message = " ".join(message.split())
+    message = one_line(message)
     error_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
     sys.exit(2)
 
@@ -309,6 +392,10 @@ def main(argv: list[str] | None = None) -> None:
         if _is(err, "Abort"):
             error_console.print("interrupted", highlight=False)
             sys.exit(130)
+        if isinstance(err, OSError) and err.errno in WRITE_ERRNOS:
+            _refuse(f"{err.filename or 'an output file'}: the write failed ({err.strerror})")
+        if _is(err, "NoArgsIsHelpError"):  # the help is shown above
+            _refuse("give a command (listed above), e.g. hptrack simulate --random")
         if _is(err, "UsageError"):
             _refuse(err.format_message() + _given(err, sys.argv[1:] if argv is None else argv))
         traceback.print_exc()

@@ -3,25 +3,35 @@ cluster."""
 
 from __future__ import annotations
 
+import time
 from contextlib import ExitStack
 from pathlib import Path
 from typing import Annotated
 
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
 from hptrack.cli.common import (
     SETTING_HELP,
     check_output_dir,
     check_output_path,
     check_seed,
+    check_workers,
     console,
     planner_settings_for,
+    progress_display,
     write_json,
+    writing,
 )
 from hptrack.interface import InputError
+from hptrack.models.mission import MAX_TARGETS
 from hptrack.models.motion import ProcessNoiseForm
+
+MAX_SCENARIOS = 1_000_000
+"""Most scenarios per number of targets (the paper uses 100)."""
+OTHER_RUN_POLL_S = 2.0
+"""How often a benchmark waiting for another run's episodes looks at the database, s."""
 
 
 def _int_list(text: str, option: str) -> tuple[int, ...]:
@@ -29,8 +39,8 @@ def _int_list(text: str, option: str) -> tuple[int, ...]:
         values = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
         raise InputError(f"{option} expects comma-separated integers, got {text!r}") from None
-    if not values or min(values) < 1 or max(values) > 62:
-        raise InputError(f"{option} expects integers between 1 and 62, got {text!r}")
+    if not values or min(values) < 1 or max(values) > MAX_TARGETS:
+        raise InputError(f"{option} expects integers between 1 and {MAX_TARGETS}, got {text!r}")
     return values
 
 
@@ -109,6 +119,8 @@ def benchmark(
         raise InputError(f"--scenarios must be a positive integer, got {scenarios}")
     if workers is not None and workers < 1:
         raise InputError(f"--workers must be a positive integer, got {workers}")
+    if not 1 <= scenarios <= MAX_SCENARIOS:
+        raise InputError(f"--scenarios must be between 1 and {MAX_SCENARIOS:,}, got {scenarios}")
     dask = scheduler is not None or dask_local is not None
     if dask:
         from hptrack.experiments.dask_cluster import check_dask_options
@@ -122,6 +134,8 @@ def benchmark(
     for name in names:
         planner_entry(name)
     counts = _int_list(targets, "--targets")
+    if workers is not None and not dask:
+        workers = check_workers(workers, scenarios * len(counts) * len(names))
     settings = planner_settings_for(names, option, iterations, time_limit)
     for name in (figure_planners or "").split(","):
         if name.strip() and name.strip() not in names:
@@ -157,13 +171,14 @@ def benchmark(
                 f"Dask scheduler {escape(pool.address)}: {pool.threads} worker "
                 f"threads, {in_flight} episodes in flight"
             )
-        with Progress(
+        with progress_display(
+            "benchmark",
+            "episodes",
             TextColumn("[bold]benchmark"),
             BarColumn(),
             MofNCompleteColumn(),
             TimeElapsedColumn(),
             TextColumn("{task.description}"),
-            console=console,
         ) as progress:
             task = progress.add_task("", total=None)
 
@@ -176,15 +191,31 @@ def benchmark(
                     f"seed={row.key.seed}: U={row.uncertainty:.2f}",
                 )
 
-            ran = run_benchmark(
-                config, store, workers=in_flight, on_done=on_done, executor=executor
-            )
-        keys = set(config.keys())
-        rows = [r for r in store.rows() if r.key in keys]
+            keys = set(config.keys())
+            ran = 0
+            while True:
+                ran += run_benchmark(
+                    config, store, workers=in_flight, on_done=on_done, executor=executor
+                )
+                rows = [r for r in store.rows() if r.key in keys]
+                if len(rows) == len(keys):
+                    break
+                # another run on this database holds the rest: wait for it (or for its claims
+                # to go stale if it died) rather than write partial tables
+                progress.update(
+                    task,
+                    completed=len(rows),
+                    total=len(keys),
+                    description=f"waiting for {len(keys) - len(rows)} episodes that another "
+                    "run on this database holds",
+                )
+                time.sleep(OTHER_RUN_POLL_S)
+                store.release_stale_claims()
     console.print(f"{ran} episodes run now, {len(rows)} of {len(keys)} in the table ({db})")
-    _write_report(config, rows, out, figure_planners, figure_targets)
+    with writing(out, "--out"):
+        _write_report(config, rows, out, figure_planners, figure_targets)
     if json_path:
-        summary = summarise(rows)
+        summary = summarise(rows, config.planners)
         write_json(
             json_path, {p: {str(n): c for n, c in by_n.items()} for p, by_n in summary.items()}
         )
@@ -193,37 +224,27 @@ def benchmark(
 def _write_report(
     config, rows, out: Path, figure_planners: str | None, figure_targets: int | None
 ) -> None:
-    from matplotlib.figure import Figure
     from rich.markdown import Markdown
 
     from hptrack.experiments.benchmark import planner_for, scenario_for
-    from hptrack.experiments.report import markdown_tables, write_csv
+    from hptrack.experiments.report import benchmark_report, write_csv
     from hptrack.experiments.store import EpisodeKey
     from hptrack.sim.episode import run_episode
-    from hptrack.viz.benchmark import plot_trajectories, plot_uncertainty_boxes
+    from hptrack.viz.benchmark import plot_trajectories, save_uncertainty_boxes
+    from hptrack.viz.style import new_figure, save_figure
 
     out.mkdir(parents=True, exist_ok=True)
-    paper = (
-        ("ARVI (paper)", "A* with heuristic (paper)", "hierarchical, homogeneous (paper)")
-        if config.homogeneous
-        else ("ADFQ (paper)", "hierarchical, heterogeneous (paper)")
-    )
-    efforts = "; ".join(f"{p}: {config.settings[p].effort_label()}" for p in config.planners)
-    text = (
-        f"Setting: {config.setting}; planning effort: {efforts}; "
-        f"{config.scenarios} scenarios per n from seed {config.first_seed}.\n\n"
-        + markdown_tables(rows, paper)
-    )
+    text = benchmark_report(config, rows)
     (out / "table.md").write_text(text)
     write_csv(rows, out / "episodes.csv")
     console.print(Markdown(text))
-    counts = sorted({r.key.n_targets for r in rows})
-    if counts:
-        fig = Figure(figsize=(4.0 * len(counts), 4.0))
-        for i, n in enumerate(counts):
-            plot_uncertainty_boxes(fig.add_subplot(1, len(counts), i + 1), rows, n)
-        fig.tight_layout()
-        fig.savefig(out / "uncertainty_boxes.png", dpi=120)
+    if rows:
+        save_uncertainty_boxes(
+            rows,
+            out / "uncertainty_boxes.png",
+            config.planners,
+            f"U per planner at the budget's end ({config.setting} setting)",
+        )
     names = (
         [p.strip() for p in figure_planners.split(",")]
         if figure_planners
@@ -236,16 +257,9 @@ def _write_report(
             name, n_figure, config.first_seed, config.setting, config.settings[name].canonical()
         )
         records.append(run_episode(scenario_for(key), planner_for(key)))
-    fig = Figure(figsize=(6.0 * len(names) + 1.0, 6.5))
-    plot_trajectories(
-        fig,
-        records,
-        [
-            f"{r.planner}, n = {n_figure}, seed {config.first_seed}: U = {r.uncertainty:.2f}"
-            for r in records
-        ],
-    )
-    fig.savefig(out / "trajectories.png", dpi=110)
+    fig = new_figure(6.0 * len(names) + 1.0, 7.0)
+    plot_trajectories(fig, records)
+    save_figure(fig, out / "trajectories.png", dpi=110)
     console.print(f"tables and figures written to {out}")
 
 

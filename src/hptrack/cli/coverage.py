@@ -11,13 +11,25 @@ from typing import Annotated
 import numpy as np
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from hptrack.cli.common import check_output_dir, check_output_path, check_seed, console, write_json
+from hptrack.cli.common import (
+    check_figure_path,
+    check_memory,
+    check_output_dir,
+    check_output_path,
+    check_seed,
+    check_workers,
+    console,
+    progress_display,
+    write_json,
+    writing,
+)
 from hptrack.coverage import CoverageSubtask
 from hptrack.experiments.coverage_validation import (
     PAPER_MAPE,
+    RUN_BYTES,
     ValidationConfig,
     case_rows,
     draw_case,
@@ -26,14 +38,21 @@ from hptrack.experiments.coverage_validation import (
     summarise,
     write_reports,
 )
-from hptrack.interface import InputError, MissionSpec
+from hptrack.interface import InputError, MissionSpec, shown
 from hptrack.models.motion import ProcessNoiseForm
 from hptrack.scenario import load_scenario
 
+MAX_DELAY_S = 3600.0
+"""Longest departure delay of ``validate-coverage``, s (an hour; the paper's budget is 900 s)."""
+MAX_CASES = 1_000_000
+"""Most ``validate-coverage`` cases (the paper uses 1000)."""
+MAX_RUNS = 10_000_000
+"""Most sampled trajectories per case and delay (the paper uses 10,000)."""
 
-def _whole_steps(seconds: float, time_step: float, name: str) -> int:
-    if not math.isfinite(seconds):
-        raise InputError(f"{name} must be a finite number of seconds, got {seconds}")
+
+def _whole_steps(seconds: float, time_step: float, name: str, longest: float) -> int:
+    if not (math.isfinite(seconds) and 0 <= seconds <= longest):
+        raise InputError(f"{name} must be between 0 and {longest:g} s, got {seconds}")
     steps = round(seconds / time_step)
     if seconds < 0 or abs(seconds / time_step - steps) > 1e-9:
         raise InputError(
@@ -64,7 +83,7 @@ def coverage(
 ) -> None:
     """Plan one coverage sub-task (intercept + shifting spiral) and print its estimate."""
     check_output_path(json_path, "--json")
-    check_output_path(plot, "--plot")
+    check_figure_path(plot, "--plot")
     scenario = load_scenario(scenario_path)
     mission = scenario.mission_spec()
     if target not in mission.target_ids:
@@ -73,9 +92,9 @@ def coverage(
             f"{list(mission.target_ids)}"
         )
     i = mission.target_ids.index(target)
-    d = _whole_steps(delay, mission.time_step, "--delay")
-    if delay >= mission.budget:
+    if math.isfinite(delay) and delay >= mission.budget:
         raise InputError(f"--delay {delay:g} s leaves no budget (budget {mission.budget:g} s)")
+    d = _whole_steps(delay, mission.time_step, "--delay", mission.budget)
     q = float(mission.process_noise[i])
     means, covs = mission.motion.predict(
         scenario.means()[i : i + 1], scenario.covariances()[i : i + 1], q, d * mission.time_step
@@ -145,18 +164,19 @@ def coverage(
             q,
             est.cutoff_time,
         )
-        plot.parent.mkdir(parents=True, exist_ok=True)
-        save_plan_figure(
-            str(plot),
-            positions,
-            n,
-            start_mean,
-            subtask.start_covariance[:2, :2],
-            end_mean[0, :2],
-            end_cov[0, :2, :2],
-            est.cdf,
-            mission.time_step,
-        )
+        with writing(plot, "--plot"):
+            save_plan_figure(
+                str(plot),
+                positions,
+                n,
+                start_mean,
+                subtask.start_covariance[:2, :2],
+                end_mean[0, :2],
+                end_cov[0, :2, :2],
+                est.cdf,
+                mission.time_step,
+                title=f"coverage sub-task of target {target} after waiting {delay:g} s",
+            )
         console.print(f"figure written to {plot}")
 
 
@@ -183,11 +203,13 @@ def validate_coverage(
     """Estimator-accuracy experiment (paper Sec. V-A): MAPE of P_find and E[T_find] per delay,
     for the paper's estimator and the sharp one on the same simulated runs."""
     check_seed(seed)
-    for value, name in ((cases, "--cases"), (runs, "--runs"), (workers, "--workers")):
-        if value < 1:
-            raise InputError(f"{name} must be a positive integer, got {value}")
+    for value, name, most in ((cases, "--cases", MAX_CASES), (runs, "--runs", MAX_RUNS)):
+        if not 1 <= value <= most:
+            raise InputError(f"{name} must be between 1 and {most:,}, got {shown(value)}")
+    workers = check_workers(workers, cases)
     for delay in _parse_delays(delays):
-        _whole_steps(delay, MissionSpec().time_step, "--delays")
+        _whole_steps(delay, MissionSpec().time_step, "--delays", MAX_DELAY_S)
+    check_memory(workers * runs * RUN_BYTES, f"--runs {runs} on {workers} worker(s)")
     check_output_dir(out, "--out")
     check_output_path(json_path, "--json")
     config = ValidationConfig(
@@ -204,14 +226,15 @@ def validate_coverage(
         f"x {runs} runs; {workers} worker(s); results in {out}"
     )
     start = time.perf_counter()
-    with Progress(
+    with progress_display(
+        "validation",
+        "cases",
         TextColumn("[bold]cases"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
-        console=console,
     ) as progress:
-        task = progress.add_task("cases", total=cases)
+        task = progress.add_task("", total=cases)
         rows = run_validation(
             config, out, workers, on_case=lambda done, total: progress.update(task, completed=done)
         )

@@ -31,7 +31,7 @@ from hptrack.cli.common import (
     write_json,
 )
 from hptrack.interface import InputError
-from hptrack.registry import PLANNERS, make_planner
+from hptrack.registry import PLANNERS, make_planner, planner_entry
 from hptrack.scenario import load_scenario
 from hptrack.scenario.io import format_validation_error
 
@@ -127,7 +127,14 @@ def fly(
     max_distance: Annotated[
         float, typer.Option(help="A setpoint farther than this from home ends the mission, m.")
     ] = 1000.0,
-    planner: Annotated[str, typer.Option(help=f"One of: {', '.join(PLANNERS)}.")] = "mcts",
+    planner: Annotated[
+        str,
+        typer.Option(
+            help="One of: "
+            + ", ".join(name for name, entry in PLANNERS.items() if not entry.reads_truth)
+            + "."
+        ),
+    ] = "mcts",
     iterations: Annotated[
         int | None,
         typer.Option(help=f"Tree-search iterations per decision (default {FLY_ITERATIONS})."),
@@ -174,6 +181,11 @@ def fly(
     _positive(lost_link, "--lost-link", 0.0, 600.0)
     _positive(connect_timeout, "--connect-timeout", 0.0, 3600.0)
     settings = _controller_settings(deadline, stale_after)
+    if planner_entry(planner).reads_truth:
+        raise InputError(
+            f"--planner {planner}: it reads the true target states, which no flight has; "
+            "it runs in hptrack simulate and benchmark only"
+        )
     scenario = load_scenario(scenario_path)
     if iterations is None and time_limit is None and planner == "mcts":
         iterations = FLY_ITERATIONS

@@ -12,19 +12,27 @@ from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
-    Progress,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
 
-from hptrack.cli.common import check_output_dir, check_output_path, check_seed, console
+from hptrack.cli.common import (
+    check_figure_path,
+    check_memory,
+    check_output_dir,
+    check_seed,
+    console,
+    progress_display,
+)
 from hptrack.interface import InputError
 
 learn_app = typer.Typer(
     help="Train learning baselines on hptrack/Tracking-v0 (resumable).", no_args_is_help=True
 )
 
+MAX_TRAINING_STEPS = 10**10
+"""Most environment steps of one training run (about a year at 300 steps per second)."""
 PROGRESS_EVERY = 250
 """Steps between progress-bar refreshes."""
 
@@ -74,10 +82,10 @@ def _check_common(
     validation_interval: int,
     checkpoint_interval: int,
 ) -> None:
-    if targets < 1:
-        raise InputError(f"--targets must be at least 1, got {targets}")
-    if steps < 1:
-        raise InputError(f"--steps must be at least 1, got {steps}")
+    if not 1 <= targets <= 62:
+        raise InputError(f"--targets must be between 1 and 62, got {targets}")
+    if not 1 <= steps <= MAX_TRAINING_STEPS:
+        raise InputError(f"--steps must be between 1 and {MAX_TRAINING_STEPS:g}, got {steps}")
     check_seed(seed)
     for option, value in (
         ("--validation-scenarios", validation_scenarios),
@@ -89,8 +97,8 @@ def _check_common(
     check_output_dir(out, "--out")
 
 
-def _train(trainer: Any, name: str, out: Path) -> dict[str, Any]:
-    total = trainer.config.steps
+def _train(trainer: Any, name: str, out: Path, total: int) -> dict[str, Any]:
+    """Run ``trainer`` to ``total`` steps with a progress display, then draw its curve."""
     columns = (
         TextColumn(f"[bold]{escape(name)}"),
         BarColumn(),
@@ -100,7 +108,7 @@ def _train(trainer: Any, name: str, out: Path) -> dict[str, Any]:
         TextColumn("{task.description}"),
     )
     start = time.perf_counter()
-    with Progress(*columns, console=console) as progress:
+    with progress_display(name, "steps", *columns) as progress:
         task = progress.add_task("", total=total)
 
         def on_progress(p) -> None:
@@ -121,23 +129,14 @@ def _train(trainer: Any, name: str, out: Path) -> dict[str, Any]:
         f"{summary['best_U']:.3f} at step {summary['best_step']}; last "
         f"{summary['last_validation_U']:.3f}; model {escape(summary['best_model'])}"
     )
-    _write_figure(out, out / "curve.png", name)
+    _write_figure(out, out / "curve.png")
     return summary
 
 
-def _write_figure(run: Path, path: Path, title: str) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+def _write_figure(run: Path, path: Path, title: str | None = None) -> None:
+    from hptrack.learning.curves import save_training_curve
 
-    from hptrack.learning.curves import load_curve, plot_training_curve
-
-    curve = load_curve(run)
-    fig = Figure(figsize=(7, 4), layout="constrained")
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    plot_training_curve(ax, curve)
-    ax.set_title(title)
-    fig.savefig(path, dpi=120)
+    save_training_curve(run, path, title)
     console.print(f"training curve written to {escape(str(path))}")
 
 
@@ -152,6 +151,14 @@ def learn_adfq(
     validation_interval: ValidationInterval = 25_000,
     checkpoint_interval: CheckpointInterval = 10_000,
     warmup: Annotated[int, typer.Option(help="Steps of exploration before learning.")] = 10_000,
+    allow_untrained: Annotated[
+        bool,
+        typer.Option(
+            "--allow-untrained",
+            help="Run even when --steps is not above --warmup (no learning: the network stays "
+            "untrained).",
+        ),
+    ] = False,
     buffer: Annotated[int, typer.Option(help="Replay capacity, transitions.")] = 200_000,
     prioritized: Annotated[
         bool, typer.Option(help="Prioritised replay (alpha 0.6, beta 0.4 -> 1) instead of uniform.")
@@ -163,6 +170,9 @@ def learn_adfq(
     )
     if warmup < 0 or buffer < 1:
         raise InputError(f"--warmup must be >= 0 and --buffer >= 1, got {warmup} and {buffer}")
+    # two float32 observations (6 features per target, the budget, a mask), action, reward,
+    # end flag, and the priority tree's two float64 leaves
+    check_memory(buffer * (8 * (7 * targets + 1) + 8 + 8 + 1 + 16), f"--buffer {buffer}")
     _require_learn_extra()
     from hptrack.learning.agent import AdfqConfig
     from hptrack.learning.train import TrainConfig, Trainer, tracking_task
@@ -175,7 +185,7 @@ def learn_adfq(
         checkpoint_interval=checkpoint_interval,
         agent=AdfqConfig(warmup_steps=warmup, buffer_size=buffer, prioritized=prioritized),
     )
-    _train(Trainer(task, config, out), f"adfq n={targets}", out)
+    _train(Trainer(task, config, out, allow_untrained), f"adfq n={targets}", out, steps)
 
 
 @learn_app.command("sb3-ppo")
@@ -201,7 +211,7 @@ def learn_sb3_ppo(
         raise InputError(
             "hptrack learn sb3-ppo needs stable-baselines3: pip install 'hptrack[learn]'"
         ) from None
-    from hptrack.learning.sb3 import PpoConfig, PpoTrainer
+    from hptrack.learning.sb3 import PpoConfig, PpoTrainer, trained_steps
     from hptrack.learning.train import tracking_task
 
     task = tracking_task(targets, homogeneous, validation_scenarios)
@@ -211,7 +221,14 @@ def learn_sb3_ppo(
         validation_interval=validation_interval,
         checkpoint_interval=checkpoint_interval,
     )
-    _train(PpoTrainer(task, config, out), f"sb3-ppo n={targets}", out)
+    trainer = PpoTrainer(task, config, out)
+    rounded = trained_steps(steps, config.n_steps)
+    if rounded != steps:
+        console.print(
+            f"PPO trains whole rollouts of {config.n_steps:,} steps: --steps {steps:,} "
+            f"trains {rounded:,} steps"
+        )
+    _train(trainer, f"sb3-ppo n={targets}", out, rounded)
 
 
 @learn_app.command("plot")
@@ -220,13 +237,16 @@ def learn_plot(
     output: Annotated[
         Path | None, typer.Option("--output", "-o", help="PNG to write (default RUN/curve.png).")
     ] = None,
-    title: Annotated[str | None, typer.Option(help="Figure title.")] = None,
+    title: Annotated[
+        str | None,
+        typer.Option(help="Figure title (default: algorithm, n, setting from the run's config)."),
+    ] = None,
 ) -> None:
     """Draw a run's training curve: final U of the training episodes and of the validation
     scenarios against steps, with the never-observed U."""
     path = output or run / "curve.png"
-    check_output_path(path, "--output")
-    _write_figure(run, path, title if title is not None else run.name)
+    check_figure_path(path, "--output")
+    _write_figure(run, path, title)
 
 
 def register(app: typer.Typer) -> None:

@@ -27,7 +27,7 @@ import numba
 import numpy as np
 
 from hptrack.interface import MissionSpec
-from hptrack.models.motion import position_covariance_after, position_polynomials
+from hptrack.models.mission import position_covariance_on, position_polynomials_on, steps_left
 
 MAX_COVERAGE_STEPS = 10_000_000
 """Cap on ``t_cutoff`` when no budget is given; reaching it means the belief does not grow."""
@@ -63,32 +63,22 @@ def ratio_grows(area, det, next_area, next_det):
 
 
 @numba.njit(cache=True)
-def _covered_ratio(cov, q, k, tau, c_per_step, speed, diameter):
+def _covered_ratio(mission, cov, q, k):
     """``S_cover(k) / sqrt(det Sigma^xy(k))`` (dimensionless)."""
-    sxx, sxy, syy = position_covariance_after(cov, q, k, tau, c_per_step)
+    sxx, sxy, syy = position_covariance_on(mission, cov, q, k)
+    speed, diameter, tau = mission.speed, 2.0 * mission.footprint_radius, mission.time_step
     area = speed * diameter * k * tau + math.pi * 0.25 * diameter * diameter
     return area / math.sqrt(sxx * syy - sxy * sxy)
 
 
 @numba.njit(cache=True)
-def coverage_outcome(
-    cov: np.ndarray,
-    q: float,
-    tau: float,
-    c_per_step: float,
-    speed: float,
-    diameter: float,
-    max_steps: int,
-) -> tuple:
+def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tuple:
     """Estimated outcome of a coverage starting from covariance ``cov``.
 
     Args:
+        mission: the mission record (time step, agent speed, footprint, ``Q`` form).
         cov: 4x4 belief covariance at the start of the coverage.
         q: process noise intensity (m^2/s^3).
-        tau: time step, s.
-        c_per_step: lower-right per-step ``Q`` block over ``q`` (``tau`` or ``1``).
-        speed: agent speed ``v_a``, m/s.
-        diameter: sensor footprint diameter ``w``, m.
         max_steps: coverage steps left in the budget (truncates ``t_cutoff``); negative when the
             budget ends before the coverage starts.
 
@@ -99,7 +89,8 @@ def coverage_outcome(
     """
     if max_steps < 0:
         return 0.0, 0.0, 0.0
-    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials(cov, q, tau, c_per_step)
+    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials_on(mission, cov, q)
+    speed, diameter, tau = mission.speed, 2.0 * mission.footprint_radius, mission.time_step
     area0 = math.pi * 0.25 * diameter * diameter  # S_cover(k) = area0 + k area1
     area1 = speed * diameter * tau
     inv_two_pi = 1.0 / (2.0 * math.pi)
@@ -124,19 +115,11 @@ def coverage_outcome(
 
 
 @numba.njit(cache=True)
-def coverage_cdf(
-    cov: np.ndarray,
-    q: float,
-    tau: float,
-    c_per_step: float,
-    speed: float,
-    diameter: float,
-    n_steps: int,
-) -> np.ndarray:
+def coverage_cdf(mission, cov: np.ndarray, q: float, n_steps: int) -> np.ndarray:
     """``P_cdf(k)`` for ``k = 0 .. n_steps - 1`` (no cutoff applied), for plots and reports."""
     out = np.empty(n_steps)
     for k in range(n_steps):
-        ratio = _covered_ratio(cov, q, float(k), tau, c_per_step, speed, diameter)
+        ratio = _covered_ratio(mission, cov, q, float(k))
         out[k] = -math.expm1(-ratio / (2.0 * math.pi))
     return out
 
@@ -218,9 +201,8 @@ def estimate_coverage(
     cov = check_state_covariance(covariance)
     if not (math.isfinite(q) and q >= 0.0):
         raise ValueError(f"process noise q must be a non-negative finite number, got {q!r}")
-    tau = mission.time_step
-    c_per_step = mission.c_per_step
-    speed, diameter = mission.agent_speed, mission.sensor_diameter
+    record = mission.record
+    tau = record.time_step
     if remaining_time is None:
         max_steps = MAX_COVERAGE_STEPS
     elif math.isnan(remaining_time):
@@ -228,18 +210,16 @@ def estimate_coverage(
     elif remaining_time < 0.0:
         return CoverageEstimate(0, 0.0, 0.0, np.zeros(0), tau, True)
     else:
-        max_steps = min(math.floor(remaining_time / tau + 1e-9), MAX_COVERAGE_STEPS)
-    cutoff, p_find, expected = coverage_outcome(
-        cov, float(q), tau, c_per_step, speed, diameter, max_steps
-    )
+        max_steps = min(steps_left(tau, remaining_time), MAX_COVERAGE_STEPS)
+    cutoff, p_find, expected = coverage_outcome(record, cov, float(q), max_steps)
     cutoff = int(cutoff)
     limited = cutoff == max_steps and _covered_ratio(
-        cov, float(q), cutoff + 1.0, tau, c_per_step, speed, diameter
-    ) > _covered_ratio(cov, float(q), float(cutoff), tau, c_per_step, speed, diameter)
+        record, cov, float(q), cutoff + 1.0
+    ) > _covered_ratio(record, cov, float(q), float(cutoff))
     if limited and remaining_time is None:
         raise ValueError(
             f"P_cdf still rises after {MAX_COVERAGE_STEPS} steps: the belief does "
             "not grow (zero velocity variance and q = 0?), so t_cutoff is undefined"
         )
-    cdf = coverage_cdf(cov, float(q), tau, c_per_step, speed, diameter, cutoff + 1)
+    cdf = coverage_cdf(record, cov, float(q), cutoff + 1)
     return CoverageEstimate(cutoff, float(p_find), float(expected) * tau, cdf, tau, bool(limited))

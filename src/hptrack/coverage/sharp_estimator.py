@@ -61,7 +61,7 @@ import numpy as np
 
 from hptrack.coverage.estimator import estimate_coverage, position_det, ratio_grows
 from hptrack.interface import MissionSpec
-from hptrack.models.motion import position_polynomials
+from hptrack.models.mission import position_polynomials_on
 
 PHASE_NODES = 2
 """Gauss-Legendre nodes in the phase of the last pass ``alpha``."""
@@ -263,12 +263,9 @@ def _found(
 
 @numba.njit(cache=True)
 def sharp_coverage_outcome(
+    mission,
     cov: np.ndarray,
     q: float,
-    tau: float,
-    c_per_step: float,
-    speed: float,
-    diameter: float,
     max_steps: int,
     flight_steps: int,
     approach_x: float,
@@ -277,12 +274,9 @@ def sharp_coverage_outcome(
     """Outcome of a sub-task (intercept flight, then spiral) with the sharp model.
 
     Args:
+        mission: the mission record (time step, agent speed, footprint, ``Q`` form).
         cov: 4x4 belief covariance at the start of the coverage (the end of the flight).
         q: process noise intensity (m^2/s^3).
-        tau: time step, s.
-        c_per_step: lower-right per-step ``Q`` block over ``q`` (``tau`` or ``1``).
-        speed: agent speed ``v_a``, m/s.
-        diameter: sensor footprint diameter ``w``, m.
         max_steps: coverage steps left in the budget (truncates ``t_cutoff``); negative when the
             budget ends before the coverage starts.
         flight_steps: whole steps of the intercept flight ``n`` (0: none).
@@ -297,8 +291,9 @@ def sharp_coverage_outcome(
     """
     if max_steps < 0:
         return 0.0, 0.0, 0.0
-    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials(cov, q, tau, c_per_step)
-    radius = 0.5 * diameter
+    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials_on(mission, cov, q)
+    speed, tau, radius = mission.speed, mission.time_step, mission.footprint_radius
+    diameter = 2.0 * radius
     tr = 0.5 * (x0 + y0)
     gap = math.sqrt(max(tr * tr - (x0 * y0 - c0 * c0), 0.0))
     semi_a, semi_b = math.sqrt(tr + gap), math.sqrt(max(tr - gap, 0.0))
@@ -446,12 +441,9 @@ def estimate_sharp(
     if remaining_time is not None and remaining_time < 0.0:
         return SharpEstimate(steps, 0, 0.0, 0.0, tau, True)
     cutoff, p_find, expected = sharp_coverage_outcome(
+        mission.record,
         np.asarray(covariance, dtype=float),
         float(q),
-        tau,
-        mission.c_per_step,
-        mission.agent_speed,
-        mission.sensor_diameter,
         paper.cutoff_steps,
         steps,
         float(step[0]),

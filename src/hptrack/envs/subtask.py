@@ -35,7 +35,8 @@ from gymnasium import spaces
 
 from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
-from hptrack.envs.tracking import MissionEnv
+from hptrack.envs.tracking import MissionEnv, discrete_action
+from hptrack.models.mission import reachable_before_budget, steps_left
 from hptrack.models.motion import predicted_positions
 
 
@@ -62,7 +63,7 @@ class SubtaskTrackingEnv(MissionEnv):
         mask = np.zeros(self.layout.n_slots, dtype=bool)
         if w.done:
             return mask
-        left = math.floor(w.remaining_budget / m.time_step + 1e-9)
+        left = steps_left(m.time_step, w.remaining_budget)
         for i in range(w.n_targets):
             mean = w.means[i]
             if math.hypot(mean[2], mean[3]) >= m.agent_speed:
@@ -78,7 +79,7 @@ class SubtaskTrackingEnv(MissionEnv):
                 m.time_step,
                 m.sensor_radius,
             )
-            mask[i] = 0 <= steps < left
+            mask[i] = reachable_before_budget(steps, left)
         if self.last_found is not None:
             mask[self.last_found] = True
         return mask
@@ -118,9 +119,7 @@ class SubtaskTrackingEnv(MissionEnv):
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         world = self._check_running()
-        i = int(action)
-        if not 0 <= i < self.layout.n_slots:
-            raise ValueError(f"action must be in 0..{self.layout.n_slots - 1}, got {action!r}")
+        i = discrete_action(action, self.layout.n_slots)
         feasible = bool(self.action_masks()[i])
         before, start = world.uncertainty, world.step_index
         plan: dict = {}

@@ -29,7 +29,7 @@ import numpy as np
 from gymnasium import spaces
 
 from hptrack.envs.observation import ObservationLayout
-from hptrack.interface import InputError
+from hptrack.interface import InputError, shown
 from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
 from hptrack.sim.record import EpisodeRecord
@@ -63,6 +63,24 @@ def _target_range(n_targets: int | tuple[int, int]) -> tuple[int, int]:
     return lo, hi
 
 
+def discrete_action(action: Any, n: int) -> int:
+    """``action`` as an index ``0 .. n-1``: an integer (Python or numpy, also a one-element
+    integer array as a policy returns it); a float, a text or a boolean is refused, never
+    truncated.
+
+    Raises:
+        ValueError: anything else (one line with the shortened value).
+    """
+    value = action
+    if isinstance(value, np.ndarray) and value.size == 1 and value.dtype.kind in "iu":
+        value = value.reshape(()).item()
+    if isinstance(value, np.integer):
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < n:
+        raise ValueError(f"action must be an integer in 0..{n - 1}, got {shown(action)}")
+    return value
+
+
 def action_waypoint(
     action_type: str, action: Any, agent: np.ndarray, step_length: float
 ) -> tuple[float, float]:
@@ -71,17 +89,20 @@ def action_waypoint(
     rule, also for flying a learned policy as a planner in the simulator.
 
     Raises:
-        ValueError: an action outside the space (a Box action only needs to be finite).
+        ValueError: an action outside the space. A Box action only needs to be finite: one
+            beyond the box is scaled back into it along its direction (the agent flies at most
+            ``step_length`` anyway), so that no waypoint overflows.
     """
     if action_type == "discrete":
-        k = int(action)
-        if not 0 <= k < len(HEADINGS):
-            raise ValueError(f"action must be in 0..{len(HEADINGS) - 1}, got {action!r}")
-        ux, uy = HEADINGS[k]
+        ux, uy = HEADINGS[discrete_action(action, len(HEADINGS))]
     else:
-        a = np.asarray(action, dtype=float)
+        try:
+            a = np.asarray(action, dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            a = np.full(1, np.nan)
         if a.shape != (2,) or not np.all(np.isfinite(a)):
-            raise ValueError(f"action must be 2 finite numbers, got {action!r}")
+            raise ValueError(f"action must be 2 finite numbers, got {shown(action)}")
+        a = a / max(1.0, float(np.max(np.abs(a))))
         ux, uy = float(a[0]), float(a[1])
     return float(agent[0]) + step_length * ux, float(agent[1]) + step_length * uy
 
@@ -149,8 +170,17 @@ class MissionEnv(gym.Env):
         """Start an episode: ``options={"scenario": Scenario}`` flies that scenario with its own
         seed (or ``options["seed"]``), exactly as the simulator; otherwise a random scenario of
         the env's setting is drawn from the env's generator (seeded by ``seed``)."""
-        super().reset(seed=seed)
         options = dict(options or {})
+        for given, name in ((seed, "seed"), (options.get("seed"), 'options["seed"]')):
+            if given is not None and (
+                isinstance(given, bool)
+                or not isinstance(given, int | np.integer)
+                or not 0 <= given < 2**63
+            ):
+                raise InputError(
+                    f"reset {name} must be an integer in 0 .. 2^63 - 1, got {shown(given)}"
+                )
+        super().reset(seed=None if seed is None else int(seed))
         unknown = sorted(set(options) - set(RESET_OPTIONS))
         if unknown:
             raise InputError(
@@ -251,22 +281,15 @@ class MissionEnv(gym.Env):
         )
 
     def render(self) -> np.ndarray | None:
-        """The mission figure of the episode so far (:func:`hptrack.viz.mission.plot_mission`)
+        """The mission figure of the episode so far (:func:`hptrack.viz.mission.mission_figure`)
         as an RGB array ``(640, 640, 3)`` uint8; ``None`` without ``render_mode``."""
         if self.render_mode is None:
             return None
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
+        from hptrack.viz.mission import mission_figure
 
-        from hptrack.viz.mission import plot_mission
-
-        fig = Figure(figsize=(6.4, 6.4), dpi=100, layout="constrained")
-        canvas = FigureCanvasAgg(fig)
-        ax = fig.add_subplot()
-        artists = plot_mission(ax, self.episode_record())
-        fig.colorbar(artists["agent"], ax=ax, label="agent time (s)", shrink=0.8)
-        canvas.draw()
-        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+        fig = mission_figure(self.episode_record(), 6.4, 6.4, dpi=100)
+        fig.canvas.draw()
+        return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
 
 
 class TrackingEnv(MissionEnv):

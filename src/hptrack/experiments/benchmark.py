@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
+from hptrack.experiments.workers import worker_pool
 from hptrack.interface import InputError
 from hptrack.registry import planner_entry, planner_settings
 from hptrack.scenario.model import Scenario
@@ -92,7 +93,7 @@ def scenario_for(key: EpisodeKey) -> Scenario:
 def planner_for(key: EpisodeKey):
     """A fresh planner of a benchmark episode, from the settings stored in its key."""
     entry = planner_entry(key.planner)
-    return entry.factory(entry.settings_type.from_canonical(key.settings))
+    return entry.factory(entry.settings_type.from_canonical(key.planner_settings))
 
 
 def run_one(key: EpisodeKey) -> EpisodeRow:
@@ -168,7 +169,9 @@ def run_keys(
                 record(row)
         return finished
     own_pool = executor is None
-    pool = ProcessPoolExecutor(max_workers=workers) if own_pool else executor
+    if own_pool:
+        workers = max(1, min(workers, len(todo)))
+    pool = worker_pool(workers) if own_pool else executor
     pending: dict[Future, EpisodeKey] = {}
     queue = iter(todo)
     try:
@@ -232,18 +235,21 @@ def benchmark(
     try:
         run_benchmark(config, store, workers)
         wanted = set(config.keys())
-        return summarise(row for row in store.rows() if row.key in wanted)
+        return summarise((row for row in store.rows() if row.key in wanted), planners)
     finally:
         store.close()
 
 
-def summarise(rows: Iterable[EpisodeRow]) -> dict:
-    """``{planner: {n: {"mean", "std", "episodes", "never_observed"}}}`` of ``U``."""
-    groups: dict = {}
+def summarise(rows: Iterable[EpisodeRow], order: Iterable[str] = ()) -> dict:
+    """``{planner: {n: {"mean", "std", "episodes", "never_observed"}}}`` of ``U``; planners in
+    ``order`` first (in that order), then the others as they first appear in ``rows``."""
+    groups: dict = {planner: {} for planner in order}
     for row in rows:
         groups.setdefault(row.key.planner, {}).setdefault(row.key.n_targets, []).append(row)
     out: dict = {}
     for planner, by_n in groups.items():
+        if not by_n:
+            continue
         out[planner] = {}
         for n, items in sorted(by_n.items()):
             u = np.array([r.uncertainty for r in items])
@@ -257,16 +263,34 @@ def summarise(rows: Iterable[EpisodeRow]) -> dict:
     return out
 
 
-def reductions(summary: dict) -> dict:
-    """Reduction of each planner's mean ``U`` against each other planner's, percent:
+def reductions(summary: dict, planner: str) -> dict:
+    """Reduction of ``planner``'s mean ``U`` against each other planner's, percent (the paper's
+    "our method reduces U by ... compared to ARVI"):
     ``{(planner, baseline): {n: 100 (U_baseline - U_planner) / U_baseline}}``."""
+    mine = summary[planner]
     out = {}
-    for a, by_a in summary.items():
-        for b, by_b in summary.items():
-            if a == b:
-                continue
-            shared = sorted(set(by_a) & set(by_b))
-            out[(a, b)] = {
-                n: 100.0 * (by_b[n]["mean"] - by_a[n]["mean"]) / by_b[n]["mean"] for n in shared
-            }
+    for baseline, theirs in summary.items():
+        if baseline == planner:
+            continue
+        shared = sorted(set(mine) & set(theirs))
+        out[(planner, baseline)] = {
+            n: 100.0 * (theirs[n]["mean"] - mine[n]["mean"]) / theirs[n]["mean"] for n in shared
+        }
     return out
+
+
+def gap_closed(summary: dict, floor: str = "greedy", reference: str = "clairvoyant") -> dict:
+    """Share of the gap from ``floor`` (no look-ahead) to ``reference`` (reads the truth) that
+    each planner's mean ``U`` closes, percent: ``{planner: {n: 100 (U_floor - U) / (U_floor -
+    U_reference)}}`` (empty without both)."""
+    if floor not in summary or reference not in summary:
+        return {}
+    low, ref = summary[floor], summary[reference]
+    return {
+        planner: {
+            n: 100.0 * (low[n]["mean"] - cell["mean"]) / (low[n]["mean"] - ref[n]["mean"])
+            for n, cell in by_n.items()
+            if n in low and n in ref and low[n]["mean"] != ref[n]["mean"]
+        }
+        for planner, by_n in summary.items()
+    }

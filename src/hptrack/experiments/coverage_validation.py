@@ -36,7 +36,7 @@ import csv
 import json
 import math
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -46,14 +46,19 @@ import numpy as np
 from hptrack.coverage.estimator import CoverageEstimate
 from hptrack.coverage.sharp_estimator import SharpEstimate
 from hptrack.coverage.subtask import CoverageSubtask
+from hptrack.experiments.workers import worker_pool
 from hptrack.interface import InputError, MissionSpec
-from hptrack.models.motion import advance_true_state, motion_noise_factors
+from hptrack.models.mission import motion_noise_factors_on
+from hptrack.models.motion import advance_true_state
 from hptrack.scenario.random import random_mean, random_prior
 
 PAPER_MAPE = {"0": (3.58, 5.18), "100": (2.46, 3.42), "200": (5.46, 3.73)}
 """The paper's Table I: ``delay -> (MAPE(P_find), MAPE(E[T_find]))`` in percent."""
 BLOCK_STEPS = 64
 """Steps of process noise drawn at a time for all runs still undetected."""
+RUN_BYTES = 8 * (8 + 4 * BLOCK_STEPS)
+"""Memory of one sampled trajectory while its case runs, bytes (its state, first detections
+and a block of noise), to refuse a ``runs`` that does not fit before it starts."""
 CASES_FILE = "cases.csv"
 CONFIG_FILE = "config.json"
 
@@ -208,23 +213,14 @@ def plan_coverage(
 
 @numba.njit(cache=True)
 def _advance_block(
-    states,
-    active,
-    noise,
-    path,
-    first_step,
-    flight_steps,
-    sqrt_q,
-    tau,
-    c_per_step,
-    radius2,
-    first_any,
-    first_spiral,
+    mission, states, active, noise, path, first_step, flight_steps, sqrt_q, first_any, first_spiral
 ):
     """Advance the ``active`` runs through steps ``first_step ..`` with unit normal ``noise``
     ``(runs, steps, 4)`` and record detections; a run stops at its first detection on the
-    spiral (step >= ``flight_steps``)."""
-    l11, l21, l22 = motion_noise_factors(tau, c_per_step)
+    spiral (step >= ``flight_steps``). ``mission`` is the mission record."""
+    l11, l21, l22 = motion_noise_factors_on(mission)
+    tau = mission.time_step
+    radius2 = mission.footprint_radius * mission.footprint_radius
     for a in range(active.shape[0]):
         i = active[a]
         for t in range(noise.shape[1]):
@@ -263,6 +259,7 @@ def first_detections(
         block = min(BLOCK_STEPS, total - step)
         noise = rng.standard_normal((active.size, block, 4))
         _advance_block(
+            mission.record,
             states,
             active,
             noise,
@@ -270,9 +267,6 @@ def first_detections(
             step,
             n,
             math.sqrt(q),
-            mission.time_step,
-            mission.c_per_step,
-            radius2,
             first_any,
             first_spiral,
         )
@@ -478,11 +472,11 @@ def run_validation(
 
         if on_case is not None:
             on_case(len(complete), config.cases)
-        if workers <= 1:
+        if workers <= 1 or len(todo) <= 1:
             for i in todo:
                 record(_run_case(i, config))
         else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
+            with worker_pool(min(workers, len(todo))) as pool:
                 futures = [pool.submit(_run_case, i, config) for i in todo]
                 for future in as_completed(futures):
                     record(future.result())

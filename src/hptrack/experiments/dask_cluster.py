@@ -26,6 +26,8 @@ logger = logging.getLogger(__name__)
 
 SCHEDULER_TIMEOUT_S = 10.0
 """Default wait for a scheduler to answer, s."""
+MAX_SCHEDULER_TIMEOUT_S = 3600.0
+"""Longest wait for a scheduler to answer, s (an hour; longer is a hang, not a wait)."""
 
 
 @dataclass(frozen=True)
@@ -70,9 +72,10 @@ def check_dask_options(
         raise InputError(
             f"--scheduler expects a scheduler address such as tcp://host:8786, got {scheduler!r}"
         )
-    if not timeout_s > 0:
+    if not 0 < timeout_s <= MAX_SCHEDULER_TIMEOUT_S:
         raise InputError(
-            f"--scheduler-timeout must be a positive number of seconds, got {timeout_s}"
+            "--scheduler-timeout must be a positive number of seconds of at most "
+            f"{MAX_SCHEDULER_TIMEOUT_S:g}, got {timeout_s}"
         )
     try:
         import distributed  # noqa: F401

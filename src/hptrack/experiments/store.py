@@ -1,12 +1,19 @@
 """SQLite store of finished episodes: written as each one finishes, so a crash or Ctrl-C loses
 nothing already done, and a re-run resumes by skipping the keys already stored.
 
-An episode's identity is its planner, number of targets, scenario seed, setting and the
-planner's full canonical settings (:meth:`hptrack.settings.PlannerSettings.canonical`, stored as
-JSON beside its hash), so a run with another value of any option never reuses another's rows.
+An episode's identity is its planner, number of targets, scenario seed, scenario setting and the
+planner's full canonical settings (:meth:`hptrack.settings.PlannerSettings.canonical`: every
+option, stored as JSON beside its hash), so a run with another value of any option never reuses
+another's rows.
 Before running an episode a run *claims* it (a row in ``claims`` with its process id and host);
 two runs on one database therefore share the work instead of both computing everything. Claims
 of a process that no longer runs (on this host) or older than :data:`STALE_CLAIM_S` are released.
+
+A database of an older layout is migrated when it is opened (:data:`MIGRATIONS`, one step per
+version). A change of what identifies a result (a new planner option, say) is such a step: it
+bumps :data:`SCHEMA_VERSION` and rewrites the stored identities to what the code now builds for
+the same runs (the new option's value that the old rows were run with), so that stored and
+published results keep their identity without the settings carrying their history.
 """
 
 from __future__ import annotations
@@ -16,42 +23,86 @@ import os
 import socket
 import sqlite3
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from hptrack.interface import InputError
 from hptrack.settings import digest_of
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS episodes (
     planner TEXT NOT NULL,
     n_targets INTEGER NOT NULL,
     seed INTEGER NOT NULL,
     setting TEXT NOT NULL,
-    settings_hash TEXT NOT NULL,
-    settings TEXT NOT NULL,
+    planner_settings_hash TEXT NOT NULL,
+    planner_settings TEXT NOT NULL,
     uncertainty REAL NOT NULL,
     never_observed REAL NOT NULL,
     detections INTEGER NOT NULL,
     wall_time_s REAL NOT NULL,
     info TEXT NOT NULL,
-    PRIMARY KEY (planner, n_targets, seed, setting, settings_hash)
+    PRIMARY KEY (planner, n_targets, seed, setting, planner_settings_hash)
 );
 CREATE TABLE IF NOT EXISTS claims (
     planner TEXT NOT NULL,
     n_targets INTEGER NOT NULL,
     seed INTEGER NOT NULL,
     setting TEXT NOT NULL,
-    settings_hash TEXT NOT NULL,
+    planner_settings_hash TEXT NOT NULL,
     host TEXT NOT NULL,
     pid INTEGER NOT NULL,
     claimed_at REAL NOT NULL,
-    PRIMARY KEY (planner, n_targets, seed, setting, settings_hash)
+    PRIMARY KEY (planner, n_targets, seed, setting, planner_settings_hash)
 );
 """
 STALE_CLAIM_S = 6 * 3600.0
 """A claim older than this is released whatever its owner (a run on another host that died)."""
+
+
+_LEFT_OUT_BY_LAYOUT_2 = {
+    "mcts": {
+        "backup": "sampled",
+        "max_weight": 1.0,
+        "root_split": "even",
+        "common_rollouts": False,
+        "rollout": "uniform",
+        "rollout_epsilon": 0.1,
+        "estimator": "paper",
+        "dwell": 0.0,
+        "threads": 1,
+    }
+}
+"""The mcts options that layout 2 left out of an identity when they had these values (the
+paper's search on one tree; ``rollout_epsilon`` also whenever the rollout took none)."""
+
+
+def _full_identity(planner: str, text: str) -> str:
+    """Layout 2 -> 3: the identity with every option (:data:`_LEFT_OUT_BY_LAYOUT_2`)."""
+    values = {**_LEFT_OUT_BY_LAYOUT_2.get(planner, {}), **json.loads(text)}
+    return json.dumps(values, sort_keys=True, separators=(",", ":"))
+
+
+def _migrate_2_to_3(db: sqlite3.Connection) -> None:
+    """Full identities; the planner's settings columns say so (``planner_settings``)."""
+    db.create_function("full_identity", 2, _full_identity, deterministic=True)
+    db.create_function("digest_of", 1, digest_of, deterministic=True)
+    db.execute("ALTER TABLE episodes RENAME TO episodes_layout_2")
+    db.execute("DROP TABLE claims")  # claims of runs of the old layout: nothing to keep
+    for statement in SCHEMA.split(";"):
+        db.execute(statement)
+    db.execute(
+        "INSERT INTO episodes SELECT planner, n_targets, seed, setting, "
+        "digest_of(full_identity(planner, settings)), full_identity(planner, settings), "
+        "uncertainty, never_observed, detections, wall_time_s, info FROM episodes_layout_2"
+    )
+    db.execute("DROP TABLE episodes_layout_2")
+
+
+MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {2: _migrate_2_to_3}
+"""Layout version -> the step that makes a database of that layout one of the next."""
 
 
 @dataclass(frozen=True)
@@ -62,23 +113,24 @@ class EpisodeKey:
         planner: registered planner name.
         n_targets: number of targets.
         seed: scenario seed.
-        setting: ``"homogeneous"`` or ``"heterogeneous"``.
-        settings: the planner's canonical settings JSON.
+        setting: the scenarios' setting, ``"homogeneous"`` or ``"heterogeneous"`` (with
+            ``"+paper_text"`` for the printed form of ``Q``).
+        planner_settings: the planner's canonical settings JSON (every option).
     """
 
     planner: str
     n_targets: int
     seed: int
     setting: str
-    settings: str
+    planner_settings: str
 
     @property
-    def settings_hash(self) -> str:
-        """A short hash of :attr:`settings` (the same as the settings' ``digest()``)."""
-        return digest_of(self.settings)
+    def planner_settings_hash(self) -> str:
+        """A short hash of :attr:`planner_settings` (the same as the settings' ``digest()``)."""
+        return digest_of(self.planner_settings)
 
     def _id(self) -> tuple:
-        return (self.planner, self.n_targets, self.seed, self.setting, self.settings_hash)
+        return (self.planner, self.n_targets, self.seed, self.setting, self.planner_settings_hash)
 
 
 @dataclass(frozen=True)
@@ -104,11 +156,35 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def check_columns(db: sqlite3.Connection, source: str) -> None:
+    """Refuse a database whose tables lack columns of :data:`SCHEMA` (a file edited by hand or
+    written by another program): one line naming the table and the missing columns.
+
+    Raises:
+        InputError: a table of :data:`SCHEMA` misses columns.
+    """
+    expected = sqlite3.connect(":memory:")
+    expected.executescript(SCHEMA)
+    for (table,) in expected.execute("SELECT name FROM sqlite_master WHERE type='table'"):
+        want = [r[1] for r in expected.execute(f"PRAGMA table_info({table})")]
+        have = {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
+        missing = [c for c in want if c not in have]
+        if missing:
+            expected.close()
+            db.close()
+            raise InputError(
+                f"{source}: table {table} has no column {', '.join(missing)}; not a results "
+                "database of this hptrack (use a new file)"
+            )
+    expected.close()
+
+
 class ResultStore:
     """Episodes in an SQLite file (one row per :class:`EpisodeKey`, inserted once).
 
     Raises:
-        InputError: the file is not an hptrack results database (or one of an older layout).
+        InputError: the file is not an hptrack results database, or one of a layout that
+            cannot be migrated (:data:`MIGRATIONS`).
     """
 
     def __init__(self, path: str | Path) -> None:
@@ -124,17 +200,35 @@ class ResultStore:
             }
         except (sqlite3.DatabaseError, OSError) as err:
             raise InputError(f"--db {path}: not an hptrack results database ({err})") from None
-        if tables and (version != SCHEMA_VERSION or "episodes" not in tables):
+        known = version == SCHEMA_VERSION or version in MIGRATIONS
+        if tables and (not known or "episodes" not in tables):
             self._db.close()
             raise InputError(
                 f"--db {path}: a database of another layout (version {version}, "
                 f"tables {sorted(tables)}); use a new --db file"
             )
+        if tables and version != SCHEMA_VERSION:
+            self._migrate()
         self._db.executescript(SCHEMA)
+        check_columns(self._db, f"--db {path}")
         self._db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
         self._db.commit()
         self._host = socket.gethostname()
         self._pid = os.getpid()
+
+    def _migrate(self) -> None:
+        """Bring the database to :data:`SCHEMA_VERSION` in one transaction (a run that opens it
+        meanwhile waits, then finds it migrated)."""
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            version = self._db.execute("PRAGMA user_version").fetchone()[0]
+            for step in range(version, SCHEMA_VERSION):
+                MIGRATIONS[step](self._db)
+            self._db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+        except BaseException:
+            self._db.rollback()
+            raise
+        self._db.commit()
 
     def add(self, row: EpisodeRow) -> None:
         """Insert a finished episode, release its claim and commit at once (a duplicate key is
@@ -144,7 +238,7 @@ class ResultStore:
             "INSERT OR IGNORE INTO episodes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (
                 *key._id(),
-                key.settings,
+                key.planner_settings,
                 row.uncertainty,
                 row.never_observed,
                 row.detections,
@@ -154,14 +248,16 @@ class ResultStore:
         )
         self._db.execute(
             "DELETE FROM claims WHERE planner=? AND n_targets=? AND seed=? AND "
-            "setting=? AND settings_hash=?",
+            "setting=? AND planner_settings_hash=?",
             key._id(),
         )
         self._db.commit()
 
     def done(self) -> set[EpisodeKey]:
         """Keys of every stored episode."""
-        cur = self._db.execute("SELECT planner, n_targets, seed, setting, settings FROM episodes")
+        cur = self._db.execute(
+            "SELECT planner, n_targets, seed, setting, planner_settings FROM episodes"
+        )
         return {EpisodeKey(*r) for r in cur}
 
     def release_stale_claims(self) -> int:
@@ -184,7 +280,7 @@ class ResultStore:
         with self._db:
             if self._db.execute(
                 "SELECT 1 FROM episodes WHERE planner=? AND n_targets=? AND "
-                "seed=? AND setting=? AND settings_hash=?",
+                "seed=? AND setting=? AND planner_settings_hash=?",
                 key._id(),
             ).fetchone():
                 return False
@@ -198,7 +294,7 @@ class ResultStore:
         """Give up this process's claim of ``key`` (an episode that was not run after all)."""
         self._db.execute(
             "DELETE FROM claims WHERE planner=? AND n_targets=? AND seed=? AND "
-            "setting=? AND settings_hash=? AND host=? AND pid=?",
+            "setting=? AND planner_settings_hash=? AND host=? AND pid=?",
             (*key._id(), self._host, self._pid),
         )
         self._db.commit()
@@ -206,7 +302,8 @@ class ResultStore:
     def rows(self) -> list[EpisodeRow]:
         """Every stored episode, in key order."""
         cur = self._db.execute(
-            "SELECT planner, n_targets, seed, setting, settings, uncertainty, never_observed, "
+            "SELECT planner, n_targets, seed, setting, planner_settings, uncertainty, "
+            "never_observed, "
             "detections, wall_time_s, info FROM episodes ORDER BY planner, n_targets, seed"
         )
         return [

@@ -1,5 +1,6 @@
 """Training-curve figure of a learning run (``curve.json`` of :mod:`hptrack.learning.train` or
-:mod:`hptrack.learning.sb3`)."""
+:mod:`hptrack.learning.sb3`), titled from the run's ``config.json``, in
+:mod:`hptrack.viz.style`'s style."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 from matplotlib.axes import Axes
 
 from hptrack.interface import InputError
+from hptrack.viz.style import legend_below, new_figure, save_figure, style_axes
 
 
 def load_curve(run: Path) -> list[dict[str, Any]]:
@@ -21,6 +23,25 @@ def load_curve(run: Path) -> list[dict[str, Any]]:
     return json.loads(path.read_text())
 
 
+def run_title(run: Path) -> str:
+    """``Deep ADFQ, n = 4 targets, heterogeneous setting, 50 validation scenarios`` from the
+    run's ``config.json`` (the folder's name without one)."""
+    path = Path(run) / "config.json"
+    if not path.is_file():
+        return Path(run).name
+    config = json.loads(path.read_text())
+    task, train = config.get("task", {}), config.get("train", {})
+    algorithm = "PPO (stable-baselines3)" if train.get("algorithm") == "PPO" else "Deep ADFQ"
+    parts = [algorithm]
+    if "n_targets" in task:
+        parts.append(f"n = {task['n_targets']} targets")
+    if "setting" in task:
+        parts.append(f"{task['setting']} setting")
+    if "validation_scenarios" in task:
+        parts.append(f"{task['validation_scenarios']} validation scenarios")
+    return ", ".join(parts)
+
+
 def plot_training_curve(
     ax: Axes, curve: list[dict[str, Any]], label: str = "validation", window: int = 10
 ) -> dict[str, Any]:
@@ -28,7 +49,7 @@ def plot_training_curve(
     policy that never re-acquires a target after the start), against environment steps: each
     training episode (dots, its own scenario) with a running mean over ``window`` episodes,
     and the mean over the fixed validation scenarios with its standard error. Returns the
-    artists by name."""
+    artists by name (a legend is the caller's: :func:`save_training_curve` puts it below)."""
     episodes = [e for e in curve if e["kind"] == "episode"]
     validations = [e for e in curve if e["kind"] == "validation"]
     artists: dict[str, Any] = {
@@ -56,8 +77,18 @@ def plot_training_curve(
             color="tab:blue",
             label=f"{label} mean (± s.e.)",
         )
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("ΔU = U − U never observed")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize="small")
+    ax.set_xlabel("environment steps (τ = 0.5 s each)")
+    ax.set_ylabel("ΔU = U − U never observed\n(sum of log det Σxy, m²; lower is better)")
+    style_axes(ax)
     return artists
+
+
+def save_training_curve(run: Path, path: Path, title: str | None = None) -> None:
+    """Write the training curve of run folder ``run`` to ``path``, titled ``title`` or
+    :func:`run_title`, with the legend below."""
+    fig = new_figure(7.5, 4.8)
+    ax = fig.add_subplot()
+    artists = plot_training_curve(ax, load_curve(run))
+    style_axes(ax, title if title is not None else run_title(run), grid=False)
+    legend_below(fig, list(artists.values()), ncol=4)
+    save_figure(fig, path)

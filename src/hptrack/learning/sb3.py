@@ -81,6 +81,13 @@ def _policy(model) -> Callable[[np.ndarray], np.ndarray]:
     return policy
 
 
+def trained_steps(steps: int, rollout_steps: int) -> int:
+    """The steps a PPO run of ``steps`` trains: whole rollouts of ``rollout_steps``
+    (``n_steps``), so ``steps`` rounded up to a multiple of it (a resumed run restarts from a
+    rollout's end)."""
+    return -(-steps // rollout_steps) * rollout_steps
+
+
 class PpoTrainer:
     """One PPO run of ``task`` in folder ``out`` (module docstring)."""
 
@@ -170,7 +177,7 @@ class PpoTrainer:
         return values[-1] if values else float("nan")
 
     def run(self, on_progress: Callable[[Progress], None] | None = None) -> dict[str, Any]:
-        """Train until at least ``config.steps`` (whole rollouts); returns a summary."""
+        """Train until :func:`trained_steps` (whole rollouts); returns a summary."""
         from stable_baselines3.common.callbacks import BaseCallback
 
         trainer, cfg = self, self.config

@@ -245,11 +245,26 @@ def check_run_config(out: Path, config: dict[str, Any]) -> None:
 
 
 class Trainer:
-    """One Deep ADFQ run of ``task`` in folder ``out`` (module docstring)."""
+    """One Deep ADFQ run of ``task`` in folder ``out`` (module docstring).
 
-    def __init__(self, task: Task, config: TrainConfig, out: Path) -> None:
+    A run of no more steps than the warm-up (``config.agent.warmup_steps``) takes no gradient
+    step and would keep the untrained network as ``best.pt``: it is refused unless
+    ``allow_untrained``.
+    """
+
+    def __init__(
+        self, task: Task, config: TrainConfig, out: Path, allow_untrained: bool = False
+    ) -> None:
         if config.steps < 1:
             raise InputError(f"--steps must be at least 1, got {config.steps}")
+        warmup = config.agent.warmup_steps
+        if config.steps <= warmup and not allow_untrained:
+            raise InputError(
+                f"--steps {config.steps} is not above the warm-up of {warmup:,} steps "
+                "(--warmup): no gradient step would be taken and best.pt would be the "
+                "untrained network; give more steps or a shorter --warmup, or "
+                "--allow-untrained to run it anyway"
+            )
         for name in ("validation_interval", "checkpoint_interval"):
             if getattr(config, name) < 1:
                 raise InputError(f"{name} must be at least 1, got {getattr(config, name)}")

@@ -2,7 +2,7 @@
 formula (prediction over any duration, Kalman update with a full ``R``, Riccati compositions),
 with a thin numpy API on top."""
 
-from hptrack.models.beliefs import TargetBeliefs, position_logdet
+from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
 
@@ -10,6 +10,5 @@ __all__ = [
     "ConstantVelocityModel",
     "PositionMeasurementModel",
     "ProcessNoiseForm",
-    "TargetBeliefs",
     "position_logdet",
 ]

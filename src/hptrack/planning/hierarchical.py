@@ -13,7 +13,7 @@
    may also follow it for the dwell's length only (action index ``n``, also in the log's plans),
    re-planning with the dwell fixed as it starts.
 
-Choices the paper leaves open (recorded in the README): a missed target that the agent measures
+Choices the paper leaves open (``docs/model.md``): a missed target that the agent measures
 by chance later returns to the action list; a planned next action that the remaining budget can
 no longer carry out triggers a fresh plan from the current state; with no action left the agent
 follows the last found target, or hovers.
@@ -30,12 +30,20 @@ from pydantic import Field, model_validator
 from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.interface import MissionSpec, Observation
+from hptrack.models.mission import follow_tables, reachable_before_budget, steps_left
 from hptrack.models.motion import predicted_positions
+from hptrack.planning.backups import backup_of
 from hptrack.planning.rollout import UniformRandom
-from hptrack.planning.search import DEFAULT_EXPLORATION, SearchResult, search
-from hptrack.planning.subtask_mdp import PlanningProblem, dwell_steps, steps_left
+from hptrack.planning.search import DEFAULT_EXPLORATION, SearchOptions, SearchResult
+from hptrack.planning.subtask_mdp import (
+    PlanningProblem,
+    SubtaskOptions,
+    dwell_action,
+    dwell_steps,
+)
 from hptrack.planning.subtask_rollout import MostUncertain, Nearest, UniformNoFollow
-from hptrack.settings import PlannerSettings
+from hptrack.planning.subtask_search import search, warm_up
+from hptrack.settings import Iterations, PlannerSettings, TimeLimit
 
 DEFAULT_ITERATIONS = 100_000
 """Simulations per tree search when neither ``iterations`` nor ``time_limit`` is given."""
@@ -102,8 +110,8 @@ class MctsSettings(PlannerSettings):
             cores.
     """
 
-    iterations: Annotated[int | None, Field(ge=1)] = None
-    time_limit: Annotated[float | None, Field(gt=0.0)] = None
+    iterations: Iterations | None = None
+    time_limit: TimeLimit | None = None
     exploration: Annotated[float, Field(gt=0.0)] = DEFAULT_EXPLORATION
     preset: Literal["paper", "improved"] = DEFAULT_PRESET
     backup: Literal["sampled", "expected", "max", "robust"] | None = None
@@ -139,23 +147,23 @@ class MctsSettings(PlannerSettings):
 
     @classmethod
     def from_canonical(cls, text: str) -> MctsSettings:
-        """The settings of a stored identity: an option it leaves out has the paper's value
-        (:meth:`canonical`), whatever the default preset."""
-        return cls.model_validate({"preset": "paper", **json.loads(text)})
+        """The settings of a stored identity, under the first preset that stands for them."""
+        values = json.loads(text)
+        preset = next(
+            (
+                name
+                for name, options in PRESETS.items()
+                if all(values[k] == v for k, v in options.items())
+            ),
+            DEFAULT_PRESET,
+        )
+        return cls.model_validate({**values, "preset": preset})
 
     def canonical(self) -> str:
-        """The identity of the results: the resolved options, without ``preset`` (which only
-        stands for them), and without the options that have the paper's value, so that the
-        paper's search keeps the identity it had before these options existed."""
+        """The identity of the results: every resolved option, without ``preset`` (which only
+        stands for some of them)."""
         values = self.as_json()
         values.pop("preset")
-        for key, paper in PRESETS["paper"].items():
-            if values[key] == paper:
-                values.pop(key)
-        if values.get("rollout", "uniform") not in ("most_uncertain", "nearest"):
-            values.pop("rollout_epsilon")
-        if values["threads"] == 1:
-            values.pop("threads")
         return json.dumps(values, sort_keys=True, separators=(",", ":"))
 
     def rollout_policy(self) -> tuple:
@@ -168,35 +176,17 @@ class MctsSettings(PlannerSettings):
             return Nearest(self.rollout_epsilon)
         return UniformRandom()
 
+    def search_options(self) -> SearchOptions:
+        """The search's options record: each of its fields is the option of the same name,
+        the backup and the rollout policy as the instances the kernels take."""
+        values = {name: getattr(self, name) for name in SearchOptions._fields}
+        values["backup"] = backup_of(self.backup, self.max_weight)
+        values["rollout"] = self.rollout_policy()
+        return SearchOptions(**values)
 
-_warmed: set[tuple[type, str]] = set()
-"""(rollout policy class, estimator) pairs whose kernels this process has loaded."""
-
-
-def warm_up(policy: tuple = UniformRandom(), estimator: str = "paper") -> None:
-    """Load (or compile) the search's kernels for ``policy``'s class and ``estimator`` once per
-    process with a tiny search, so that the first timed search of a process gets as many
-    simulations as the later ones."""
-    if (type(policy), estimator) in _warmed:
-        return
-    cov = np.diag([1000.0, 1000.0, 0.4, 0.4])
-    for fixed in (None, 0):
-        problem = PlanningProblem(
-            np.zeros(2),
-            np.array([[300.0, 0, 1, 0], [-300.0, 0, 0, 1]]),
-            np.stack([cov, cov]),
-            np.full(2, 3e-4),
-            60.0,
-            0.5,
-            0.5,
-            30.0,
-            100.0,
-            10.0 * np.eye(2),
-            current_action=fixed,
-            estimator=estimator,
-        )
-        search(problem, iterations=64, seed=0, policy=policy)
-    _warmed.add((type(policy), estimator))
+    def subtask_options(self) -> SubtaskOptions:
+        """The sub-task MDP's options record, field by field the options of the same name."""
+        return SubtaskOptions(**{name: getattr(self, name) for name in SubtaskOptions._fields})
 
 
 class HierarchicalPlanner:
@@ -209,8 +199,8 @@ class HierarchicalPlanner:
         self.settings = settings or MctsSettings()
         self.iterations = self.settings.iterations
         self.time_limit = self.settings.time_limit
-        self.exploration = self.settings.exploration
-        self.policy = self.settings.rollout_policy()
+        self.options = self.settings.search_options()
+        self.subtask_options = self.settings.subtask_options()
 
     # --- planning -------------------------------------------------------------------------
     def _search(
@@ -219,27 +209,22 @@ class HierarchicalPlanner:
         current_action: int | None = None,
         last_found: int | None = None,
     ) -> SearchResult:
-        problem = PlanningProblem.from_mission(
-            self._mission,
+        problem = PlanningProblem.from_observation(
+            self._record,
             observation,
             available=self._available,
             last_found=last_found,
             current_action=current_action,
-            estimator=self.settings.estimator,
-            dwell_time=self.settings.dwell,
+            follow=self._follow_tables,
         )
         result = search(
             problem,
+            self.options,
+            self.subtask_options,
             iterations=self.iterations,
             time_limit=self.time_limit,
             seed=self._rng,
-            exploration=self.exploration,
-            policy=self.policy,
-            backup=self.settings.backup,
             threads=self.settings.threads,
-            max_weight=self.settings.max_weight,
-            weighted_root=self.settings.root_split == "weighted",
-            common_rollouts=self.settings.common_rollouts,
         )
         self._searches.append(
             {
@@ -255,7 +240,7 @@ class HierarchicalPlanner:
         """In the action list and interceptable before the budget ends (as in the MDP)."""
         if not self._available[target]:
             return False
-        m, agent, mission = observation.means[target], observation.agent_position, self._mission
+        m, agent, mission = observation.means[target], observation.agent_position, self._record
         steps = intercept_steps(
             agent[0],
             agent[1],
@@ -263,15 +248,16 @@ class HierarchicalPlanner:
             m[1],
             m[2],
             m[3],
-            mission.agent_speed,
+            mission.speed,
             mission.time_step,
-            mission.sensor_radius,
+            mission.footprint_radius,
         )
-        return 0 <= steps < steps_left(observation.remaining_budget, mission.time_step)
+        left = steps_left(mission.time_step, observation.remaining_budget)
+        return reachable_before_budget(steps, left)
 
     def _dwell_feasible(self, observation: Observation, last_found: int | None) -> bool:
         """A target was just found and the dwell ends before the budget (as in the MDP)."""
-        left = steps_left(observation.remaining_budget, self._mission.time_step)
+        left = steps_left(self._record.time_step, observation.remaining_budget)
         return last_found is not None and 0 < self._dwell_steps < left
 
     def _start_dwell(self, observation: Observation, target: int) -> None:
@@ -279,7 +265,8 @@ class HierarchicalPlanner:
         self._follow = target
         self._subtask = None
         self._dwell_end = observation.step + self._dwell_steps
-        plan = self._search(observation, current_action=self._mission.n_targets, last_found=target)
+        dwell = dwell_action(self._mission.n_targets)
+        plan = self._search(observation, current_action=dwell, last_found=target)
         self._plan = (plan.best_after_find, None)
         self._log.append(
             {"dwell": target, "start_step": observation.step, "plan_after_dwell": self._plan[0]}
@@ -301,7 +288,7 @@ class HierarchicalPlanner:
     def _next(self, observation: Observation, planned: int | None, last_found: int | None) -> None:
         """Carry on after a sub-task: follow, dwell, start the planned target, or plan
         afresh."""
-        dwell = self._mission.n_targets  # the dwell's action index
+        dwell = dwell_action(self._mission.n_targets)
         if planned is None:
             feasible = False
         elif planned == dwell:
@@ -328,15 +315,17 @@ class HierarchicalPlanner:
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
     ) -> None:
         if self.time_limit is not None:
-            warm_up(self.policy, self.settings.estimator)
+            warm_up(self.options, self.subtask_options)
         self._mission = mission
+        self._record = mission.record
+        self._follow_tables = follow_tables(self._record)
         self._rng = rng
         self._available = np.ones(mission.n_targets, dtype=bool)
         self._subtask: CoverageSubtask | None = None
         self._plan: tuple[int | None, int | None] = (None, None)
         self._follow: int | None = None
         self._dwell_end: int | None = None
-        self._dwell_steps = dwell_steps(self.settings.dwell, mission.time_step)
+        self._dwell_steps = dwell_steps(mission.time_step, self.settings.dwell)
         self._log: list[dict] = []
         self._searches: list[dict] = []
         self._next(observation, None, None)

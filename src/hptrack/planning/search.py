@@ -13,18 +13,23 @@ data) registered with :func:`hptrack.planning.mdp.register_mdp` and these kernel
 * ``apply(env, state, a, outcome0, payload, work)``: the transition, in place;
 * ``value(env, state) -> float``: the return of a terminal state (``-U`` in this project).
 
-A rollout policy is a class of ``policy`` (a ``NamedTuple`` of its parameters, possibly empty)
-registered with :func:`hptrack.planning.rollout.register_policy` and a kernel ``choose(policy, env,
-state, rng, candidates) -> a`` (:mod:`hptrack.planning.rollout`); the search takes a policy instance
-as an argument. Numba compiles one version of the search per (env, policy) class; the sub-task MDP's
-is cached on disk (:func:`run_subtask_simulations`), so a new process plans at once, while another
-MDP's is compiled once per process (passing the kernels as function arguments would make even the
-paper's search uncacheable: several seconds of compilation in every process).
+An MDP declares its number of actions, at most :data:`~hptrack.planning.tree.MAX_ACTIONS`
+(the search refuses more).
 
-The search is a pure function of ``(env, root, policy, seed, number of simulations)``: the same
+The search's options are one record, :class:`SearchOptions`, under the planner settings' names.
+Its rollout policy is a class of ``policy`` (a ``NamedTuple`` of its parameters, possibly empty)
+registered with :func:`hptrack.planning.rollout.register_policy` and a kernel ``choose(policy,
+env, state, rng, candidates) -> a`` (:mod:`hptrack.planning.rollout`); its backup likewise
+(:mod:`hptrack.planning.backups`). Numba compiles one version of the search per (env, policy,
+backup) class. Passing the kernels as function arguments would make even the paper's search
+uncacheable (several seconds of compilation in every process), so an MDP that wants its search
+cached on disk passes its own compiled copy of :func:`run_simulations` (``kernel``), as the
+sub-task MDP does (:mod:`hptrack.planning.subtask_search`); another MDP's is compiled once per
+process.
+
+The search is a pure function of ``(env, root, options, seed, number of simulations)``: the same
 inputs give the same tree, whether the simulations ran in one call or in chunks between
-wall-clock checks. :func:`search` runs it on the sub-task MDP of
-:mod:`hptrack.planning.subtask_mdp`.
+wall-clock checks.
 
 **Simulate** (Algorithm 1 lines 15-34), iteratively:
 
@@ -36,8 +41,8 @@ wall-clock checks. :func:`search` runs it on the sub-task MDP of
   are the same as with an eager expansion, at a fraction of the cost;
 * otherwise UCB1 picks an action (:func:`hptrack.planning.tree.select`), the outcome is drawn
   from ``p`` (line 25), the child state is created on first draw (lines 26-29) and values are
-  backed up as running means (:func:`hptrack.planning.tree.backup`, lines 31-33), or with
-  one of the other backups of :mod:`hptrack.planning.tree` (``backup``).
+  backed up by the options' backup (:mod:`hptrack.planning.backups`; the paper's running
+  means, lines 31-33, or another).
 
 States are not stored: the descent rebuilds the state from the root by applying the stored
 transitions, only when it is needed (a first visit, opening the action slots, or a first
@@ -47,8 +52,8 @@ expansion), so a descent to a cached terminal node costs no transition at all.
 result gives ``argmax V`` over the actions of its find child and of its miss child. As both
 answers are needed whatever ``p`` is (it is often above 0.99), the root's outcome is not drawn:
 it alternates between find and miss, so each child gets half of the simulations, or with
-``weighted_root`` the find gets a share that grows with ``p`` (:func:`_root_outcome`); below the
-root everything is as above.
+``root_split="weighted"`` the find gets a share that grows with ``p`` (:func:`_root_outcome`);
+below the root everything is as above.
 """
 
 from __future__ import annotations
@@ -56,25 +61,23 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
 import numba
 import numpy as np
 
-from hptrack.planning import subtask_mdp
+from hptrack.planning.backups import Sampled, back_up, pairs_outcomes
 from hptrack.planning.mdp import mdp_apply, mdp_copy_state, mdp_expand, mdp_is_available, mdp_value
 from hptrack.planning.rollout import UniformRandom, choose_action
 from hptrack.planning.stream import seed_value, substream, uniform
 from hptrack.planning.tree import (
-    BACKUPS,
     LEAF,
+    MAX_ACTIONS,
     TERMINAL,
     UNVISITED,
     ActionStats,
     Tree,
-    backup,
     grow_tree,
     merge_stats,
     new_tree,
@@ -104,28 +107,48 @@ def rollout(env, state, forced, policy, rng, candidates, work):
     return mdp_value(env, state)
 
 
+ROOT_SPLITS = ("even", "weighted")
+"""How re-planning shares the root's simulations between the current action's outcomes."""
+
+
 class SearchOptions(NamedTuple):
-    """The search's tunable constants, as the compiled loop takes them.
+    """The search's options, one compiled record under the planner settings' names
+    (:class:`hptrack.planning.hierarchical.MctsSettings`); the defaults are the paper's.
 
     Attributes:
         exploration: UCB1 constant ``c`` on values normalised to the observed return range.
-        backup_mode: index of the backup in :data:`~hptrack.planning.tree.BACKUPS`.
-        max_weight: the max backup's weight of a state's best action
-            (:func:`~hptrack.planning.tree.backup`).
-        weighted_root: re-planning: share the root's simulations between the current action's
-            outcomes by their probability (:func:`_root_outcome`) instead of evenly.
+        backup: a registered backup instance (:mod:`hptrack.planning.backups`).
+        root_split: re-planning: the root's simulations go to the current action's outcomes
+            ``"even"``ly or ``"weighted"`` by their probability (:func:`_root_outcome`).
         common_rollouts: a rollout from a new node draws from a stream derived from its parent
             node (common random numbers): the rollouts that value the actions and outcomes of
             one state take the same random decisions wherever they can, so their differences
             are less noisy. Otherwise every draw comes from the tree's single stream (the
             paper's).
+        rollout: a registered rollout policy instance (:mod:`hptrack.planning.rollout`).
     """
 
-    exploration: float
-    backup_mode: int
-    max_weight: float
-    weighted_root: bool
-    common_rollouts: bool
+    exploration: float = DEFAULT_EXPLORATION
+    backup: tuple = Sampled()
+    root_split: str = "even"
+    common_rollouts: bool = False
+    rollout: tuple = UniformRandom()
+
+
+PAPER_SEARCH = SearchOptions()
+"""The paper's search (Algorithm 1): every option at its default."""
+
+
+def checked_options(options: SearchOptions) -> SearchOptions:
+    """``options`` with its numbers in the compiled types, or ``ValueError`` naming the bad
+    field."""
+    if not (math.isfinite(options.exploration) and options.exploration > 0.0):
+        raise ValueError(f"exploration must be a positive number, got {options.exploration!r}")
+    if options.root_split not in ROOT_SPLITS:
+        raise ValueError(f"root_split must be one of {ROOT_SPLITS}, got {options.root_split!r}")
+    return options._replace(
+        exploration=float(options.exploration), common_rollouts=bool(options.common_rollouts)
+    )
 
 
 @numba.njit(cache=True)
@@ -155,7 +178,7 @@ def _open_slots(tree, env, s, state, fixed, n_actions):
     for a in range(n_actions):
         if (fixed < 0 or s != 0 or a == fixed) and mdp_is_available(env, state, a):
             x = first + count
-            tree.a_target[x] = a
+            tree.a_action[x] = a
             tree.a_p[x] = -1.0
             count += 1
     tree.counts[1] += count
@@ -176,9 +199,9 @@ def _catch_up(tree, env, path_action, path_found, applied, depth, root, state, w
         mdp_apply(
             env,
             state,
-            np.int64(tree.a_target[x]),
+            np.int64(tree.a_action[x]),
             found,
-            tree.a_find[x] if found else tree.a_miss[x],
+            tree.a_payload[x, 0 if found else 1],
             work,
         )
     return depth
@@ -186,26 +209,28 @@ def _catch_up(tree, env, path_action, path_found, applied, depth, root, state, w
 
 @numba.njit
 def run_simulations(
-    tree, env, root, state, work, policy, n_actions, max_depth, fixed, options, n_simulations
+    tree, env, root, state, work, options, n_actions, max_depth, fixed, n_simulations
 ):
     """Run up to ``n_simulations`` simulations (Algorithm 1, ``Simulate`` from the root) and
     return how many ran: it stops early when the tree's arrays might not hold one more
     simulation's nodes (:func:`~hptrack.planning.tree.grow_tree` makes room).
 
     ``root`` is the root state (never modified), ``state`` scratch of the same shapes, ``work``
-    the MDP's scratch; ``max_depth`` bounds the number of sub-tasks of a history; ``options``
-    a :class:`SearchOptions`. With the expected and max backups, an action's second visit takes
-    the outcome not yet visited (their values are combined with the known ``p``, so both are
-    needed, and the draw no longer weights them).
+    the MDP's scratch; ``options`` a :class:`SearchOptions`; ``max_depth`` bounds the number
+    of transitions of a history. With a backup that keeps a value per outcome, an action's
+    second visit takes the outcome not yet visited (their values are combined with the known
+    ``p``, so both are needed, and the draw no longer weights them).
     """
-    exploration, backup_mode = options.exploration, options.backup_mode
+    exploration, policy = options.exploration, options.rollout
+    paired = pairs_outcomes(options.backup)
+    weighted = options.root_split == "weighted"
     candidates = np.empty(n_actions, dtype=np.int64)
     common = np.empty(1, dtype=np.uint64)
     path_state = np.empty(max_depth, dtype=np.int64)
     path_action = np.empty(max_depth, dtype=np.int64)
     path_found = np.empty(max_depth, dtype=np.bool_)
     cap_s = tree.s_first.shape[0]
-    cap_a = tree.a_target.shape[0]
+    cap_a = tree.a_action.shape[0]
     for sim in range(n_simulations):
         if tree.counts[0] + 1 > cap_s or tree.counts[1] + n_actions > cap_a:
             return sim
@@ -246,14 +271,14 @@ def run_simulations(
                 applied = _catch_up(
                     tree, env, path_action, path_found, applied, depth, root, state, work
                 )
-                p, payload0, payload1 = mdp_expand(env, state, np.int64(tree.a_target[x]), work)
+                p, payload0, payload1 = mdp_expand(env, state, np.int64(tree.a_action[x]), work)
                 tree.a_p[x] = p
-                tree.a_find[x] = payload0
-                tree.a_miss[x] = payload1
+                tree.a_payload[x, 0] = payload0
+                tree.a_payload[x, 1] = payload1
             if s == 0 and fixed >= 0 and 0.0 < tree.a_p[x] < 1.0:
-                found = _root_outcome(tree.counts[2], tree.a_p[x], options.weighted_root)
+                found = _root_outcome(tree.counts[2], tree.a_p[x], weighted)
             elif (
-                backup_mode > 0
+                paired
                 and tree.a_visits[x] > 0
                 and 0.0 < tree.a_p[x] < 1.0
                 and tree.a_out_visits[x, 0] * tree.a_out_visits[x, 1] == 0
@@ -272,25 +297,8 @@ def run_simulations(
                 tree.counts[0] += 1
                 tree.a_child[x, outcome] = child
             s = child
-        backup(
-            tree, path_state, path_action, path_found, depth, ret, backup_mode, options.max_weight
-        )
+        back_up(options.backup, tree, path_state, path_action, path_found, depth, ret)
     return n_simulations
-
-
-@numba.njit(cache=True, nogil=True)
-def run_subtask_simulations(
-    tree, env, root, state, work, policy, n_actions, max_depth, fixed, options, n_simulations
-):
-    """:func:`run_simulations` on the paper's sub-task MDP, compiled once and cached on disk.
-
-    The generic loop is not cached itself: its cache index would hold the signature of every
-    MDP it ever ran on (test toys included), and another process that cannot import one of
-    them could not read it. It releases the GIL, so root-parallel trees run on several cores.
-    """
-    return run_simulations(
-        tree, env, root, state, work, policy, n_actions, max_depth, fixed, options, n_simulations
-    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -334,7 +342,7 @@ class SearchResult:
         return None if self.after_miss is None else self.after_miss.best
 
 
-def _check_limits(iterations: int | None, time_limit: float | None) -> None:
+def check_limits(iterations: int | None, time_limit: float | None) -> None:
     if iterations is None and time_limit is None:
         raise ValueError("give iterations, time_limit or both")
     if iterations is not None and iterations < 1:
@@ -358,7 +366,7 @@ def run_search(
     checked (from ``start``, a ``time.perf_counter()`` reading, default now). With both limits,
     whichever comes first stops the search.
     """
-    _check_limits(iterations, time_limit)
+    check_limits(iterations, time_limit)
     start = time.perf_counter() if start is None else start
     tree = new_tree(seed_value(seed))
     done = 0
@@ -390,17 +398,14 @@ def search_mdp(
     n_actions: int,
     max_depth: int,
     work: np.ndarray,
+    options: SearchOptions = PAPER_SEARCH,
+    *,
     iterations: int | None = None,
     time_limit: float | None = None,
     seed: int | np.random.Generator = 0,
-    exploration: float = DEFAULT_EXPLORATION,
-    policy: tuple = UniformRandom(),
     fixed: int = -1,
     start: float | None = None,
-    backup: str = "sampled",
-    max_weight: float = 1.0,
-    weighted_root: bool = False,
-    common_rollouts: bool = False,
+    kernel: Callable = run_simulations,
 ) -> SearchResult:
     """Search the registered MDP of ``env`` from ``root`` (a tuple of arrays, not modified).
 
@@ -408,127 +413,36 @@ def search_mdp(
         env: the MDP's constant data, an instance of a class registered with
             :func:`hptrack.planning.mdp.register_mdp`.
         root: the root state.
-        n_actions: number of actions of the MDP.
+        n_actions: number of actions of the MDP, at most
+            :data:`~hptrack.planning.tree.MAX_ACTIONS`.
         max_depth: most transitions of one history.
         work: the MDP's scratch.
+        options: the search's options (default the paper's search).
         iterations, time_limit: stop after this many simulations / this wall time (s),
             whichever comes first.
         seed: an integer or a :class:`numpy.random.Generator` (one ``uint64`` is drawn from it).
-        exploration: UCB1 constant ``c`` on values normalised to the observed return range.
-        policy: the rollout policy (:mod:`hptrack.planning.rollout`).
         fixed: re-planning mode: the root's only action (``-1``: a first plan).
         start: a ``time.perf_counter()`` reading the time limit counts from (default now).
-        backup: one of :data:`~hptrack.planning.tree.BACKUPS` (default the paper's).
-        max_weight: the max backup's weight ``lambda`` of a state's best action, in ``[0, 1]``
-            (:func:`~hptrack.planning.tree.backup`; 1 is the pure max).
-        weighted_root: re-planning: split the root's simulations between the outcomes by their
-            probability (:func:`_root_outcome`; default the paper's even split).
-        common_rollouts: draw each new node's rollout from a stream derived from its parent
-            (:class:`SearchOptions`; default the paper's single stream).
+        kernel: the compiled simulation loop, :func:`run_simulations` or an MDP's cached copy
+            of it.
+
+    Raises:
+        ValueError: more actions than the tree holds, a bad option or limit.
     """
-    mode = _backup_mode(backup)
-    if not 0.0 <= max_weight <= 1.0:
-        raise ValueError(f"max_weight must be in [0, 1], got {max_weight}")
+    if not 1 <= n_actions <= MAX_ACTIONS:
+        raise ValueError(
+            f"the MDP declares {n_actions} actions; the search takes 1 to {MAX_ACTIONS}"
+        )
+    options = checked_options(options)
     state = tuple(np.array(a, copy=True) for a in root)
-    options = SearchOptions(
-        float(exploration), mode, float(max_weight), bool(weighted_root), bool(common_rollouts)
-    )
-    kernel = run_subtask_simulations if isinstance(env, subtask_mdp.SubtaskEnv) else run_simulations
 
     def simulate(tree: Tree, count: int) -> int:
-        return kernel(
-            tree, env, root, state, work, policy, n_actions, max_depth, fixed, options, count
-        )
+        return kernel(tree, env, root, state, work, options, n_actions, max_depth, fixed, count)
 
     return run_search(simulate, n_actions, iterations, time_limit, seed, fixed, start)
 
 
-def search(
-    problem: subtask_mdp.PlanningProblem,
-    iterations: int | None = None,
-    time_limit: float | None = None,
-    seed: int | np.random.Generator = 0,
-    exploration: float = DEFAULT_EXPLORATION,
-    policy: tuple = UniformRandom(),
-    backup: str = "sampled",
-    threads: int = 1,
-    max_weight: float = 1.0,
-    weighted_root: bool = False,
-    common_rollouts: bool = False,
-) -> SearchResult:
-    """Plan from ``problem``'s root state with Algorithm 1 (``TreeSearch``) on the sub-task MDP.
-
-    Args:
-        problem: root state and model; with ``current_action`` set, re-planning mode: the root's
-            only action is the current one and the result gives the best next action after
-            each of its outcomes (Algorithm 1 lines 9-12).
-        iterations: stop after this many simulations.
-        time_limit: stop once this wall time (s) has passed, checked between chunks of
-            simulations. With both limits, whichever comes first.
-        seed: an integer or a :class:`numpy.random.Generator` (one ``uint64`` is drawn from it).
-            The same seed and number of simulations give the same tree and plan.
-        exploration: UCB1 constant ``c`` on values normalised to the observed return range.
-        policy: the rollout policy (default the paper's uniformly random one).
-        backup: one of :data:`~hptrack.planning.tree.BACKUPS` (default the paper's running
-            mean of sampled returns).
-        max_weight: the max backup's weight of a state's best action (1: the pure max; below,
-            mixed with the state's mean return, :func:`~hptrack.planning.tree.backup`).
-        weighted_root: re-planning: split the root's simulations between the current action's
-            outcomes by their probability instead of evenly (the paper's).
-        common_rollouts: common random numbers in the rollouts of one state's children
-            (:class:`SearchOptions`).
-        threads: root parallelism: this many independent trees (each with its own stream,
-            seeded from ``seed``, and the limits above), searched on as many threads and
-            merged (:func:`~hptrack.planning.tree.merge_stats`). 1 is the paper's single tree.
-
-    Raises:
-        ValueError: no limit given, a limit not positive, or a current action that cannot be
-            carried out in the remaining budget.
-    """
-    _check_limits(iterations, time_limit)
-    if threads < 1:
-        raise ValueError(f"threads must be positive, got {threads}")
-    start = time.perf_counter()
-    model = problem.model()
-    root = problem.root_state()
-    fixed = -1 if problem.current_action is None else problem.current_action
-
-    envs = [
-        subtask_mdp.SubtaskEnv(model, subtask_mdp.new_memo(problem.n_targets, problem.n_steps))
-        for _ in range(threads)
-    ]  # one memo per tree: the kernels write to it
-    if fixed >= 0 and not subtask_mdp.is_available(envs[0], root, fixed):
-        raise ValueError(f"current action {fixed} cannot be carried out in the remaining budget")
-
-    def one(env: subtask_mdp.SubtaskEnv, tree_seed: int | np.random.Generator) -> SearchResult:
-        return search_mdp(
-            env,
-            root,
-            problem.n_actions,
-            problem.n_steps + 2,
-            subtask_mdp.new_work(),
-            iterations,
-            time_limit,
-            tree_seed,
-            exploration,
-            policy,
-            fixed,
-            start,
-            backup,
-            max_weight,
-            weighted_root,
-            common_rollouts,
-        )
-
-    if threads == 1:
-        return one(envs[0], seed)
-    seeds = np.random.SeedSequence(seed_value(seed)).generate_state(threads, np.uint64)
-    with ThreadPoolExecutor(threads) as pool:
-        results = list(pool.map(one, envs, (int(s) for s in seeds)))
-    return _merged(results, fixed)
-
-
-def _merged(results: list[SearchResult], fixed: int) -> SearchResult:
+def merged(results: list[SearchResult], fixed: int) -> SearchResult:
     """One result from root-parallel trees: statistics merged action by action."""
     root = merge_stats([r.root for r in results])
     after_find = merge_stats([r.after_find for r in results]) if fixed >= 0 else None
@@ -545,12 +459,6 @@ def _merged(results: list[SearchResult], fixed: int) -> SearchResult:
         action_nodes=sum(r.action_nodes for r in results),
         tree_bytes=sum(r.tree_bytes for r in results),
     )
-
-
-def _backup_mode(backup: str) -> int:
-    if backup not in BACKUPS:
-        raise ValueError(f"backup must be one of {BACKUPS}, got {backup!r}")
-    return BACKUPS.index(backup)
 
 
 def _result(tree: Tree, fixed: int, stopped_by: str, elapsed: float) -> SearchResult:

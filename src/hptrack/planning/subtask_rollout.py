@@ -24,7 +24,7 @@ import numba
 import numpy as np
 
 from hptrack.models.beliefs import logdet_xy
-from hptrack.models.motion import position_covariance_after
+from hptrack.models.mission import position_covariance_on
 from hptrack.planning.rollout import available_actions, register_policy
 from hptrack.planning.stream import uniform
 from hptrack.planning.subtask_mdp import I_LAST, I_STEP, intercept_of, is_dwell
@@ -59,23 +59,19 @@ def epsilon_greedy(epsilon, env, state, rng, candidates, uncertainty):
         return -1
     if uniform(rng) < epsilon:
         return candidates[int(uniform(rng) * count)]
-    model = env.model
+    mission = env.mission
     si, sf, base_cov, base_step = state
     t = si[I_STEP]
     best = -1
     best_score = -np.inf
     for k in range(count):
         a = candidates[k]
-        if a == si[I_LAST] or is_dwell(model, a):  # the follow, the dwell
+        if a == si[I_LAST] or is_dwell(env, a):  # the follow, the dwell
             continue
-        steps = intercept_of(model, sf, a, t)
+        steps = intercept_of(env, sf, a, t)
         if uncertainty:
-            sxx, sxy, syy = position_covariance_after(
-                base_cov[a],
-                model.process_noise[a],
-                float(t + steps - base_step[a]),
-                model.time_step,
-                model.c_per_step,
+            sxx, sxy, syy = position_covariance_on(
+                mission, base_cov[a], mission.process_noise[a], float(t + steps - base_step[a])
             )
             score = logdet_xy(sxx, sxy, syy)
         else:

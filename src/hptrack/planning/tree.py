@@ -3,29 +3,16 @@ spirit of mctx: state nodes ``s_*`` and action (chance) nodes ``a_*``.
 
 A state node stores its visit count ``N(N^s)``, its first action slot and the number of slots;
 an action node stores its action, the expansion results (``p`` of outcome 0, and one integer
-payload per outcome that the MDP needs to replay the transition, e.g. a duration), ``N(N^a)``,
+payload per outcome that the MDP needs to replay the transition, e.g. a duration, in
+``a_payload[:, outcome]``), ``N(N^a)``,
 ``V(N^a)`` and its two children (outcome 0, outcome 1). States themselves are not stored: the
 search rebuilds them from the root by replaying the stored transitions.
 
-:func:`select` is UCB1 (paper Algorithm 1, line 23) and :func:`backup` the backup; both are the
-tree's, whatever the MDP. Four backups (``BACKUPS``):
+:func:`select` is UCB1 (paper Algorithm 1, line 23), the tree's whatever the MDP; the backups
+are registered kernels (:mod:`hptrack.planning.backups`).
 
-* ``"sampled"``, the paper's (lines 31-33): ``V(N^a)`` is the running mean of the returns of the
-  simulations through the action, whose outcomes were drawn from ``p``;
-* ``"expected"``: each action node keeps a running mean per outcome and
-  ``V(N^a) = p V_find + (1 - p) V_miss`` with the known ``p``, so the outcome draws add no noise;
-* ``"max"``: the expected combination of the outcomes' *values*, where a state's value is that
-  of its best action (a Bellman backup; a state visited once is worth its rollout's return).
-  Mean backups average the returns of every action tried below, which the random rollouts drag
-  down; an action whose value is exact from the start (following a target to the end of the
-  budget) then looks better than it is at small effort. The max backup removes that bias, but
-  the largest of several noisy values is biased upwards, more so as the tree grows: with
-  ``max_weight`` ``lambda < 1`` a state is worth ``lambda max_a V(N^a) + (1 - lambda)`` times
-  the mean return of the simulations through it (the "mixmax" backup of Jacobsen et al., 2014);
-* ``"robust"``: like ``"max"``, but a state is worth its most visited action (ties: the better
-  value). At the frontier of the tree, actions are valued by one or a few rollouts, and the
-  largest of several noisy values is biased upwards; UCB1 concentrates its visits on the best
-  action, so the most visited one is the best without picking a lucky rollout.
+Action slots hold action indices as ``int16``: an MDP may declare up to :data:`MAX_ACTIONS`
+actions (the search refuses more).
 """
 
 from __future__ import annotations
@@ -58,10 +45,9 @@ class Tree(NamedTuple):
     s_visits: np.ndarray
     s_value: np.ndarray
     s_mean: np.ndarray
-    a_target: np.ndarray
+    a_action: np.ndarray
     a_p: np.ndarray
-    a_find: np.ndarray
-    a_miss: np.ndarray
+    a_payload: np.ndarray
     a_visits: np.ndarray
     a_value: np.ndarray
     a_child: np.ndarray
@@ -74,14 +60,13 @@ class Tree(NamedTuple):
 
 _FILL = {
     "s_first": (UNVISITED, np.int32),
-    "s_count": (0, np.int8),
+    "s_count": (0, np.int16),
     "s_visits": (0, np.int32),
     "s_value": (np.nan, np.float64),
     "s_mean": (0.0, np.float64),
-    "a_target": (0, np.int8),
+    "a_action": (0, np.int16),
     "a_p": (-1.0, np.float64),
-    "a_find": (0, np.int32),
-    "a_miss": (0, np.int32),
+    "a_payload": (0, np.int32),
     "a_visits": (0, np.int32),
     "a_value": (0.0, np.float64),
     "a_child": (-1, np.int32),
@@ -91,9 +76,9 @@ _FILL = {
 """Initial value and dtype of each node array of :class:`Tree` (``a_child``, ``a_out_*``: one
 column per outcome)."""
 
-BACKUPS = ("sampled", "expected", "max", "robust")
-"""The backups of :func:`backup`, by code (index)."""
-PAIRED = ("a_child", "a_out_visits", "a_out_value")
+MAX_ACTIONS = int(np.iinfo(np.int16).max)
+"""Most actions an MDP may declare: action slots and a state's slot count are ``int16``."""
+PAIRED = ("a_payload", "a_child", "a_out_visits", "a_out_value")
 
 
 def new_tree(seed: int, capacity: int = 1024) -> Tree:
@@ -116,7 +101,7 @@ def grow_tree(tree: Tree, n_actions: int) -> Tree:
     arrays = tree._asdict()
     for prefix, size, need in (
         ("s_", tree.s_first.shape[0], tree.counts[0] + 1),
-        ("a_", tree.a_target.shape[0], tree.counts[1] + n_actions),
+        ("a_", tree.a_action.shape[0], tree.counts[1] + n_actions),
     ):
         if need <= size:
             continue
@@ -151,76 +136,6 @@ def select(tree, s, exploration):
             best_score = score
             best = x
     return best
-
-
-@numba.njit(cache=True)
-def _outcome_mean(tree, x):
-    """``p V_find + (1 - p) V_miss`` of action node ``x`` (the visited outcome's value while
-    only one has been visited)."""
-    n_find, n_miss = tree.a_out_visits[x, 0], tree.a_out_visits[x, 1]
-    if n_miss == 0:
-        return tree.a_out_value[x, 0]
-    if n_find == 0:
-        return tree.a_out_value[x, 1]
-    p = tree.a_p[x]
-    return p * tree.a_out_value[x, 0] + (1.0 - p) * tree.a_out_value[x, 1]
-
-
-@numba.njit(cache=True)
-def _best_value(tree, s):
-    """The largest ``V(N^a)`` over the visited actions of state node ``s``."""
-    best = -np.inf
-    for x in range(tree.s_first[s], tree.s_first[s] + tree.s_count[s]):
-        if tree.a_visits[x] > 0 and tree.a_value[x] > best:
-            best = tree.a_value[x]
-    return best
-
-
-@numba.njit(cache=True)
-def _most_visited_value(tree, s):
-    """``V(N^a)`` of the most visited action of state node ``s`` (ties: the larger value)."""
-    best = -np.inf
-    most = 0
-    for x in range(tree.s_first[s], tree.s_first[s] + tree.s_count[s]):
-        n = tree.a_visits[x]
-        if n > most or (n == most and n > 0 and tree.a_value[x] > best):
-            most = n
-            best = tree.a_value[x]
-    return best
-
-
-@numba.njit(cache=True)
-def backup(tree, path_state, path_action, path_found, depth, ret, mode, max_weight):
-    """Back the return ``ret`` of a simulation up its path (Algorithm 1 lines 31-33), with the
-    backup ``BACKUPS[mode]`` (module docstring; ``max_weight`` is the max backup's ``lambda``).
-    Every mode counts ``N(N^s) += 1`` and ``N(N^a) += 1``; ``"sampled"`` sets
-    ``V(N^a) += (ret - V(N^a)) / N(N^a)``."""
-    value = ret
-    for d in range(depth - 1, -1, -1):
-        x = path_action[d]
-        s = path_state[d]
-        tree.s_visits[s] += 1
-        tree.a_visits[x] += 1
-        if mode == 0:
-            tree.a_value[x] += (ret - tree.a_value[x]) / tree.a_visits[x]
-            continue
-        o = 0 if path_found[d] else 1
-        tree.a_out_visits[x, o] += 1
-        if mode == 1:
-            tree.a_out_value[x, o] += (ret - tree.a_out_value[x, o]) / tree.a_out_visits[x, o]
-        else:
-            tree.a_out_value[x, o] = value
-        tree.a_value[x] = _outcome_mean(tree, x)
-        if mode == 2:
-            value = _best_value(tree, s)
-            if max_weight < 1.0:
-                tree.s_mean[s] += (ret - tree.s_mean[s]) / tree.s_visits[s]
-                value = max_weight * value + (1.0 - max_weight) * tree.s_mean[s]
-        elif mode == 3:
-            value = _most_visited_value(tree, s)
-    tree.value_range[0] = min(tree.value_range[0], ret)
-    tree.value_range[1] = max(tree.value_range[1], ret)
-    tree.counts[2] += 1
 
 
 @dataclass(frozen=True, eq=False)
@@ -286,10 +201,10 @@ def node_stats(tree: Tree, s: int) -> ActionStats | None:
     p = tree.a_p[xs].copy()
     p[p < 0.0] = np.nan
     return ActionStats(
-        tree.a_target[xs].astype(np.int64),
+        tree.a_action[xs].astype(np.int64),
         tree.a_visits[xs].astype(np.int64),
         tree.a_value[xs].copy(),
         p,
-        tree.a_find[xs].astype(np.int64),
-        tree.a_miss[xs].astype(np.int64),
+        tree.a_payload[xs, 0].astype(np.int64),
+        tree.a_payload[xs, 1].astype(np.int64),
     )

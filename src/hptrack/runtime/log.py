@@ -18,11 +18,20 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Annotated, Any
 
 import numpy as np
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    Strict,
+    ValidationError,
+)
 
-from hptrack.interface import InputError
+from hptrack.interface import InputError, one_line, shown
 
 LOG_VERSION = 1
 """Format version written in the header record."""
@@ -113,6 +122,129 @@ class MissionLog:
         self.close()
 
 
+MAX_LOG_DEPTH = 16
+"""Deepest nesting of a log record (a tick's covariances are four levels deep)."""
+MAX_LOG_TIME_S = 1e9
+"""Largest mission time of a record, s (a mission has at most a million steps of a minute)."""
+MAX_LOG_INDEX = 2**62
+"""Largest step, call or line number of a record."""
+_NON_FINITE = ("nan", "inf", "-inf")
+
+
+def _log_number(value: Any) -> Any:
+    if value in _NON_FINITE:
+        return float(value)
+    return value
+
+
+def _bounded_time(value: float) -> float:
+    if math.isfinite(value) and abs(value) > MAX_LOG_TIME_S:
+        raise ValueError(f"a mission time beyond {MAX_LOG_TIME_S:g} s")
+    return value
+
+
+LogNumber = Annotated[float, BeforeValidator(_log_number), Strict()]
+"""A number as the log writes it: a JSON number, or ``"nan"``, ``"inf"``, ``"-inf"``."""
+LogTime = Annotated[LogNumber, AfterValidator(_bounded_time)]
+Index = Annotated[int, Strict(), Field(ge=0, le=MAX_LOG_INDEX)]
+
+
+class _Record(BaseModel):
+    """The fields every record shares (others are kept as they are)."""
+
+    model_config = ConfigDict(extra="allow")
+
+    kind: Annotated[str, Strict(), Field(max_length=40)]
+    t: LogTime | None = None
+    seq: Index | None = None
+    call: Index | None = None
+
+
+class _Input(_Record):
+    """An odometry or detection record (one with ``raw`` was refused before it had fields)."""
+
+    t: LogTime | None
+    position: Any
+
+
+class _Step(_Record):
+    k: Index
+
+
+class _Truth(_Step):
+    states: list[tuple[LogNumber, LogNumber, LogNumber, LogNumber]]
+
+
+class _End(_Record):
+    t: LogTime
+    reason: Annotated[str, Strict(), Field(max_length=200)]
+
+
+class _Header(BaseModel):
+    model_config = ConfigDict(extra="allow")
+
+    kind: str
+    version: Any = None
+    scenario: dict
+    controller: dict
+    planner: Annotated[str, Strict(), Field(max_length=100)]
+    planner_settings: dict | None = None
+    seed: Annotated[int, Strict(), Field(ge=0, lt=2**63)]
+
+
+_SCHEMAS: dict[str, type[BaseModel]] = {
+    "odometry": _Input,
+    "detection": _Input,
+    "plan": _Step,
+    "tick": _Step,
+    "late": _Step,
+    "truth": _Truth,
+    "end": _End,
+}
+
+
+def _depth(value: Any) -> int:
+    """Nesting depth of JSON data (iterative: a deep record cannot exhaust the stack)."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        node, depth = stack.pop()
+        deepest = max(deepest, depth)
+        if depth > MAX_LOG_DEPTH:
+            break
+        if isinstance(node, dict):
+            stack.extend((v, depth + 1) for v in node.values())
+        elif isinstance(node, list):
+            stack.extend((v, depth + 1) for v in node)
+    return deepest
+
+
+def check_record(record: dict, where: str, header: bool = False) -> None:
+    """Refuse a record whose fields replay cannot use: the fields of its kind missing or of
+    the wrong type (text for a number), numbers out of range, or nested deeper than
+    :data:`MAX_LOG_DEPTH`. Other fields are compared, not used, and may hold anything.
+
+    Raises:
+        InputError: one line naming the place, the field and the shortened value.
+    """
+    if _depth(record) > MAX_LOG_DEPTH:
+        raise InputError(f"{where}: nested more than {MAX_LOG_DEPTH} levels deep")
+    kind = record.get("kind")
+    schema = (
+        _Header if header else _SCHEMAS.get(kind, _Record) if isinstance(kind, str) else _Record
+    )
+    if "raw" in record and schema is _Input:
+        schema = _Record
+    try:
+        schema.model_validate(record)
+    except ValidationError as err:
+        first = err.errors(include_url=False)[0]
+        field = ".".join(str(p) for p in first["loc"]) or "record"
+        value = "" if first["type"] == "missing" else f" (value {shown(first.get('input'))})"
+        raise InputError(
+            one_line(f"{where} ({shown(kind, 20)} record): {field}: {first['msg']}{value}")
+        ) from None
+
+
 @dataclass(frozen=True)
 class LogContents:
     """A mission log read back.
@@ -154,6 +286,10 @@ def read_log(path: str | Path) -> LogContents:
             record = json.loads(line)
             if not isinstance(record, dict) or "kind" not in record:
                 raise ValueError("not a log record")
+        except RecursionError:
+            raise InputError(
+                f"{path}: line {number} is nested more than {MAX_LOG_DEPTH} levels deep"
+            ) from None
         except ValueError:
             if number == len(lines) and not text.endswith("\n"):
                 truncated = True
@@ -163,8 +299,10 @@ def read_log(path: str | Path) -> LogContents:
                     f"{path}: not a mission log (line 1 is not a JSON record)"
                 ) from None
             raise InputError(
-                f"{path}: line {number} is not a mission-log record: {line[:80]!r}"
+                f"{path}: line {number} is not a mission-log record: {shown(line)}"
             ) from None
+        if number > 1:
+            check_record(record, f"{path}: line {number}")
         records.append(record)
     if not records or records[0]["kind"] != "header":
         raise InputError(f"{path}: not a mission log (no header record on line 1)")
@@ -173,4 +311,5 @@ def read_log(path: str | Path) -> LogContents:
             f"{path}: mission-log version {records[0].get('version')!r} is not "
             f"supported (this hptrack reads version {LOG_VERSION})"
         )
+    check_record(records[0], f"{path}: line 1", header=True)
     return LogContents(records[0], records[1:], truncated)

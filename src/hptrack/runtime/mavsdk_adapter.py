@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import math
 import signal
@@ -43,8 +42,13 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
 
 from hptrack.runtime.controller import MissionController
 from hptrack.runtime.frames import enu_to_ned, ned_to_enu
-from hptrack.runtime.log import log_float
-from hptrack.runtime.network import udp_address
+from hptrack.runtime.network import (
+    Refusal,
+    enlarge_receive_buffer,
+    kernel_drops,
+    parse_detection_line,
+    udp_address,
+)
 
 logger = logging.getLogger(__name__)
 mavsdk_logger = logging.getLogger("mavsdk")
@@ -232,21 +236,12 @@ class _Flight:
                 self._guard(lambda line=line: self._detection_line(line, received))
 
     def _detection_line(self, line: str, received: float) -> None:
-        try:
-            message = json.loads(line)
-        except ValueError:
-            self.controller.bad_input("detection", "malformed", "not a JSON line", line[:200])
+        parsed = parse_detection_line(line)
+        if isinstance(parsed, Refusal):
+            self.controller.bad_input("detection", parsed.reason, parsed.detail, line[:200])
             return
-        if not isinstance(message, dict) or not {"id", "x", "y"} <= message.keys():
-            self.controller.bad_input(
-                "detection", "malformed", 'expected {"id": ..., "x": ..., "y": ...}', line[:200]
-            )
-            return
-        stamp = message.get("t")
-        t = received if stamp is None else log_float(stamp) - self.unix0
-        self.controller.detection(
-            t, message["id"], [message["x"], message["y"]], message.get("cov")
-        )
+        t = received if parsed.stamp is None else parsed.stamp - self.unix0
+        self.controller.detection(t, parsed.target, parsed.position, parsed.covariance)
 
     # --- the mission ----------------------------------------------------------------------
     async def wait_for(
@@ -432,6 +427,9 @@ async def fly_mission(
             transport, _ = await loop.create_datagram_endpoint(
                 lambda: _Detections(flight), local_addr=(host, port)
             )
+            detection_socket = transport.get_extra_info("socket")
+            enlarge_receive_buffer(detection_socket)
+            drops_before = kernel_drops(detection_socket)
             if options.takeoff:
                 await _take_off(flight, system)
             elif not await flight.wait_for(
@@ -447,6 +445,13 @@ async def fly_mission(
             except Exception:  # noqa: BLE001 - end safely first, report after
                 flight.error = traceback.format_exc()
                 reason, detail = "controller error", flight.error.strip().splitlines()[-1]
+            drops_after = kernel_drops(detection_socket)
+            if drops_before is not None and drops_after is not None:
+                dropped = drops_after - drops_before
+                flight.say(
+                    f"{dropped} detection datagrams dropped by the system (receive buffer full)",
+                    dropped_datagrams=dropped,
+                )
             action, confirmed = await flight.safe_end(system, reason, detail)
         finally:
             if transport is not None:

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import math
+import re
+import stat
 from pathlib import Path
 
 import yaml
 from pydantic import ValidationError
 
-from hptrack.interface import InputError
+from hptrack.interface import InputError, one_line, shown
 from hptrack.scenario.model import Scenario
 
 
@@ -16,13 +18,49 @@ class ScenarioError(InputError):
     """A scenario file that cannot be read or is invalid; the message is one line."""
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
+MAX_FILE_BYTES = 2**18
+"""Largest scenario file, bytes (62 targets written in full take about 40 KB)."""
+MAX_VALUES = 20_000
+"""Most values (numbers, strings, lists, mappings) a file may hold, as written and once its
+YAML aliases are expanded (a few aliases can name billions of values: a "YAML bomb"); 62
+targets take about 2,500. Parsing 20,000 values takes about a second."""
+MAX_DEPTH = 32
+"""Deepest nesting of lists and mappings (a scenario is four levels deep)."""
+MAX_INT_DIGITS = 100
+"""Longest integer literal (a seed below 2^63 has 19 digits)."""
+MAX_LISTED_PROBLEMS = 3
+"""Problems of a validation error named in its one-line message."""
+
+_INT = re.compile(r"^[-+]?(0b[0-1_]+|0[0-7_]+|(0|[1-9][0-9_]*)|0x[0-9a-fA-F_]+)$")
+_FLOAT = re.compile(
+    r"^([-+]?(\.[0-9]+|[0-9][0-9_]*(\.[0-9_]*)?)([eE][-+]?[0-9]+)?"
+    r"|[-+]?\.(inf|Inf|INF)|\.(nan|NaN|NAN))$"
+)
+
+
+class _ScenarioLoader(yaml.SafeLoader):
     """A safe YAML loader that refuses a mapping with the same key twice (PyYAML keeps the
-    last one silently)."""
+    last one silently) and integers of more than :data:`MAX_INT_DIGITS` digits, keeps merge
+    keys (``<<: *defaults``), reads ``1e-4`` as a number (YAML 1.1 needs a dot) and ``1:00``
+    as text (YAML 1.1 would read 60)."""
+
+    def __init__(self, stream) -> None:
+        super().__init__(stream)
+        self._events = 0
+
+    def get_event(self):
+        self._events += 1
+        if self._events > 2 * MAX_VALUES:
+            raise yaml.parser.ParserError(
+                None, None, f"more than {MAX_VALUES:,} values", self.peek_event().start_mark
+            )
+        return super().get_event()
 
     def construct_mapping(self, node, deep=False):
         seen = set()
         for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
             key = self.construct_object(key_node, deep=deep)
             try:
                 duplicated = key in seen
@@ -31,20 +69,72 @@ class _UniqueKeyLoader(yaml.SafeLoader):
             if duplicated:
                 mark = key_node.start_mark
                 raise yaml.constructor.ConstructorError(
-                    None, None, f"duplicated key {key!r} at line {mark.line + 1}", mark
+                    None, None, f"duplicated key {shown(key)} at line {mark.line + 1}", mark
                 )
             seen.add(key)
         return super().construct_mapping(node, deep=deep)
 
+    def construct_yaml_int(self, node):
+        digits = sum(c.isalnum() for c in str(node.value))
+        if digits > MAX_INT_DIGITS:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"an integer of {digits} digits", node.start_mark
+            )
+        return super().construct_yaml_int(node)
 
-def read_yaml(path: str | Path, what: str = "file") -> object:
-    """Parse a YAML file (UTF-8 text, no duplicated keys), or raise :class:`ScenarioError`
-    naming the file."""
-    path = Path(path)
+
+_ScenarioLoader.add_constructor("tag:yaml.org,2002:int", _ScenarioLoader.construct_yaml_int)
+# YAML 1.1's base-60 numbers (``1:00`` is 60) are text here: resolve int and float anew
+_ScenarioLoader.yaml_implicit_resolvers = {
+    first: [(tag, regexp) for tag, regexp in resolvers if not tag.endswith((":int", ":float"))]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+_ScenarioLoader.add_implicit_resolver("tag:yaml.org,2002:int", _INT, list("-+0123456789"))
+_ScenarioLoader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT, list("-+0123456789."))
+
+
+def _check_size(data: object, path: Path) -> None:
+    """Refuse data of more than :data:`MAX_VALUES` values or :data:`MAX_DEPTH` levels, looking
+    at no more than that (aliases make the expanded data far larger than the file)."""
+    stack, count = [(data, 1)], 0
+    while stack:
+        node, depth = stack.pop()
+        count += 1
+        if count > MAX_VALUES:
+            raise ScenarioError(
+                f"{path}: more than {MAX_VALUES:,} values once its YAML aliases are expanded"
+            )
+        if depth > MAX_DEPTH:
+            raise ScenarioError(f"{path}: nested more than {MAX_DEPTH} levels deep")
+        if isinstance(node, dict):
+            stack.extend((v, depth + 1) for v in node.values())
+            count += len(node)
+        elif isinstance(node, list):
+            stack.extend((v, depth + 1) for v in node)
+
+
+def _read_regular_file(path: Path, what: str) -> bytes:
+    """The bytes of a regular file of at most :data:`MAX_FILE_BYTES` (a FIFO, a device or a
+    folder is refused before it is opened: reading one may never end)."""
     try:
-        raw = path.read_bytes()
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode):
+            kind = "a folder" if stat.S_ISDIR(info.st_mode) else "not a regular file"
+            raise ScenarioError(f"{path}: {kind}, not a {what}")
+        with path.open("rb") as file:
+            raw = file.read(MAX_FILE_BYTES + 1)
     except OSError as err:
         raise ScenarioError(f"{path}: cannot read {what} ({err.strerror})") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise ScenarioError(f"{path}: larger than {MAX_FILE_BYTES // 2**10} KiB; is it a {what}?")
+    return raw
+
+
+def read_yaml(path: str | Path, what: str = "file") -> object:
+    """Parse a YAML file (UTF-8 text, no duplicated keys, bounded size), or raise
+    :class:`ScenarioError` naming the file."""
+    path = Path(path)
+    raw = _read_regular_file(path, what)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
@@ -54,32 +144,40 @@ def read_yaml(path: str | Path, what: str = "file") -> object:
     if "\x00" in text:
         raise ScenarioError(f"{path}: a binary file, not a {what}")
     try:
-        return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+        data = yaml.load(text, Loader=_ScenarioLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(err, "problem", None) or "invalid YAML"
         raise ScenarioError(f"{path}: malformed YAML{where}: {problem}") from None
+    except RecursionError:
+        raise ScenarioError(f"{path}: nested more than {MAX_DEPTH} levels deep") from None
+    _check_size(data, path)
+    return data
 
 
 def format_validation_error(error: ValidationError) -> str:
-    """One line per problem: ``field.path: message (value ...)``, joined with ``; ``."""
+    """One bounded line: ``field.path: message (value ...)`` for the first few problems,
+    joined with ``; `` (values shortened, never printed whole)."""
     parts = []
-    for item in error.errors():
-        loc = ".".join(str(p) for p in item["loc"]) or "scenario"
-        msg = item["msg"].removeprefix("Value error, ")
+    problems = error.errors(include_url=False, include_context=False)
+    for item in problems[:MAX_LISTED_PROBLEMS]:
+        loc = ".".join(shown(p, 40).strip("'") for p in item["loc"]) or "scenario"
+        msg = one_line(item["msg"].removeprefix("Value error, "), 300)
         value = item.get("input")
         large = isinstance(value, float) and math.isfinite(value) and abs(value) >= 1e6
-        text = f"{value:g}" if large else repr(value)
-        shown = "" if isinstance(value, dict) or "value" in msg else f" (value {text})"
-        parts.append(f"{loc}: {msg}{shown}")
+        text = f"{value:g}" if large else shown(value)
+        show = not isinstance(value, dict) and "value" not in msg
+        parts.append(f"{loc}: {msg}" + (f" (value {text})" if show else ""))
+    if len(problems) > MAX_LISTED_PROBLEMS:
+        parts.append(f"and {len(problems) - MAX_LISTED_PROBLEMS} more problems")
     return "; ".join(parts)
 
 
 def parse_scenario(data: object, source: str = "scenario") -> Scenario:
     """Validate already-parsed YAML/JSON data."""
     if not isinstance(data, dict):
-        raise ScenarioError(f"{source}: expected a mapping at the top level, got {data!r}")
+        raise ScenarioError(f"{source}: expected a mapping at the top level, got {shown(data)}")
     try:
         return Scenario.model_validate(data)
     except ValidationError as err:

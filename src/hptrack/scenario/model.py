@@ -2,11 +2,14 @@
 
 A scenario fixes the time step, the budget, the agent, and each target's prior belief (mean,
 covariance), process noise ``q`` and, optionally, its true initial state. Every number is
-checked before any work starts: a real number (a boolean is not), finite, inside a sane range,
-covariances symmetric positive definite with a well-conditioned position block and a finite
-``log det`` up to the budget's end, the budget a whole number of time steps and at most
-:data:`MAX_STEPS` of them, target ids unique, and every target's mean speed below the agent's
-(the coverage planner of Sec. IV-A needs ``v_a > |v_hat|``). Errors name the field and the value.
+checked before any work starts: a real number (a boolean or a text such as ``"0.5"`` is not),
+finite, inside a sane range; covariances symmetric positive definite, eigenvalues at least
+:data:`MIN_VARIANCE` and within 1e12 of each other, position variances (prior and at the
+budget's end) within what the Kalman update handles (:data:`MAX_UPDATE_RATIO`) and the area
+(:data:`MAX_POSITION_VARIANCE`); the budget a whole number of time steps and at most
+:data:`MAX_STEPS` of them; target ids unique and printable; every target's mean speed below the
+agent's (the coverage planner of Sec. IV-A needs ``v_a > |v_hat|``); mean and true paths inside
+the 10,000 km area for the whole budget. Errors name the field and the value.
 """
 
 from __future__ import annotations
@@ -15,11 +18,21 @@ import math
 from typing import Annotated, Any, Self
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    Strict,
+    field_validator,
+    model_validator,
+)
 
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import PositionMeasurementModel
+from hptrack.models.mission import MAX_TARGETS, steps_left
 from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
 
 MAX_STEPS = 1_000_000
@@ -28,6 +41,18 @@ MAX_COORDINATE_M = 1e7
 """Largest absolute position coordinate, m (10,000 km)."""
 MIN_POSITION_CONDITION = 1e-12
 """Smallest ratio of the position covariance's eigenvalues (a flatter ellipse is degenerate)."""
+MIN_VARIANCE = 1e-12
+"""Smallest eigenvalue of a prior covariance, m^2 or (m/s)^2: a smaller one is a point mass
+whose ``log det`` is -inf (the score of a known target is not defined)."""
+MAX_POSITION_VARIANCE = MAX_COORDINATE_M**2
+"""Largest position variance of a belief up to the budget's end, m^2: a standard deviation
+beyond the 10,000 km area carries no information."""
+MAX_UPDATE_RATIO = 1e13
+"""Largest ratio of a position variance (prior or predicted to the budget's end) to ``R``'s
+smallest eigenvalue: the Kalman update ``(I - K) P`` loses about ``ratio * 2e-16`` of its
+relative precision and gives negative variances from about 1e15."""
+MAX_TRUE_SPEED = 1e4
+"""Largest true target speed, m/s (10 km/s, above orbital speed)."""
 
 
 def _not_bool(value: Any) -> Any:
@@ -36,7 +61,14 @@ def _not_bool(value: Any) -> Any:
     return value
 
 
-Real = Annotated[float, BeforeValidator(_not_bool)]
+def _printable(value: str) -> str:
+    if not value.isprintable():
+        raise ValueError("must be printable text (no control characters or terminal escapes)")
+    return value
+
+
+Real = Annotated[float, BeforeValidator(_not_bool), Strict()]
+"""A number written as a number: no boolean and no text (``"0.5"`` is refused)."""
 Coordinate = Annotated[Real, Field(ge=-MAX_COORDINATE_M, le=MAX_COORDINATE_M)]
 Vector2 = tuple[Coordinate, Coordinate]
 Vector4 = tuple[Real, Real, Real, Real]
@@ -86,7 +118,7 @@ class TargetSpec(BaseModel):
 
     model_config = _STRICT
 
-    id: Annotated[str, Field(min_length=1, max_length=200)]
+    id: Annotated[str, Field(min_length=1, max_length=200), AfterValidator(_printable)]
     mean: tuple[Coordinate, Coordinate, Real, Real]
     covariance: Matrix4
     process_noise: Annotated[Real, Field(ge=0.0, le=1e6)]
@@ -104,6 +136,16 @@ class TargetSpec(BaseModel):
             raise ValueError(f"entries are too large: {cov.tolist()}")
         if eig[0] <= 0.0:
             raise ValueError(f"covariance is not positive definite: {cov.tolist()}")
+        if eig[0] < MIN_VARIANCE:
+            raise ValueError(
+                f"covariance has an eigenvalue of {eig[0]:.3g}, below {MIN_VARIANCE:g}: a point "
+                "mass whose log det is -inf"
+            )
+        if eig[0] < MIN_POSITION_CONDITION * eig[-1]:
+            raise ValueError(
+                f"covariance eigenvalues {eig[0]:.3g} to {eig[-1]:.3g} span more than 1e12 "
+                "(its smallest is lost in rounding)"
+            )
         pos = np.linalg.eigvalsh(cov[:2, :2])
         if pos[0] < MIN_POSITION_CONDITION * pos[1]:
             raise ValueError(
@@ -120,10 +162,10 @@ class Scenario(BaseModel):
 
     time_step: Annotated[Real, Field(ge=1e-3, le=60.0)] = 0.5
     budget: Annotated[Real, Field(gt=0.0)] = 900.0
-    seed: Annotated[int, BeforeValidator(_not_bool), Field(ge=0, lt=2**63)] = 0
+    seed: Annotated[int, BeforeValidator(_not_bool), Strict(), Field(ge=0, lt=2**63)] = 0
     process_noise_form: ProcessNoiseForm = "continuous"
     agent: AgentSpec = AgentSpec()
-    targets: Annotated[list[TargetSpec], Field(min_length=1, max_length=62)]
+    targets: Annotated[list[TargetSpec], Field(min_length=1, max_length=MAX_TARGETS)]
 
     @model_validator(mode="after")
     def _consistent(self) -> Self:
@@ -154,6 +196,15 @@ class Scenario(BaseModel):
                     f"targets.{i}.mean: target {target.id!r} mean speed {speed:g} m/s is not "
                     f"below agent.speed {self.agent.speed:g} m/s"
                 )
+            self._check_drift(i, "mean", target.mean)
+            if target.truth is not None:
+                true_speed = float(np.hypot(target.truth[2], target.truth[3]))
+                if true_speed > MAX_TRUE_SPEED:
+                    raise ValueError(
+                        f"targets.{i}.truth: speed {true_speed:.3g} m/s is above "
+                        f"{MAX_TRUE_SPEED:g} m/s"
+                    )
+                self._check_drift(i, "truth", target.truth)
         with np.errstate(all="ignore"):
             _, covs = self.motion_model().predict(
                 self.means(), self.covariances(), self.process_noise(), self.budget
@@ -166,7 +217,36 @@ class Scenario(BaseModel):
                     f"by the end of the budget ({value}); use smaller variances "
                     "or process noise"
                 )
+        self._check_variances(self.covariances(), "")
+        self._check_variances(covs, " by the end of the budget")
         return self
+
+    def _check_drift(self, i: int, field: str, state: tuple[float, ...]) -> None:
+        """Refuse a state whose constant-velocity path leaves the 10,000 km area in the
+        budget."""
+        for axis in (0, 1):
+            end = state[axis] + state[axis + 2] * self.budget
+            if abs(end) > MAX_COORDINATE_M:
+                raise ValueError(
+                    f"targets.{i}.{field}: at {state[axis + 2]:.3g} m/s the target is at "
+                    f"{end:.3g} m by the end of the budget, beyond the "
+                    f"{MAX_COORDINATE_M:g} m area"
+                )
+
+    def _check_variances(self, covs: np.ndarray, when: str) -> None:
+        """Refuse position variances the Kalman update cannot handle (:data:`MAX_UPDATE_RATIO`)
+        or wider than the area (:data:`MAX_POSITION_VARIANCE`)."""
+        r_min = float(np.linalg.eigvalsh(self.agent.noise_covariance())[0])
+        limit = min(MAX_POSITION_VARIANCE, MAX_UPDATE_RATIO * r_min)
+        largest = np.linalg.eigvalsh(covs[:, :2, :2])[:, -1]
+        for i, value in enumerate(largest):
+            if value > limit:
+                raise ValueError(
+                    f"targets.{i}.covariance: a position variance of {value:.3g} m^2{when} is "
+                    f"above {limit:.3g} m^2 (the area's {MAX_POSITION_VARIANCE:g} m^2, or "
+                    f"{MAX_UPDATE_RATIO:g} times R's smallest eigenvalue {r_min:.3g} m^2, "
+                    "beyond which the Kalman update loses its precision)"
+                )
 
     # --- arrays for the library -------------------------------------------------------------
     @property
@@ -175,8 +255,8 @@ class Scenario(BaseModel):
 
     @property
     def n_steps(self) -> int:
-        """Simulation steps in the budget."""
-        return round(self.budget / self.time_step)
+        """Simulation steps in the budget (:func:`hptrack.models.mission.steps_left`)."""
+        return steps_left(self.time_step, self.budget)
 
     def means(self) -> np.ndarray:
         """Prior means ``(n, 4)``."""

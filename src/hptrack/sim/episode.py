@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from hptrack.interface import Planner
+from hptrack.interface import Planner, TruthReader
 from hptrack.scenario.model import Scenario
 from hptrack.sim.record import EpisodeRecord
 from hptrack.sim.step import World
@@ -33,7 +33,8 @@ def run_episode(
 
     Args:
         scenario: the mission.
-        planner: any :class:`~hptrack.interface.Planner`; it never sees the truth.
+        planner: any :class:`~hptrack.interface.Planner`; it never sees the truth unless it
+            is a :class:`~hptrack.interface.TruthReader` (a reference).
         seed: overrides ``scenario.seed``.
         belief_stride: store beliefs every this many steps (the last step is always stored).
         on_step: called as ``on_step(k, K)`` after each step (progress bars).
@@ -58,7 +59,10 @@ def run_episode(
     store(0)
     observation = world.observation()
     planner.reset(mission, observation, np.random.default_rng(world.planner_seed))
+    reader = planner if isinstance(planner, TruthReader) else None
     for k in range(1, n_steps + 1):
+        if reader is not None:
+            reader.see_truth(world.truth.copy())
         waypoint = np.asarray(planner.act(observation), dtype=float)
         if waypoint.shape != (2,) or not np.all(np.isfinite(waypoint)):
             raise ValueError(f"planner {planner.name!r} returned an invalid waypoint {waypoint!r}")

@@ -10,6 +10,30 @@ import numpy as np
 
 from hptrack.models.beliefs import position_logdet
 
+PLANNED_ACTIONS = ("plan_after_find", "plan_after_miss", "plan_after_dwell")
+"""Sub-task log entries holding the next planned action: a target index, or ``n`` the dwell."""
+
+
+def subtasks_with_ids(entries: list[dict], target_ids: tuple[str, ...]) -> list[dict]:
+    """A planner's sub-task log (indices into ``target_ids``, as planners keep it) naming
+    targets by id: ``target_index`` becomes ``target``, ``follow`` and ``dwell`` hold ids, and a
+    planned action is an id, ``"dwell"`` (action ``n``) or ``None``."""
+    n = len(target_ids)
+    out = []
+    for entry in entries:
+        named = {}
+        for key, value in entry.items():
+            if key == "target_index":
+                named["target"] = target_ids[value]
+            elif key in ("follow", "dwell"):
+                named[key] = None if value is None else target_ids[value]
+            elif key in PLANNED_ACTIONS and value is not None:
+                named[key] = "dwell" if value == n else target_ids[value]
+            else:
+                named[key] = value
+        out.append(named)
+    return out
+
 
 @dataclass
 class EpisodeRecord:
@@ -64,7 +88,12 @@ class EpisodeRecord:
         return position_logdet(self.belief_covariances).sum(axis=1)
 
     def summary(self) -> dict:
-        """JSON-ready summary: ``U``, per-target log det and detections, planner, seed."""
+        """JSON-ready summary: ``U``, per-target log det and detections, planner, seed, and
+        the planner's metadata with its sub-tasks naming targets by id
+        (:func:`subtasks_with_ids`)."""
+        info = dict(self.info)
+        if info.get("subtasks"):
+            info["subtasks"] = subtasks_with_ids(info["subtasks"], self.target_ids)
         return {
             "U": self.uncertainty,
             "per_target_logdet": dict(
@@ -77,7 +106,7 @@ class EpisodeRecord:
             "seed": self.seed,
             "time_step": self.time_step,
             "duration": float(self.times[-1]),
-            "info": self.info,
+            "info": info,
         }
 
     def save(self, path: str | Path) -> None:

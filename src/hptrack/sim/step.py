@@ -25,12 +25,8 @@ import numpy as np
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.measurement import kalman_update
-from hptrack.models.motion import (
-    advance_true_state,
-    mean_position_at,
-    motion_noise_factors,
-    predict_covariance,
-)
+from hptrack.models.mission import motion_noise_factors_on, predict_covariance_on
+from hptrack.models.motion import advance_true_state, mean_position_at
 from hptrack.scenario.model import Scenario
 
 BLOCK_STEPS = 256
@@ -100,30 +96,16 @@ def sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, log
 
 @numba.njit(cache=True)
 def world_step(
-    agent,
-    waypoint,
-    max_step,
-    truth,
-    z_motion,
-    sqrt_q,
-    means,
-    covs,
-    q,
-    tau,
-    c_per_step,
-    radius2,
-    noise,
-    factor,
-    e,
-    e_pos,
-    seen,
-    logdets,
-    z,
+    mission, agent, waypoint, truth, z_motion, sqrt_q, means, covs, sensor, e, e_pos, out
 ):
     """One simulator step in place (module docstring): move, true motion with the unit normals
-    ``z_motion`` ``(n, 4)``, predict one step, sense. Returns the new ``e_pos`` and ``U``."""
-    move_agent(agent, waypoint, max_step)
-    l11, l21, l22 = motion_noise_factors(tau, c_per_step)
+    ``z_motion`` ``(n, 4)``, predict one step, sense (``sensor``: the squared footprint radius
+    and the Cholesky factor of ``R``; ``out``: :func:`sense`'s ``seen``, ``logdets`` and
+    ``z``). Returns the new ``e_pos`` and ``U``."""
+    move_agent(agent, waypoint, mission.step_length)
+    l11, l21, l22 = motion_noise_factors_on(mission)
+    tau = mission.time_step
+    q = mission.process_noise
     steps = tau / tau
     elapsed = steps * tau
     for i in range(truth.shape[0]):
@@ -131,7 +113,10 @@ def world_step(
         x, y = mean_position_at(means[i], elapsed)
         means[i, 0] = x
         means[i, 1] = y
-        predict_covariance(covs[i], q[i], steps, tau, c_per_step, covs[i])
+        predict_covariance_on(mission, covs[i], q[i], steps, covs[i])
+    radius2, factor = sensor
+    seen, logdets, z = out
+    noise = mission.measurement_noise
     return sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, logdets, z)
 
 
@@ -195,7 +180,7 @@ class World:
         self._sqrt_q = np.sqrt(self.q)
         self._noise = np.array(mission.measurement_noise, dtype=float)
         self._factor = np.linalg.cholesky(self._noise)
-        self._radius2 = (0.5 * mission.sensor_diameter) ** 2
+        self._radius2 = mission.record.footprint_radius**2
         self._motion = NormalBlock(np.random.default_rng(motion_seq), BLOCK_STEPS * n * 4)
         self._sensor = NormalBlock(np.random.default_rng(sensor_seq), BLOCK_STEPS * n * 2)
         self._waypoint = np.empty(2)
@@ -260,27 +245,19 @@ class World:
         wp = self._waypoint
         wp[0] = waypoint_x
         wp[1] = waypoint_y
-        m = self.mission
         sensor.pos, self.uncertainty = world_step(
+            self.mission.record,
             self.agent,
             wp,
-            m.step_length,
             self.truth,
             z,
             self._sqrt_q,
             self.means,
             self.covariances,
-            self.q,
-            m.time_step,
-            m.c_per_step,
-            self._radius2,
-            self._noise,
-            self._factor,
+            (self._radius2, self._factor),
             sensor.values,
             sensor.pos,
-            self.seen,
-            self.logdets,
-            self._z,
+            (self.seen, self.logdets, self._z),
         )
         self.step_index += 1
         return self.uncertainty

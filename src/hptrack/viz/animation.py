@@ -140,9 +140,39 @@ def check_format(path: Path, option: str = "output") -> None:
         )
 
 
-def _writer(path: Path, fps: int):
+class GifWriter(PillowWriter):
+    """matplotlib's Pillow GIF writer that reports ``encoding(done, total)`` as Pillow converts
+    each frame to a palette image (most of the encoding's time; the file is written after
+    the last). An MP4 needs no such report: ffmpeg encodes each frame as it is grabbed."""
+
+    def __init__(self, fps: int, encoding: Callable[[int, int], None] | None = None) -> None:
+        super().__init__(fps=fps)
+        self.encoding = encoding
+
+    def finish(self) -> None:
+        frames = self._frames  # matplotlib's grabbed frames (PillowWriter.setup)
+        report = self.encoding or (lambda _done, _total: None)
+
+        def counted():
+            for done, frame in enumerate(frames[1:], start=1):
+                report(done, len(frames))
+                yield frame
+            report(len(frames), len(frames))
+
+        frames[0].save(
+            self.outfile,
+            save_all=True,
+            append_images=counted(),
+            duration=int(1000 / self.fps),
+            loop=0,
+        )
+
+
+def _writer(path: Path, fps: int, encoding: Callable[[int, int], None] | None):
     check_format(path)
-    return PillowWriter(fps=fps) if path.suffix.lower() == ".gif" else FFMpegWriter(fps=fps)
+    if path.suffix.lower() == ".gif":
+        return GifWriter(fps, encoding)
+    return FFMpegWriter(fps=fps)
 
 
 def animate_mission(
@@ -153,6 +183,7 @@ def animate_mission(
     trail_s: float = 30.0,
     progress: Callable[[int, int], None] | None = None,
     *,
+    encoding: Callable[[int, int], None] | None = None,
     dpi: int = 80,
     size_in: float = 6.0,
 ) -> int:
@@ -166,7 +197,9 @@ def animate_mission(
         stride: steps between frames (the last step is always drawn).
         fps: frames per second of the output.
         trail_s: length of the agent's and the targets' trails, s.
-        progress: called as ``progress(done, total)`` per frame.
+        progress: called as ``progress(done, total)`` per frame drawn.
+        encoding: called as ``encoding(done, total)`` per frame encoded, after the last frame
+            is drawn (a GIF is encoded at the end; an MP4 as it goes, and reports nothing).
         dpi: dots per inch.
         size_in: figure width, inches; the height fits the square map, the title and the
             legends (:func:`frame_size_in`). The frame is ``size * dpi`` pixels.
@@ -178,7 +211,7 @@ def animate_mission(
         raise InputError(f"fps must be a positive number of frames per second, got {fps}")
     if trail_s < 0:
         raise InputError(f"trail_s must be a non-negative duration in s, got {trail_s}")
-    writer = _writer(path, fps)
+    writer = _writer(path, fps, encoding)
 
     n_steps = record.agent_path.shape[0] - 1
     steps = frame_steps(n_steps, stride)

@@ -1,6 +1,7 @@
 """Coverage figures: the planned intercept and shifting spiral (paper Fig. 3, Fig. 5a) and the
-estimated against empirical target-finding CDF (paper Fig. 5b). Functions take an Axes and return
-artists; :func:`save_cdf_figure` and :func:`save_plan_figure` write whole figures without pyplot.
+estimated against empirical target-finding CDF (paper Fig. 5b), with ``t_cutoff`` marked and
+``p_find`` in the titles. Functions take an Axes and return artists; :func:`save_cdf_figure`
+and :func:`save_plan_figure` write whole figures in :mod:`hptrack.viz.style`'s style.
 """
 
 from __future__ import annotations
@@ -9,9 +10,9 @@ from collections.abc import Mapping
 
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.figure import Figure
 
 from hptrack.viz.mission import covariance_ellipse
+from hptrack.viz.style import DPI, legend_below, new_figure, save_figure, style_axes
 
 
 def empirical_cdf(detection_times: np.ndarray, time_step: float, n_steps: int) -> np.ndarray:
@@ -31,17 +32,19 @@ def plot_cdf_comparison(
     time_step: float,
     title: str | None = None,
 ) -> dict:
-    """Estimated ``P_cdf`` (Sec. IV-B) against the simulated fraction found, over coverage time.
+    """Estimated ``P_cdf`` (Sec. IV-B) against the simulated fraction found, over coverage time,
+    with ``t_cutoff`` marked and ``p_find`` (the estimate's and the simulation's) annotated.
 
     Args:
         ax: target axes.
         estimated_cdf: ``P_cdf(k)`` for ``k = 0 .. t_cutoff``.
         detection_times: coverage time of detection per run, s (NaN if not found).
         time_step: ``tau``, s.
-        title: axes title.
+        title: axes title (``p_find`` of both is added on a second line).
     """
     n = len(estimated_cdf)
     t = np.arange(n) * time_step
+    cutoff = t[-1]
     empirical = empirical_cdf(detection_times, time_step, n)
     (sim,) = ax.step(
         t,
@@ -52,15 +55,25 @@ def plot_cdf_comparison(
         label=f"simulation ({np.asarray(detection_times).size} runs)",
     )
     (est,) = ax.plot(t, estimated_cdf, color="C3", lw=1.6, ls="--", label="estimate $P_{cdf}$")
+    line = ax.axvline(cutoff, color="0.3", lw=1.0, ls=":", label="$t_{cutoff}$")
+    ax.annotate(
+        f"$t_{{cutoff}}$ = {cutoff:g} s",
+        (cutoff, 0.04),
+        xytext=(-4, 0),
+        textcoords="offset points",
+        ha="right",
+        fontsize="small",
+        color="0.3",
+    )
+    p_find = float(estimated_cdf[-1])
+    ax.plot([cutoff], [p_find], marker="o", color="C3", ms=5, zorder=4)
     ax.set_xlabel("time since the coverage started (s)")
     ax.set_ylabel("probability of having found the target")
     ax.set_ylim(0.0, 1.02)
-    ax.set_xlim(0.0, max(t[-1], time_step))
-    ax.grid(alpha=0.3)
-    ax.legend(loc="lower right", fontsize="small")
-    if title:
-        ax.set_title(title)
-    return {"simulation": sim, "estimate": est}
+    ax.set_xlim(0.0, 1.04 * max(cutoff, time_step))
+    heading = f"$p_{{find}}$ = {p_find:.3f} (simulated {empirical[-1]:.3f})"
+    style_axes(ax, f"{title}\n{heading}" if title else heading)
+    return {"simulation": sim, "estimate": est, "t_cutoff": line}
 
 
 def plot_coverage_plan(
@@ -73,7 +86,8 @@ def plot_coverage_plan(
     end_covariance: np.ndarray | None = None,
 ) -> dict:
     """The planned agent path: intercept flight (dashed) and spiral (solid), with the 95 %
-    belief ellipse when the coverage starts and, if given, at ``t_cutoff``.
+    belief ellipse when the coverage starts and, if given, at ``t_cutoff``. Returns the
+    artists by role (``"handles"`` for a legend).
 
     Args:
         ax: target axes (equal aspect is set).
@@ -94,7 +108,7 @@ def plot_coverage_plan(
             fill=False,
             edgecolor="C2",
             lw=1.2,
-            label="95 % belief, start",
+            label="95 % belief, coverage start",
         )
     )
     artists = {"intercept": flight, "spiral": spiral, "start_ellipse": start}
@@ -106,36 +120,41 @@ def plot_coverage_plan(
                 fill=False,
                 edgecolor="C3",
                 lw=1.2,
+                ls="--",
                 label="95 % belief, $t_{cutoff}$",
             )
         )
-    ax.plot(*path[0], marker="^", color="k", ms=7, label="departure")
+    (departure,) = ax.plot(*path[0], marker="^", color="k", ms=7, ls="none", label="departure")
     ax.set_aspect("equal")
     ax.autoscale_view()
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.legend(loc="best", fontsize="small")
+    style_axes(ax, "planned path")
+    artists["handles"] = [a for a in artists.values() if a is not None] + [departure]
     return artists
 
 
 def save_cdf_figure(
-    panels: Mapping[str, Mapping], path: str, title: str = "", dpi: int = 130
+    panels: Mapping[str, Mapping], path: str, title: str = "", dpi: int = DPI
 ) -> None:
     """One CDF panel per delay (keys: delay in s as text; values with ``estimated_cdf``,
-    ``detection_times`` and ``time_step``), side by side, written to ``path``."""
-    fig = Figure(figsize=(4.2 * len(panels), 3.8))
-    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    ``detection_times`` and ``time_step``), side by side with one legend below, written to
+    ``path``."""
+    fig = new_figure(4.2 * len(panels), 4.3, dpi)
+    axes = fig.subplots(1, len(panels), squeeze=False, sharey=True)[0]
     for ax, (delay, panel) in zip(axes, panels.items(), strict=True):
-        plot_cdf_comparison(
+        drawn = plot_cdf_comparison(
             ax,
             panel["estimated_cdf"],
             panel["detection_times"],
             panel["time_step"],
             title=f"$t_d$ = {delay} s",
         )
+        ax.label_outer()
+    legend_below(fig, list(drawn.values()), ncol=3)
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    save_figure(fig, path, dpi)
 
 
 def save_plan_figure(
@@ -148,18 +167,29 @@ def save_plan_figure(
     end_covariance: np.ndarray,
     estimated_cdf: np.ndarray,
     time_step: float,
-    dpi: int = 130,
+    dpi: int = DPI,
+    title: str = "",
 ) -> None:
-    """Planned path (left) and estimated ``P_cdf`` (right) of one coverage sub-task."""
-    fig = Figure(figsize=(10.5, 4.5))
+    """Planned path (left) and estimated ``P_cdf`` (right, ``t_cutoff`` and ``p_find``
+    marked) of one coverage sub-task, one legend below."""
+    fig = new_figure(10.5, 5.0, dpi)
     left, right = fig.subplots(1, 2)
-    plot_coverage_plan(
+    drawn = plot_coverage_plan(
         left, plan_path, intercept_steps, start_mean, start_covariance, end_mean, end_covariance
     )
     t = np.arange(len(estimated_cdf)) * time_step
-    right.plot(t, estimated_cdf, color="C3", lw=1.6)
+    (estimate,) = right.plot(t, estimated_cdf, color="C3", lw=1.6, label="estimate $P_{cdf}$")
+    right.axvline(t[-1], color="0.3", lw=1.0, ls=":")
+    right.plot([t[-1]], [estimated_cdf[-1]], marker="o", color="C3", ms=5)
     right.set_xlabel("time since the coverage started (s)")
     right.set_ylabel("estimated $P_{cdf}$")
     right.set_ylim(0.0, 1.02)
-    right.grid(alpha=0.3)
-    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    right.set_xlim(0.0, 1.04 * max(t[-1], time_step))
+    style_axes(
+        right,
+        f"$p_{{find}}$ = {estimated_cdf[-1]:.3f} at $t_{{cutoff}}$ = {t[-1]:g} s",
+    )
+    legend_below(fig, [*drawn["handles"], estimate], ncol=4)
+    if title:
+        fig.suptitle(title)
+    save_figure(fig, path, dpi)

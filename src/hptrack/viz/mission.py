@@ -1,6 +1,6 @@
 """Mission figure in the style of the paper's Fig. 6: agent path coloured by time, true target
-paths, detections and 95 % belief ellipses at a few times. Functions take an Axes and return
-artists.
+paths, detections and 95 % belief ellipses at a few times (one line style per time). Drawing
+functions take an Axes and return artists; the style is :mod:`hptrack.viz.style`'s.
 
 Colours: targets use the categorical ``tab10`` palette without its grey
 (:func:`target_color`); the agent's time runs through :data:`AGENT_TIME_CMAP`, light grey to
@@ -14,10 +14,19 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.colors import Colormap, LinearSegmentedColormap, Normalize
+from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Ellipse
 
 from hptrack.sim.record import EpisodeRecord
+from hptrack.viz.style import (
+    DPI,
+    colorbar_beside,
+    legend_below,
+    new_figure,
+    save_figure,
+    style_axes,
+)
 
 CONFIDENCE_SCALE_95 = float(np.sqrt(-2.0 * np.log(0.05)))  # chi-squared, 2 dof, 95 %
 
@@ -54,6 +63,18 @@ def covariance_ellipse(
     return Ellipse(tuple(center), float(width), float(height), angle=float(angle), **kwargs)
 
 
+ELLIPSE_LINESTYLES = (":", "-.", "--", "-")
+"""Line styles of the belief ellipses from the earliest time drawn to the latest (cycled)."""
+
+
+def mission_title(record: EpisodeRecord) -> str:
+    """``planner, n = 4 targets, seed 0, 900 s`` over ``U = ... (Σ log det Σxy, Σxy in m²)``."""
+    return (
+        f"{record.planner}, n = {len(record.target_ids)} targets, seed {record.seed}, "
+        f"{record.times[-1]:g} s\nU = {record.uncertainty:.2f} (Σ log det Σxy, Σxy in m²)"
+    )
+
+
 def plot_mission(
     ax: Axes,
     record: EpisodeRecord,
@@ -62,23 +83,28 @@ def plot_mission(
     norm: Normalize | None = None,
     legend: bool = True,
 ) -> dict:
-    """Draw one mission on ``ax``; returns the artists by role (``"agent"`` is the
-    time-coloured path, the mappable for a colour bar).
+    """Draw one mission on ``ax``, titled by :func:`mission_title`; returns the artists by role
+    (``"agent"`` is the time-coloured path, the mappable for a colour bar).
+
+    The targets' paths and markers are drawn over the agent's path, so a target the agent
+    follows stays visible, and the agent's end is a hollow diamond that leaves a target's end
+    square in sight.
 
     Args:
         ax: target axes (equal aspect is set).
         record: the episode to draw.
-        n_ellipses: how many evenly spaced stored times get 95 % belief ellipses (dashed,
-            fainter for earlier times).
+        n_ellipses: how many evenly spaced stored times get 95 % belief ellipses, one line
+            style per time (:data:`ELLIPSE_LINESTYLES`, fainter for earlier times).
         cmap: colour map for the agent's time.
         norm: time (s) to colour; default ``0`` to the mission's end.
-        legend: draw the legend below the axes.
+        legend: draw the figure's legend below the plots (:func:`~hptrack.viz.style.legend_below`;
+            the figure should have the constrained layout).
     """
     times = record.times
     path = record.agent_path
     segments = np.stack([path[:-1], path[1:]], axis=1)
     agent = LineCollection(
-        segments, cmap=cmap, norm=norm or Normalize(0.0, times[-1]), linewidths=1.8, zorder=3
+        segments, cmap=cmap, norm=norm or Normalize(0.0, times[-1]), linewidths=2.4, zorder=2
     )
     agent.set_array(times[1:])
     ax.add_collection(agent)
@@ -86,9 +112,9 @@ def plot_mission(
     artists: dict = {"agent": agent, "targets": [], "ellipses": [], "detections": []}
     for i, (tid, color) in enumerate(zip(record.target_ids, colors, strict=True)):
         truth = record.true_states[:, i, :2]
-        (line,) = ax.plot(truth[:, 0], truth[:, 1], color=color, lw=1.0, label=tid, zorder=2)
-        ax.plot(*truth[0], marker="o", color=color, ms=5, zorder=4)
-        ax.plot(*truth[-1], marker="s", color=color, ms=5, zorder=4)
+        (line,) = ax.plot(truth[:, 0], truth[:, 1], color=color, lw=1.2, label=tid, zorder=4)
+        ax.plot(*truth[0], marker="o", color=color, mec="k", mew=0.5, ms=5.5, zorder=6)
+        ax.plot(*truth[-1], marker="s", color=color, mec="k", mew=0.5, ms=5.5, zorder=6)
         artists["targets"].append(line)
         seen = record.detections[:, i]
         if seen.any():
@@ -101,48 +127,67 @@ def plot_mission(
                     facecolors="none",
                     edgecolors=[color],
                     linewidths=0.7,
-                    zorder=4,
+                    zorder=5,
                 )
             )
     n_stored = len(record.belief_steps)
     picks = np.unique(np.linspace(0, n_stored - 1, n_ellipses).round().astype(int))
-    for j in picks:
-        alpha = 0.25 + 0.6 * j / max(n_stored - 1, 1)
+    ellipse_keys = []
+    for rank, j in enumerate(picks):
+        alpha = 0.35 + 0.55 * rank / max(len(picks) - 1, 1)
+        style = ELLIPSE_LINESTYLES[rank % len(ELLIPSE_LINESTYLES)]
         for i, color in enumerate(colors):
             patch = covariance_ellipse(
                 record.belief_means[j, i, :2],
                 record.belief_covariances[j, i, :2, :2],
                 fill=False,
                 edgecolor=color,
-                lw=0.9,
+                lw=1.0,
                 alpha=alpha,
-                ls="--",
+                ls=style,
+                zorder=3,
             )
             ax.add_patch(patch)
             artists["ellipses"].append(patch)
-    ax.plot(*path[0], marker="^", color="k", ms=9, ls="none", zorder=5)
-    ax.plot(*path[-1], marker="D", color="k", mfc="white", mew=1.5, ms=7, ls="none", zorder=5)
+        t = record.belief_steps[j] * record.time_step
+        ellipse_keys.append(
+            Line2D(
+                [],
+                [],
+                color="0.2",
+                lw=1.0,
+                ls=style,
+                alpha=alpha,
+                label=f"95 % belief, t = {t:.0f} s",
+            )
+        )
+    ax.plot(*path[0], marker="^", color="k", ms=8, ls="none", zorder=5)
+    ax.plot(*path[-1], marker="D", color="k", mfc="none", mew=1.4, ms=8, ls="none", zorder=5)
     ax.set_aspect("equal")
     ax.autoscale_view()
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"{record.planner}: U = {record.uncertainty:.2f}")
-    ellipse_times = ", ".join(f"{t:.0f}" for t in record.belief_steps[picks] * record.time_step)
+    style_axes(ax, mission_title(record))
     proxies = [
+        *ellipse_keys,
+        Line2D([], [], color="k", marker="^", ms=7, ls="none", label="agent start"),
+        Line2D(
+            [], [], color="k", marker="D", mfc="none", mew=1.4, ms=7, ls="none", label="agent end"
+        ),
         Line2D(
             [],
             [],
-            color="0.35",
-            lw=0.9,
-            ls="--",
-            label=f"95 % belief ellipse (t = {ellipse_times} s)",
+            color="0.6",
+            mec="k",
+            mew=0.5,
+            marker="o",
+            ms=5.5,
+            ls="none",
+            label="target start",
         ),
-        Line2D([], [], color="k", marker="^", ms=8, ls="none", label="agent start"),
         Line2D(
-            [], [], color="k", marker="D", mfc="white", mew=1.5, ms=6, ls="none", label="agent end"
+            [], [], color="0.6", mec="k", mew=0.5, marker="s", ms=5.5, ls="none", label="target end"
         ),
-        Line2D([], [], color="0.4", marker="o", ms=5, ls="none", label="target start"),
-        Line2D([], [], color="0.4", marker="s", ms=5, ls="none", label="target end"),
         Line2D(
             [],
             [],
@@ -157,22 +202,34 @@ def plot_mission(
     ]
     artists["legend_handles"] = artists["targets"] + proxies
     if legend:
-        artists["legend"] = ax.legend(
-            handles=artists["legend_handles"],
-            loc="upper center",
-            bbox_to_anchor=(0.5, -0.1),
-            ncol=3,
-            fontsize="small",
-        )
+        artists["legend"] = legend_below(ax.figure, artists["legend_handles"], ncol=4)
     return artists
 
 
-def save_mission_figure(record: EpisodeRecord, path: str, dpi: int = 130) -> None:
-    """Write the mission figure (with the agent-time colour bar) to ``path`` (PNG or PDF)."""
-    from matplotlib.figure import Figure
+_SIDES_IN, _ABOVE_BELOW_IN, _LEGEND_ROW_IN = 1.9, 1.3, 0.22  # room around the map, inches
 
-    fig = Figure(figsize=(7.5, 8.0))
+
+def mission_figure(
+    record: EpisodeRecord,
+    width_in: float = 7.5,
+    height_in: float | None = None,
+    dpi: int = DPI,
+) -> Figure:
+    """The mission figure: :func:`plot_mission` with its legend below and the agent-time
+    colour bar beside the map. Without ``height_in`` the height fits the map's aspect, the
+    title and the legend."""
+    fig = new_figure(width_in, height_in or width_in, dpi)
     ax = fig.add_subplot()
     artists = plot_mission(ax, record)
-    fig.colorbar(artists["agent"], ax=ax, label="agent time (s)", shrink=0.8)
-    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    colorbar_beside(fig, artists["agent"], ax, "agent time (s)")
+    if height_in is None:
+        (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+        rows = -(-len(artists["legend_handles"]) // 4)
+        map_in = (width_in - _SIDES_IN) * min((y1 - y0) / (x1 - x0), 1.5)
+        fig.set_size_inches(width_in, map_in + _ABOVE_BELOW_IN + _LEGEND_ROW_IN * rows)
+    return fig
+
+
+def save_mission_figure(record: EpisodeRecord, path: str, dpi: int = DPI) -> None:
+    """Write the mission figure (:func:`mission_figure`) to ``path`` (PNG or PDF)."""
+    save_figure(mission_figure(record, dpi=dpi), path, dpi)

@@ -1,0 +1,143 @@
+"""Numba's on-disk cache of the compiled kernels, in a directory named by their sources' hash.
+
+Numba's own cache (``cache=True``) checks only the file of the kernel it loads: a kernel that
+calls or inlines a kernel of another module, or reads a constant from one, keeps its old machine
+code after an edit there. Here the kernel modules of the package (those that use numba) and every
+hptrack module they import are hashed, and numba caches in ``<base>/numba-<hash>``: an edit in
+any of them gives a new directory, so nothing stale is ever loaded and nobody deletes files. The
+base is ``$HPTRACK_CACHE_DIR``, else ``$NUMBA_CACHE_DIR/hptrack``, else the user's cache directory
+(``~/.cache/hptrack`` on Linux), else, if that cannot be written (a read-only home), one in the
+system's temporary directory. Directories of other hashes unused for :data:`KEEP_DAYS` are removed.
+
+``hptrack/__init__.py`` imports this module first: numba chooses a kernel's cache directory when
+the kernel is defined. It imports no numerics: it sets ``NUMBA_CACHE_DIR`` (and
+``HPTRACK_CACHE_DIR`` to the base, so that child processes key their own sources under the same
+base) for numba to read when it is imported, and numba's configuration if numba already is.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+PACKAGE = Path(__file__).parent
+KEEP_DAYS = 30.0
+"""A cache directory of other sources that no process has used for this long is removed."""
+
+_IMPORT = re.compile(
+    r"^[ \t]*(?:from[ \t]+(hptrack[\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n]*)"
+    r"|import[ \t]+(hptrack[\w.]*))",
+    re.MULTILINE,
+)
+
+
+def _module_files(name: str, root: Path) -> list[Path]:
+    """The files that importing module ``name`` (``hptrack.a.b``) runs: ``b`` and its packages'
+    ``__init__.py``."""
+    parts = name.split(".")[1:]
+    files = [root / Path(*parts[:i]) / "__init__.py" for i in range(len(parts))]
+    path = root / Path(*parts) if parts else root
+    files += [path.with_suffix(".py"), path / "__init__.py"]
+    return [f for f in files if f.is_file()]
+
+
+def _imported_files(source: str, root: Path) -> set[Path]:
+    """The hptrack files a module's source imports (anywhere in it, also inside functions)."""
+    out = set()
+    for module, names, plain in _IMPORT.findall(source):
+        out.update(_module_files(module or plain, root))
+        for name in names.strip("()").split(","):  # ``from hptrack.a import b`` may be a module
+            name = name.split(" as ")[0].strip()
+            if name.isidentifier():
+                out.update(_module_files(f"{module}.{name}", root))
+    return out
+
+
+def sources_digest(root: Path = PACKAGE) -> str:
+    """A hash of the package's kernel modules and of every hptrack module they import
+    (transitively), by path and content."""
+    sources = {p: p.read_bytes() for p in root.rglob("*.py")}
+    todo = [p for p, text in sources.items() if b"numba" in text]
+    seen: set[Path] = set()
+    while todo:
+        path = todo.pop()
+        if path in seen or path not in sources:
+            continue
+        seen.add(path)
+        todo.extend(_imported_files(sources[path].decode(), root))
+    digest = hashlib.sha256()
+    for path in sorted(seen):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + sources[path] + b"\0")
+    return digest.hexdigest()[:16]
+
+
+def _user_cache_base() -> Path:
+    if sys.platform == "win32":
+        return Path(os.environ.get("LOCALAPPDATA", Path.home() / "AppData" / "Local")) / "hptrack"
+    if sys.platform == "darwin":
+        return Path.home() / "Library" / "Caches" / "hptrack"
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "hptrack"
+
+
+def _bases() -> list[Path]:
+    """Where the cache may live, first choice first."""
+    if os.environ.get("HPTRACK_CACHE_DIR"):
+        first = Path(os.environ["HPTRACK_CACHE_DIR"])
+    elif os.environ.get("NUMBA_CACHE_DIR"):
+        first = Path(os.environ["NUMBA_CACHE_DIR"]) / "hptrack"
+    else:
+        first = _user_cache_base()
+    user = os.environ.get("USER") or os.environ.get("USERNAME") or "user"
+    return [first, Path(tempfile.gettempdir()) / f"hptrack-{user}"]
+
+
+def _writable(directory: Path) -> bool:
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=directory):
+            return True
+    except OSError:
+        return False
+
+
+def _remove_unused(base: Path, keep: Path) -> None:
+    limit = time.time() - KEEP_DAYS * 86400.0
+    for other in base.glob("numba-*"):
+        try:
+            if other != keep and other.stat().st_mtime < limit:
+                shutil.rmtree(other, ignore_errors=True)
+        except OSError:
+            continue
+
+
+def cache_directory(root: Path = PACKAGE) -> Path | None:
+    """The cache directory for the sources under ``root`` (created and marked as used now), or
+    ``None`` if no place can be written."""
+    name = f"numba-{sources_digest(root)}"
+    for base in _bases():
+        directory = base / name
+        if _writable(directory):
+            os.utime(directory)
+            _remove_unused(base, directory)
+            return directory
+    return None
+
+
+def configure() -> None:
+    """Point numba's cache at :func:`cache_directory` (kernels defined from now on)."""
+    directory = cache_directory()
+    if directory is None:
+        return
+    os.environ["HPTRACK_CACHE_DIR"] = str(directory.parent)
+    os.environ["NUMBA_CACHE_DIR"] = str(directory)
+    if "numba" in sys.modules:
+        sys.modules["numba"].config.CACHE_DIR = str(directory)
+
+
+configure()

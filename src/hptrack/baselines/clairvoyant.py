@@ -1,0 +1,160 @@
+"""The ``clairvoyant`` reference: a planner that READS THE TRUE TARGET STATES.
+
+It measures how far a planner is from perfect information, not a planner that can fly: only the
+simulator knows the truth, and hands it only to a planner that declares it reads it
+(:class:`hptrack.interface.TruthReader`); the flight controller refuses it.
+
+A *visit* flies straight at the point where the true target will be met (its true position and
+velocity, the footprint's edge reached at ``v_a``), then stays on it, measured every step, for a
+chosen time. As a visit ends (or at the start) the planner scores every plan of two visits
+``(target, stay)`` then ``(other target, stay)``, stays from :data:`STAYS`, by the decrease of
+``U`` at the end of the budget that the two visits buy (each belief predicted to its arrival,
+updated at every step of its stay, predicted to the end; Eq. (1) and the Kalman update) per second
+the plan takes, and flies the first visit of the best plan. A plan of one visit is scored the same
+way.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+import numpy as np
+
+from hptrack.interface import InputError, MissionSpec, Observation
+from hptrack.models.beliefs import position_logdet
+from hptrack.settings import NoSettings
+
+STAYS = (0.0, 5.0, 10.0, 20.0, 40.0, 80.0, math.inf)
+"""Stays on a target after meeting it, s (0: the one measurement as it is met; inf: to the end)."""
+SETTLED_STEPS = 200
+"""Measured steps after which a stay's covariance is taken as settled (the Riccati recursion
+converges within it at the paper's ``q`` and ``R``); longer stays keep it."""
+
+
+def intercept_time(
+    agent: np.ndarray, states: np.ndarray, speed: float, radius: float
+) -> np.ndarray:
+    """Earliest time, s, at which an agent flying straight at ``speed`` (m/s) from ``agent``
+    ``(2,)`` or ``(k, 2)`` comes within ``radius`` (m) of each target moving at constant velocity
+    from ``states`` ``(k, 4)``; ``inf`` if it never does (a target faster than the agent)."""
+    d = states[:, :2] - agent
+    v = states[:, 2:]
+    a = np.einsum("ij,ij->i", v, v) - speed * speed
+    b = 2.0 * (np.einsum("ij,ij->i", d, v) - radius * speed)
+    c = np.einsum("ij,ij->i", d, d) - radius * radius
+    disc = b * b - 4.0 * a * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = np.where(
+            np.abs(a) > 1e-12, (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a), -c / b
+        )
+    root = np.where((disc < 0.0) | ~np.isfinite(root) | (root < 0.0), math.inf, root)
+    return np.where(c <= 0.0, 0.0, root)
+
+
+class ClairvoyantPlanner:
+    """Perfect-knowledge reference (module docstring): reads the true target states."""
+
+    name = "clairvoyant"
+    reads_truth: ClassVar[str] = "the true target states, every step"
+
+    def __init__(self, settings: NoSettings | None = None) -> None:
+        self.settings = settings or NoSettings()
+
+    def reset(
+        self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
+    ) -> None:
+        self._mission = mission
+        self._truth: np.ndarray | None = None
+        self._target: int | None = None
+        self._stay = 0.0
+        self._leave_at: float | None = None  # s; set when the target is met
+        self._visits: list[dict] = []
+
+    def see_truth(self, states: np.ndarray) -> None:
+        """The true target states ``(n, 4)`` of this step (m, m/s), from the simulator."""
+        self._truth = np.array(states, dtype=float)
+
+    # --- the look-ahead --------------------------------------------------------------------
+    def _final_logdets(
+        self, covs: np.ndarray, q: np.ndarray, arrive: np.ndarray, stay: np.ndarray, end: float
+    ) -> np.ndarray:
+        """``log det Sigma^xy`` at the budget's end ``end`` (s from now) of beliefs ``covs``
+        ``(k, 4, 4)`` met after ``arrive`` s and measured at every step of ``stay`` s."""
+        motion, sensor, tau = self._mission.motion, self._mission.sensor, self._mission.time_step
+        zeros = np.zeros((covs.shape[0], 4))
+        measured = np.minimum(np.floor(stay / tau + 1e-9).astype(int) + 1, SETTLED_STEPS)
+        covs = motion.predict(zeros, covs, q, arrive)[1]
+        for step in range(int(measured.max(initial=0))):
+            on = measured > step
+            if step:
+                covs[on] = motion.predict(zeros[on], covs[on], q[on], tau)[1]
+            covs[on] = sensor.update(zeros[on], covs[on], zeros[on, :2])[1]
+        return position_logdet(motion.predict(zeros, covs, q, end - arrive - stay)[1])
+
+    def _plan(self, obs: Observation, truth: np.ndarray, leaving: int | None) -> tuple[int, float]:
+        """The first visit ``(target, stay s)`` of the best plan of two visits, to another
+        target than the one ``leaving`` (the stay chose how long to spend on it)."""
+        m = self._mission
+        n, left = m.n_targets, obs.remaining_budget
+        q, covs = m.process_noise, obs.covariances
+        base = position_logdet(m.motion.predict(obs.means, covs, q, left)[1])
+        stays = np.array(STAYS)
+        # first visits: every target x every stay
+        t1, s1 = np.repeat(np.arange(n), stays.size), np.tile(stays, n)
+        a1 = intercept_time(obs.agent_position, truth, m.agent_speed, m.sensor_radius)[t1]
+        ok = (a1 <= left) & ((t1 != leaving) | (n == 1))
+        t1, s1, a1 = t1[ok], s1[ok], a1[ok]
+        if t1.size == 0:
+            return int(np.argmin(np.hypot(*(truth[:, :2] - obs.agent_position).T))), math.inf
+        s1 = np.minimum(s1, left - a1)
+        gain1 = base[t1] - self._final_logdets(covs[t1], q[t1], a1, s1, left)
+        free1 = a1 + s1  # when the first visit ends, s from now
+        # where each first visit leaves the agent, and every target's truth then
+        leave = truth[t1, :2] + truth[t1, 2:] * free1[:, None]
+        k1 = np.repeat(np.arange(t1.size), n * stays.size)
+        t2 = np.tile(np.repeat(np.arange(n), stays.size), t1.size)
+        s2 = np.tile(stays, n * t1.size)
+        moved = truth[t2].copy()
+        moved[:, :2] += moved[:, 2:] * free1[k1, None]
+        a2 = free1[k1] + intercept_time(leave[k1], moved, m.agent_speed, m.sensor_radius)
+        ok = (t2 != t1[k1]) & (a2 <= left)
+        k1, t2, s2, a2 = k1[ok], t2[ok], s2[ok], a2[ok]
+        s2 = np.minimum(s2, left - a2)
+        gain2 = base[t2] - self._final_logdets(covs[t2], q[t2], a2, s2, left)
+        rate = np.concatenate(
+            [gain1 / np.maximum(free1, m.time_step), (gain1[k1] + gain2) / (a2 + s2)]
+        )
+        best = int(np.argmax(rate))
+        first = best if best < t1.size else int(k1[best - t1.size])
+        return int(t1[first]), float(s1[first])
+
+    # --- flying ----------------------------------------------------------------------------
+    def act(self, observation: Observation) -> np.ndarray:
+        if self._truth is None:
+            raise InputError(
+                "planner 'clairvoyant' reads the true target states, which only the simulator "
+                "has: use it in hptrack simulate or benchmark"
+            )
+        obs, truth, m = observation, self._truth, self._mission
+        self._truth = None  # read once: the next step brings its own
+        if self._target is not None and self._leave_at is None and obs.detected[self._target]:
+            self._leave_at = obs.time + self._stay
+        if self._target is None or (self._leave_at is not None and obs.time >= self._leave_at):
+            self._target, self._stay = self._plan(obs, truth, self._target)
+            self._leave_at = obs.time + self._stay if obs.detected[self._target] else None
+            self._visits.append(
+                {"step": obs.step, "target_index": self._target, "stay_s": self._stay}
+            )
+        state = truth[self._target]
+        if self._leave_at is not None:  # staying: where the target will be after this step
+            return state[:2] + state[2:] * m.time_step
+        meet = intercept_time(obs.agent_position, state[None], m.agent_speed, 0.0)[0]
+        return state[:2] + state[2:] * (meet if math.isfinite(meet) else 0.0)
+
+    def episode_info(self) -> dict:
+        return {
+            "settings": self.settings.as_json(),
+            "reads_truth": self.reads_truth,
+            "visits": self._visits,
+        }

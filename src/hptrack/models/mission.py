@@ -1,0 +1,182 @@
+"""The mission's constants as one compiled record, and the rules on it (paper Sec. III, V-A).
+
+:class:`Mission` is what every compiled kernel takes instead of loose constants: it is built and
+validated once (:func:`mission_record`, or :attr:`hptrack.interface.MissionSpec.record`). The
+per-step process noise of Eq. (1) enters the kernels through ``q`` and
+:attr:`Mission.velocity_variance_per_q`, the lower-right (velocity) block of the per-step ``Q``
+divided by ``q``: ``tau`` for the continuous white-noise-acceleration form, ``1`` for the
+paper's printed form (:mod:`hptrack.models.motion`).
+
+The rules, one place each: :func:`steps_left` (whole steps of a remaining budget, the same for
+the mission's budget), :func:`reachable_before_budget` (an intercept that ends strictly before
+the budget), :data:`MAX_TARGETS` (the planner's action list is an ``int64`` bitmask). The kernels
+of :mod:`hptrack.models.motion` and :mod:`hptrack.models.riccati` that need the noise form are
+offered here on the record (:func:`predict_covariance_on`, :func:`position_covariance_on`, ...),
+so that no layer above the models handles it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from hptrack.models.measurement import check_noise_covariance
+from hptrack.models.motion import (
+    motion_noise_factors,
+    position_covariance_after,
+    position_polynomials,
+    predict_covariance,
+)
+from hptrack.models.riccati import riccati_table
+
+MAX_TARGETS = 62
+"""Most targets of a mission: the planner's action list is an ``int64`` bitmask."""
+
+STEP_TOLERANCE = 1e-9
+"""A budget within this many steps below a whole step counts as that step (rounding of
+``budget / tau``)."""
+
+
+class Mission(NamedTuple):
+    """The mission's constants, as the compiled kernels take them (SI units).
+
+    Attributes:
+        time_step: ``tau``, s.
+        speed: agent speed ``v_a``, m/s.
+        step_length: largest agent displacement per step ``v_a tau``, m.
+        footprint_radius: ``w / 2``, m; targets within it are measured.
+        measurement_noise: ``(2, 2)`` position measurement covariance ``R``, m^2.
+        process_noise: ``(n,)`` per-target noise intensities ``q``, m^2/s^3.
+        n_steps: whole steps in the budget ``N``.
+        velocity_variance_per_q: the velocity block of the per-step ``Q`` over ``q``, s
+            (``tau``, continuous form) or 1 (the paper's printed form).
+    """
+
+    time_step: float
+    speed: float
+    step_length: float
+    footprint_radius: float
+    measurement_noise: np.ndarray
+    process_noise: np.ndarray
+    n_steps: int
+    velocity_variance_per_q: float
+
+
+def mission_record(
+    time_step: float,
+    budget: float,
+    agent_speed: float,
+    sensor_diameter: float,
+    measurement_noise: np.ndarray,
+    process_noise: np.ndarray,
+    continuous_noise: bool = True,
+) -> Mission:
+    """The validated :class:`Mission` (``continuous_noise``: the continuous form of ``Q``, else
+    the paper's printed one).
+
+    Raises:
+        ValueError: a constant not positive and finite, ``R`` not symmetric positive definite,
+            a ``q`` negative or not finite, more than :data:`MAX_TARGETS` targets.
+    """
+    for name, value in (
+        ("time_step", time_step),
+        ("budget", budget),
+        ("agent_speed", agent_speed),
+        ("sensor_diameter", sensor_diameter),
+    ):
+        if isinstance(value, bool) or not (math.isfinite(value) and value > 0.0):
+            raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    noise = np.ascontiguousarray(check_noise_covariance(measurement_noise))
+    q = np.ascontiguousarray(np.array(process_noise, dtype=float).reshape(-1))
+    if not np.all(np.isfinite(q) & (q >= 0.0)):
+        raise ValueError(f"process_noise must be finite and >= 0, got {q.tolist()}")
+    if q.size > MAX_TARGETS:
+        raise ValueError(f"at most {MAX_TARGETS} targets, got {q.size}")
+    noise.flags.writeable = False
+    q.flags.writeable = False
+    tau = float(time_step)
+    return Mission(
+        time_step=tau,
+        speed=float(agent_speed),
+        step_length=float(agent_speed) * tau,
+        footprint_radius=0.5 * float(sensor_diameter),
+        measurement_noise=noise,
+        process_noise=q,
+        n_steps=steps_left(tau, float(budget)),
+        velocity_variance_per_q=tau if continuous_noise else 1.0,
+    )
+
+
+@numba.njit(cache=True)
+def steps_left(time_step, remaining_budget):
+    """Whole steps of ``time_step`` s in ``remaining_budget`` s (the budget's ``N`` too)."""
+    return int(math.floor(remaining_budget / time_step + STEP_TOLERANCE))
+
+
+@numba.njit(cache=True, inline="always")
+def reachable_before_budget(intercept_steps, left):
+    """An intercept of ``intercept_steps`` (``-1``: never) ends strictly before the ``left``
+    steps of the budget run out."""
+    return 0 <= intercept_steps < left
+
+
+@numba.njit(cache=True, inline="always")
+def predict_covariance_on(mission, cov, q, steps, out):
+    """:func:`hptrack.models.motion.predict_covariance` with the mission's ``tau`` and ``Q``."""
+    predict_covariance(cov, q, steps, mission.time_step, mission.velocity_variance_per_q, out)
+
+
+@numba.njit(cache=True, inline="always")
+def position_covariance_on(mission, cov, q, steps):
+    """:func:`hptrack.models.motion.position_covariance_after` on the mission."""
+    return position_covariance_after(
+        cov, q, steps, mission.time_step, mission.velocity_variance_per_q
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def position_polynomials_on(mission, cov, q):
+    """:func:`hptrack.models.motion.position_polynomials` on the mission."""
+    return position_polynomials(cov, q, mission.time_step, mission.velocity_variance_per_q)
+
+
+@numba.njit(cache=True, inline="always")
+def motion_noise_factors_on(mission):
+    """:func:`hptrack.models.motion.motion_noise_factors` on the mission."""
+    return motion_noise_factors(mission.time_step, mission.velocity_variance_per_q)
+
+
+class FollowTables(NamedTuple):
+    """Every target's :func:`~hptrack.models.riccati.riccati_table` (measured at every step),
+    stacked: ``a``, ``g``, ``h`` ``(n, L, 4, 4)`` and ``length`` ``(n,)`` valid entries."""
+
+    a: np.ndarray
+    g: np.ndarray
+    h: np.ndarray
+    length: np.ndarray
+
+
+def follow_tables(mission: Mission, max_steps: int | None = None) -> FollowTables:
+    """The targets' Riccati tables up to ``max_steps`` (default the mission's ``N``): build
+    them once per mission; a table holds for any shorter horizon."""
+    steps = mission.n_steps if max_steps is None else int(max_steps)
+    tables = [
+        riccati_table(
+            float(q),
+            mission.time_step,
+            mission.velocity_variance_per_q,
+            mission.measurement_noise,
+            steps,
+        )
+        for q in mission.process_noise
+    ]
+    lengths = np.array([t[3] for t in tables], dtype=np.int64)
+    top = int(lengths.max()) if lengths.size else 1
+    stacked = [
+        np.stack([t[k][:top] for t in tables]) if tables else np.zeros((0, 1, 4, 4))
+        for k in range(3)
+    ]
+    return FollowTables(stacked[0], stacked[1], stacked[2], lengths)

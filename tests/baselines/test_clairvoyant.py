@@ -1,0 +1,93 @@
+"""The ``clairvoyant`` reference (reads the true target states) on toy missions with exact
+answers, and the guarantee that no other planner is handed the truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hptrack.baselines.clairvoyant import ClairvoyantPlanner, intercept_time
+from hptrack.experiments.benchmark import gap_closed
+from hptrack.interface import InputError, TruthReader
+from hptrack.registry import PLANNERS, make_planner
+from hptrack.scenario.model import AgentSpec, Scenario, TargetSpec
+from hptrack.sim.episode import run_episode
+
+
+@pytest.mark.parametrize(
+    ("state", "expected"),
+    [
+        ((300.0, 0.0, 0.0, 0.0), 250.0 / 30.0),  # static: fly to the footprint's edge
+        ((300.0, 0.0, 10.0, 0.0), 250.0 / 20.0),  # running away at 10 m/s
+        ((300.0, 0.0, -10.0, 0.0), 250.0 / 40.0),  # coming closer
+        ((0.0, 40.0, 0.0, 0.0), 0.0),  # already inside the footprint
+        ((300.0, 0.0, 40.0, 0.0), math.inf),  # faster than the agent
+    ],
+)
+def test_intercept_time(state, expected):
+    t = intercept_time(np.zeros(2), np.array([state]), 30.0, 50.0)[0]
+    assert t == pytest.approx(expected, rel=1e-12)
+
+
+def _one_target(x: float, budget: float = 60.0, q: float = 0.0) -> Scenario:
+    return Scenario(
+        budget=budget,
+        agent=AgentSpec(position=(0.0, 0.0)),
+        targets=[
+            TargetSpec(
+                id="t",
+                mean=(x, 0.0, 0.0, 0.0),
+                covariance=np.diag([100.0, 100.0, 0.01, 0.01]).tolist(),
+                process_noise=q,
+                truth=(x, 0.0, 0.0, 0.0),
+            )
+        ],
+    )
+
+
+def test_one_static_target_is_met_at_the_intercept_time_and_kept_to_the_end():
+    """300 m away at 30 m/s with a 50 m footprint: met after 250 / 30 = 8.33 s, the end of
+    step 17 (8.5 s); then measured at every step to the end of the budget."""
+    record = run_episode(_one_target(300.0), ClairvoyantPlanner())
+    seen = np.flatnonzero(record.detections[:, 0])
+    assert seen[0] == math.ceil(250.0 / 30.0 / 0.5) == 17
+    assert np.array_equal(seen, np.arange(17, 121))
+    assert record.info["reads_truth"] and record.info["visits"][0]["target_index"] == 0
+
+
+def test_the_simulator_hands_the_truth_to_a_truth_reader_only():
+    seen = []
+
+    class Spy(ClairvoyantPlanner):
+        def see_truth(self, states):
+            seen.append(states)
+            super().see_truth(states)
+
+    record = run_episode(_one_target(300.0, budget=5.0, q=1e-3), Spy())
+    assert len(seen) == 10
+    assert all(np.array_equal(s, t) for s, t in zip(seen, record.true_states[:-1], strict=True))
+    readers = [name for name, entry in PLANNERS.items() if entry.reads_truth]
+    assert readers == ["clairvoyant"]
+    assert not any(isinstance(make_planner(name), TruthReader) for name in ("greedy", "mcts"))
+
+
+def test_without_the_truth_it_refuses_to_act():
+    planner = ClairvoyantPlanner()
+    scenario = _one_target(300.0)
+    planner.reset(scenario.mission_spec(), scenario.initial_observation(), None)
+    with pytest.raises(InputError, match="reads the true target states"):
+        planner.act(scenario.initial_observation())
+
+
+def test_the_share_of_the_gap_closed():
+    summary = {
+        "greedy": {6: {"mean": 140.0}, 12: {"mean": 300.0}},
+        "clairvoyant": {6: {"mean": 60.0}, 12: {"mean": 160.0}},
+        "mcts": {6: {"mean": 80.0}, 12: {"mean": 230.0}},
+    }
+    gaps = gap_closed(summary)
+    assert gaps["mcts"] == {6: 75.0, 12: 50.0}
+    assert gaps["greedy"] == {6: 0.0, 12: 0.0} and gaps["clairvoyant"] == {6: 100.0, 12: 100.0}
+    assert gap_closed({"greedy": summary["greedy"]}) == {}
