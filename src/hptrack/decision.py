@@ -15,6 +15,7 @@ import numpy as np
 from hptrack.interface import MissionSpec, Observation, Planner
 from hptrack.registry import make_planner
 from hptrack.scenario.model import Scenario
+from hptrack.sim.record import subtasks_with_ids
 
 
 @dataclass(frozen=True)
@@ -25,8 +26,9 @@ class Decision:
         waypoint: ``(2,)`` position to fly towards now, m.
         target: id of the target the planner pursues (the hierarchical planner's sub-task), or
             ``None`` for planners without sub-tasks.
-        subtask: the planned sub-task (intercept time, ``t_cutoff``, ``p_find``, expected time,
-            in s) or ``None``.
+        subtask: the planned sub-task, targets named by id (``target``, intercept time,
+            ``t_cutoff``, ``p_find``, expected time in s, the plan after a find and a miss) or
+            ``None``.
         info: the planner's ``episode_info()``: its searches, settings and plans so far.
     """
 
@@ -36,18 +38,10 @@ class Decision:
     info: dict[str, Any] = field(default_factory=dict)
 
 
-def _first_subtask(info: dict[str, Any]) -> dict[str, Any] | None:
+def _first_subtask(info: dict[str, Any], mission: MissionSpec) -> dict[str, Any] | None:
+    """The planner's first sub-task, naming targets by id (as the episode JSON does)."""
     subtasks = info.get("subtasks") or []
-    return dict(subtasks[0]) if subtasks else None
-
-
-def _target_id(subtask: dict[str, Any] | None, mission: MissionSpec) -> str | None:
-    if subtask is None:
-        return None
-    if "target_index" in subtask:
-        return mission.target_ids[subtask["target_index"]]
-    target = subtask.get("target")
-    return None if target is None else str(target)
+    return subtasks_with_ids(subtasks[:1], mission.target_ids)[0] if subtasks else None
 
 
 def plan(
@@ -93,5 +87,6 @@ def plan(
     planner.reset(mission, observation, np.random.default_rng(seed))
     waypoint = np.array(planner.act(observation), dtype=float)
     info = dict(planner.episode_info())
-    subtask = _first_subtask(info)
-    return Decision(waypoint, _target_id(subtask, mission), subtask, info)
+    subtask = _first_subtask(info, mission)
+    target = None if subtask is None else subtask.get("target")
+    return Decision(waypoint, target, subtask, info)

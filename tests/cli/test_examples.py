@@ -3,6 +3,8 @@
 import subprocess
 import sys
 
+import pytest
+
 from hptrack.cli.examples import shipped_examples
 
 EXPECTED = {
@@ -55,3 +57,28 @@ def test_copied_examples_run(cli, tmp_path):
     assert plan.startswith("pursue t")
     run = run_example(tmp_path, "run_episode.py", "--planner", "greedy", "--targets", "2")
     assert run.splitlines()[-1].startswith("U = ")
+
+
+def test_benchmark_example_prints_a_row_per_planner(cli, tmp_path):
+    cli("examples", "benchmark.py", "--to", str(tmp_path))
+    out = run_example(
+        tmp_path,
+        "benchmark.py",
+        "--planners",
+        "greedy,stationary",
+        "--targets",
+        "2",
+        "--scenarios",
+        "2",
+    )
+    header, greedy, stationary = out.splitlines()
+    assert header.split() == ["planner", "n=2"]
+    assert greedy.split()[0] == "greedy" and stationary.split()[0] == "stationary"
+    assert float(greedy.split()[1]) < float(stationary.split()[1])
+
+
+@pytest.mark.slow
+def test_simulated_flight_example_finishes_its_mission(cli, tmp_path):
+    cli("examples", "fly_simulated.py", "paper-flight.yaml", "--to", str(tmp_path))
+    out = run_example(tmp_path, "fly_simulated.py")
+    assert out.startswith("U = ") and "inputs rejected" in out
