@@ -169,7 +169,7 @@ def _free_port() -> int:
         ),
         (
             ("--scheduler", "tcp://x:1", "--scheduler-timeout", 0),
-            "--scheduler-timeout must be a positive number of seconds, got 0.0",
+            "--scheduler-timeout must be a positive number of seconds of at most 3600, got 0.0",
         ),
     ],
 )
