@@ -311,5 +311,4 @@ def read_log(path: str | Path) -> LogContents:
             f"{path}: mission-log version {records[0].get('version')!r} is not "
             f"supported (this hptrack reads version {LOG_VERSION})"
         )
-    check_record(records[0], f"{path}: line 1", header=True)
     return LogContents(records[0], records[1:], truncated)

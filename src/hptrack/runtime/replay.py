@@ -24,7 +24,7 @@ from pydantic import ValidationError
 from hptrack.interface import InputError
 from hptrack.registry import make_planner
 from hptrack.runtime.controller import ControllerSettings, MissionController
-from hptrack.runtime.log import MissionLog, log_array, log_float, read_log
+from hptrack.runtime.log import MissionLog, check_record, log_array, log_float, read_log
 from hptrack.runtime.worker import ReplayRunner
 from hptrack.scenario.io import format_validation_error, parse_scenario
 from hptrack.sim.record import EpisodeRecord
@@ -93,6 +93,7 @@ def replay_log(path: str | Path) -> ReplayResult:
     """
     contents = read_log(path)
     header = contents.header
+    check_record(header, f"{path}: line 1", header=True)
     try:
         scenario = parse_scenario(header["scenario"], f"{path}: header scenario")
         settings = ControllerSettings(**header["controller"])
