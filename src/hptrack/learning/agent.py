@@ -55,10 +55,6 @@ class AdfqConfig:
         out["hidden"] = list(self.hidden)
         return out
 
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> AdfqConfig:
-        return cls(**{**data, "hidden": tuple(data["hidden"])})
-
 
 def greedy_actions(mean: np.ndarray, epsilon: float, rng: np.random.Generator) -> np.ndarray:
     """Argmax of ``mean`` ``(B, A)`` per row; each row with probability ``epsilon`` takes a
@@ -102,10 +98,6 @@ class AdfqAgent:
         """One draw of every ``Q(s, a)`` from its belief, then the argmax."""
         mean, sd = self.beliefs(obs[None])
         return int(np.argmax(mean[0] + sd[0] * rng.standard_normal(self.n_actions)))
-
-    def test_actions(self, obs: np.ndarray, epsilon: float, rng: np.random.Generator) -> np.ndarray:
-        """The test policy on observations ``(B, d)``: greedy on the means, ``epsilon``-random."""
-        return greedy_actions(self.beliefs(obs)[0], epsilon, rng)
 
     # --- learning ----------------------------------------------------------------------------
     def remember(
