@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from hptrack.experiments.workers import _alive
+from hptrack.experiments.workers import process_alive
 
 PARENT = textwrap.dedent(
     """
@@ -35,13 +35,13 @@ def test_workers_die_when_their_parent_is_killed():
     )
     try:
         workers = [int(pid) for pid in parent.stdout.readline().split()]
-        assert len(workers) == 2 and all(_alive(pid) for pid in workers)
+        assert len(workers) == 2 and all(process_alive(pid) for pid in workers)
         parent.send_signal(signal.SIGKILL)
         parent.wait(timeout=30)
         deadline = time.monotonic() + 10.0
-        while time.monotonic() < deadline and any(_alive(pid) for pid in workers):
+        while time.monotonic() < deadline and any(process_alive(pid) for pid in workers):
             time.sleep(0.1)
-        assert not any(_alive(pid) for pid in workers)
+        assert not any(process_alive(pid) for pid in workers)
     finally:
         parent.kill()
         parent.wait()

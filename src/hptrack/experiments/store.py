@@ -27,6 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from hptrack.experiments.workers import process_alive
 from hptrack.interface import InputError
 from hptrack.settings import digest_of
 
@@ -146,16 +147,6 @@ class EpisodeRow:
     info: dict
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def check_columns(db: sqlite3.Connection, source: str) -> None:
     """Refuse a database whose tables lack columns of :data:`SCHEMA` (a file edited by hand or
     written by another program): one line naming the table and the missing columns.
@@ -269,7 +260,7 @@ class ResultStore:
             r[0]
             for r in rows
             if now - r[3] > STALE_CLAIM_S
-            or (r[1] == self._host and r[2] != self._pid and not _alive(r[2]))
+            or (r[1] == self._host and r[2] != self._pid and not process_alive(r[2]))
         ]
         self._db.executemany("DELETE FROM claims WHERE rowid=?", [(r,) for r in stale])
         self._db.commit()

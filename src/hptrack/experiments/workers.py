@@ -22,7 +22,8 @@ WATCH_INTERVAL_S = 1.0
 """How often a worker checks that its parent still lives, s."""
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether a process of this id exists (one of another user counts)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -45,7 +46,7 @@ def die_with_parent(parent: int | None = None) -> None:
             os._exit(1)
 
     def watch() -> None:
-        while _alive(parent) and os.getppid() == parent:
+        while process_alive(parent) and os.getppid() == parent:
             time.sleep(WATCH_INTERVAL_S)
         os._exit(1)
 
