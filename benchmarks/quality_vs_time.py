@@ -42,7 +42,12 @@ def settings(variant: str, level: float) -> str:
     return MctsSettings.from_options("mcts", {**VARIANTS[variant], "time_limit": level}).canonical()
 
 
-def keys(targets, scenarios, first_seed, levels, variants, greedy, only=None):
+BASELINES = ("greedy", "clairvoyant")
+"""Planners flown once per scenario, without a planning time: no look-ahead, and the reference
+that reads the truth (the report gives the share of the gap between them that a variant closes)."""
+
+
+def keys(targets, scenarios, first_seed, levels, variants, greedy, only=None, clairvoyant=False):
     """The episodes to run; ``only``: a set of ``(variant, level)`` pairs to keep (all if
     ``None``)."""
     from hptrack.experiments.store import EpisodeKey
@@ -57,15 +62,16 @@ def keys(targets, scenarios, first_seed, levels, variants, greedy, only=None):
                     for v in variants
                     if only is None or (v, level) in only
                 ]
-            if greedy:
-                out.append(EpisodeKey("greedy", n, seed, SETTING, NoSettings().canonical()))
+            for baseline, wanted in zip(BASELINES, (greedy, clairvoyant), strict=True):
+                if wanted:
+                    out.append(EpisodeKey(baseline, n, seed, SETTING, NoSettings().canonical()))
     return out
 
 
 def label(key, levels, variants) -> tuple[str, float] | None:
     """``(variant, level)`` of a stored episode (``("greedy", 0)``), ``None`` if not ours."""
-    if key.planner == "greedy":
-        return ("greedy", 0.0)
+    if key.planner in BASELINES:
+        return (key.planner, 0.0)
     for level in levels:
         for v in variants:
             if key.planner_settings == settings(v, level):
@@ -88,11 +94,14 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
     rows = store.rows()
     store.close()
     by = defaultdict(dict)  # (variant, level, n) -> {seed: U}
+    lost = defaultdict(list)  # (variant, level, n) -> targets never detected, per episode
     mine = []
     for r in rows:
         tag = label(r.key, levels, variants) if r.key.setting == SETTING else None
         if tag is not None:
             by[(*tag, r.key.n_targets)][r.key.seed] = r.uncertainty
+            if "targets_never_detected" in r.info:
+                lost[(*tag, r.key.n_targets)].append(r.info["targets_never_detected"])
             mine.append(r)
     ns = sorted({n for (_, _, n) in by})
     out.mkdir(parents=True, exist_ok=True)
@@ -106,8 +115,8 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
     cells = sorted(
         {(v, lv) for (v, lv, _) in by},
         key=lambda c: (
-            c[0] != "greedy",
-            list(VARIANTS).index(c[0]) if c[0] in VARIANTS else -1,
+            c[0] not in BASELINES,
+            list(VARIANTS).index(c[0]) if c[0] in VARIANTS else BASELINES.index(c[0]),
             c[1],
         ),
     )
@@ -120,11 +129,46 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
                 row.append(f"{m:.2f} +- {se:.2f} ({len(seeds)})")
             else:
                 row.append("")
-        lines.append(
-            f"| {v} | {lv:g} | " + " | ".join(row) + " |"
-            if v != "greedy"
-            else "| greedy | - | " + " | ".join(row) + " |"
-        )
+        lines.append(f"| {v} | {'-' if v in BASELINES else f'{lv:g}'} | " + " | ".join(row) + " |")
+    if any(lost.values()):
+        lines += [
+            "",
+            "Targets never detected per episode, mean (episodes that record it).",
+            "",
+            "| variant | time, s | " + " | ".join(f"n={n}" for n in ns) + " |",
+            "|---|---|" + "---|" * len(ns),
+        ]
+        for v, lv in cells:
+            row = [f"{np.mean(lost[(v, lv, n)]):.2f}" if lost[(v, lv, n)] else "" for n in ns]
+            if any(row):
+                time = "-" if v in BASELINES else f"{lv:g}"
+                lines.append(f"| {v} | {time} | " + " | ".join(row) + " |")
+
+    def gap_closed(cell):
+        """Share of the greedy-to-clairvoyant gap that ``cell`` closes, % (shared scenarios)."""
+        out_cells = []
+        for n in ns:
+            a, g, c = (by.get((*x, n), {}) for x in (cell, ("greedy", 0.0), ("clairvoyant", 0.0)))
+            shared = sorted(set(a) & set(g) & set(c))
+            if not shared:
+                out_cells.append("")
+                continue
+            mg, mc = np.mean([g[s] for s in shared]), np.mean([c[s] for s in shared])
+            closed = 100.0 * (mg - np.mean([a[s] for s in shared])) / (mg - mc)
+            out_cells.append(f"{closed:.0f} ({len(shared)})")
+        return out_cells
+
+    gap_rows = [(f"{v} @ {lv:g} s", gap_closed((v, lv))) for v, lv in cells if v not in BASELINES]
+    if any(any(c) for _, c in gap_rows):
+        lines += [
+            "",
+            "Share of the gap from greedy (no look-ahead) to clairvoyant (reads the true target "
+            "states) closed, % (scenarios).",
+            "",
+            "| variant | " + " | ".join(f"n={n}" for n in ns) + " |",
+            "|---|" + "---|" * len(ns),
+        ]
+        lines += [f"| {name} | " + " | ".join(c) + " |" for name, c in gap_rows if any(c)]
 
     def paired(a, b, relative=False):
         """Mean of ``U_a - U_b`` over the shared scenarios (percent of mean ``U_b``)."""
@@ -243,6 +287,9 @@ def main() -> None:
         help="run only these pairs of variant and level (e.g. paper@1)",
     )
     parser.add_argument("--no-greedy", action="store_true")
+    parser.add_argument(
+        "--clairvoyant", action="store_true", help="also fly the reference that reads the truth"
+    )
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--db", type=Path, default=Path("results/quality_vs_time.db"))
     parser.add_argument("--report", action="store_true", help="only write the report")
@@ -283,6 +330,7 @@ def main() -> None:
         variants,
         not args.no_greedy,
         only,
+        args.clairvoyant,
     )
 
     def on_done(row, finished, total):

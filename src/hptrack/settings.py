@@ -107,7 +107,9 @@ class PlannerSettings(BaseModel):
             return cls.model_validate(options)
         except ValidationError as err:
             first = err.errors()[0]
-            option = ".".join(str(p) for p in first["loc"]) or "settings"
+            # the field, then list positions (not the names of a union's members)
+            parts = [p for k, p in enumerate(first["loc"]) if k == 0 or isinstance(p, int)]
+            option = ".".join(str(p) for p in parts) or "settings"
             if first["type"] == "extra_forbidden":
                 known = ", ".join(sorted(cls.model_fields)) or "none"
                 raise InputError(

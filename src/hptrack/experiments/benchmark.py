@@ -109,7 +109,7 @@ def run_one(key: EpisodeKey) -> EpisodeRow:
         scenario.never_observed_uncertainty(),
         int(record.detections.sum()),
         wall,
-        record.info,
+        {**record.info, "targets_never_detected": int(np.sum(~record.detections.any(axis=0)))},
     )
 
 

@@ -25,7 +25,7 @@ import json
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
@@ -39,9 +39,9 @@ from hptrack.planning.subtask_mdp import (
     PlanningProblem,
     SubtaskOptions,
     dwell_action,
-    dwell_steps,
+    stay_steps,
 )
-from hptrack.planning.subtask_rollout import MostUncertain, Nearest, UniformNoFollow
+from hptrack.planning.subtask_rollout import MostUncertain, Nearest, Tour, UniformNoFollow
 from hptrack.planning.subtask_search import search, warm_up
 from hptrack.settings import Iterations, PlannerSettings, TimeLimit
 
@@ -58,6 +58,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "rollout": "uniform",
         "estimator": "paper",
         "dwell": 0.0,
+        "miss": "drop",
     },
     "improved": {
         "backup": "max",
@@ -67,12 +68,17 @@ PRESETS: dict[str, dict[str, Any]] = {
         "rollout": "uniform",
         "estimator": "paper",
         "dwell": 0.0,
+        "miss": "drop",
     },
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
 improvements measured in ``docs/planner-improvements.md``."""
 
 DEFAULT_PRESET = "improved"
+
+
+DwellLength = Annotated[float, Field(ge=0.0, le=1e6)]
+"""A dwell action's length, s."""
 
 
 class MctsSettings(PlannerSettings):
@@ -96,15 +102,17 @@ class MctsSettings(PlannerSettings):
         common_rollouts: the rollouts that value one state's actions and outcomes share their
             random draws (common random numbers) instead of all drawing from one stream.
         rollout: ``"uniform"`` (the paper's random policy), ``"uniform_no_follow"`` (the same
-            without following the target just found), ``"nearest"`` or ``"most_uncertain"``
-            (:mod:`hptrack.planning.subtask_rollout`).
-        rollout_epsilon: probability of a random action in a ``nearest`` or
-            ``most_uncertain`` rollout.
+            without following the target just found), ``"nearest"``, ``"most_uncertain"`` or
+            ``"tour"`` (:mod:`hptrack.planning.subtask_rollout`).
+        rollout_epsilon: probability of a random action in a ``nearest``,
+            ``most_uncertain`` or ``tour`` rollout.
         estimator: the sub-task outcome estimator of the search's expansions, ``"paper"``
             (Sec. IV-B) or ``"sharp"`` (:mod:`hptrack.coverage.sharp_estimator`).
         dwell: length of an extra action beyond the paper, s: follow the target just found
-            for this long, then choose again (:mod:`hptrack.planning.subtask_mdp`); 0 (the
-            paper): no such action.
+            for this long, then choose again (:mod:`hptrack.planning.subtask_mdp`); a list of
+            lengths gives one such action each, the search choosing; 0 (the paper): none.
+        miss: ``"drop"`` (the paper): a missed target leaves the action list until it is
+            measured by chance; ``"keep"``: it stays, and the search may pursue it again.
         threads: independent trees searched in parallel and merged (root parallelism), each
             with the effort above; 1 (the paper's single tree) unless the machine has spare
             cores.
@@ -118,10 +126,13 @@ class MctsSettings(PlannerSettings):
     max_weight: Annotated[float | None, Field(ge=0.0, le=1.0)] = None
     root_split: Literal["even", "weighted"] | None = None
     common_rollouts: bool | None = None
-    rollout: Literal["uniform", "uniform_no_follow", "nearest", "most_uncertain"] | None = None
+    rollout: Literal["uniform", "uniform_no_follow", "nearest", "most_uncertain", "tour"] | None = (
+        None
+    )
     rollout_epsilon: Annotated[float, Field(ge=0.0, le=1.0)] = 0.1
     estimator: Literal["paper", "sharp"] | None = None
-    dwell: Annotated[float | None, Field(ge=0.0, le=1e6)] = None
+    dwell: DwellLength | list[DwellLength] | None = None
+    miss: Literal["drop", "keep"] | None = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
@@ -135,6 +146,23 @@ class MctsSettings(PlannerSettings):
             data = {**data, "iterations": DEFAULT_ITERATIONS}
         preset = PRESETS.get(data.get("preset", DEFAULT_PRESET), {})
         return {**data, **{k: v for k, v in preset.items() if data.get(k) is None}}
+
+    @field_validator("dwell", mode="before")
+    @classmethod
+    def _dwell_lengths(cls, value: Any) -> Any:
+        """Several lengths (a list, or comma-separated text from ``-o dwell=5,10,20``): each a
+        positive number of seconds."""
+        if isinstance(value, str) and "," in value:
+            value = value.split(",")
+        if not isinstance(value, list | tuple):
+            return value
+        try:
+            lengths = [float(v) for v in value]
+        except (TypeError, ValueError):
+            lengths = []
+        if not lengths or not all(0.0 < d <= 1e6 for d in lengths):
+            raise ValueError("must be one length or several, each in (0, 1e6] s")
+        return lengths
 
     @model_validator(mode="after")
     def _max_weight_needs_the_max_backup(self) -> MctsSettings:
@@ -174,6 +202,8 @@ class MctsSettings(PlannerSettings):
             return UniformNoFollow()
         if self.rollout == "nearest":
             return Nearest(self.rollout_epsilon)
+        if self.rollout == "tour":
+            return Tour(self.rollout_epsilon)
         return UniformRandom()
 
     def search_options(self) -> SearchOptions:
@@ -186,7 +216,10 @@ class MctsSettings(PlannerSettings):
 
     def subtask_options(self) -> SubtaskOptions:
         """The sub-task MDP's options record, field by field the options of the same name."""
-        return SubtaskOptions(**{name: getattr(self, name) for name in SubtaskOptions._fields})
+        values = {name: getattr(self, name) for name in SubtaskOptions._fields}
+        if isinstance(values["dwell"], list):
+            values["dwell"] = tuple(values["dwell"])
+        return SubtaskOptions(**values)
 
 
 class HierarchicalPlanner:
@@ -255,21 +288,32 @@ class HierarchicalPlanner:
         left = steps_left(mission.time_step, observation.remaining_budget)
         return reachable_before_budget(steps, left)
 
-    def _dwell_feasible(self, observation: Observation, last_found: int | None) -> bool:
+    def _dwell_length(self, action: int) -> int:
+        """Steps of dwell action ``action``."""
+        return self._stay_steps[action - dwell_action(self._mission.n_targets)]
+
+    def _dwell_feasible(
+        self, observation: Observation, last_found: int | None, action: int
+    ) -> bool:
         """A target was just found and the dwell ends before the budget (as in the MDP)."""
         left = steps_left(self._record.time_step, observation.remaining_budget)
-        return last_found is not None and 0 < self._dwell_steps < left
+        return last_found is not None and self._dwell_length(action) < left
 
-    def _start_dwell(self, observation: Observation, target: int) -> None:
-        """Follow ``target`` for the dwell and re-plan with the dwell fixed."""
+    def _start_dwell(self, observation: Observation, target: int, action: int) -> None:
+        """Follow ``target`` for dwell ``action``'s length and re-plan with it fixed."""
         self._follow = target
         self._subtask = None
-        self._dwell_end = observation.step + self._dwell_steps
-        dwell = dwell_action(self._mission.n_targets)
-        plan = self._search(observation, current_action=dwell, last_found=target)
+        length = self._dwell_length(action)
+        self._dwell_end = observation.step + length
+        plan = self._search(observation, current_action=action, last_found=target)
         self._plan = (plan.best_after_find, None)
         self._log.append(
-            {"dwell": target, "start_step": observation.step, "plan_after_dwell": self._plan[0]}
+            {
+                "dwell": target,
+                "start_step": observation.step,
+                "dwell_steps": length,
+                "plan_after_dwell": self._plan[0],
+            }
         )
 
     def _start(self, observation: Observation, target: int) -> None:
@@ -291,8 +335,8 @@ class HierarchicalPlanner:
         dwell = dwell_action(self._mission.n_targets)
         if planned is None:
             feasible = False
-        elif planned == dwell:
-            feasible = self._dwell_feasible(observation, last_found)
+        elif planned >= dwell:
+            feasible = self._dwell_feasible(observation, last_found, planned)
         else:
             feasible = planned == last_found or self._feasible(observation, planned)
         if not feasible:
@@ -305,8 +349,8 @@ class HierarchicalPlanner:
             self._subtask = None
             self._log.append({"follow": last_found, "start_step": observation.step})
             return
-        if planned == dwell:
-            self._start_dwell(observation, last_found)
+        if planned >= dwell:
+            self._start_dwell(observation, last_found, planned)
             return
         self._start(observation, planned)
 
@@ -325,7 +369,7 @@ class HierarchicalPlanner:
         self._plan: tuple[int | None, int | None] = (None, None)
         self._follow: int | None = None
         self._dwell_end: int | None = None
-        self._dwell_steps = dwell_steps(mission.time_step, self.settings.dwell)
+        self._stay_steps = stay_steps(mission.time_step, self.settings.dwell)
         self._log: list[dict] = []
         self._searches: list[dict] = []
         self._next(observation, None, None)
@@ -337,7 +381,7 @@ class HierarchicalPlanner:
             found = subtask.found(observation)
             target = subtask.target_index
             self._log[-1].update(outcome="found" if found else "missed", end_step=observation.step)
-            if not found:
+            if not found and self.settings.miss == "drop":
                 self._available[target] = False
             self._next(
                 observation, self._plan[0] if found else self._plan[1], target if found else None

@@ -106,11 +106,16 @@ class SubtaskOptions(NamedTuple):
             footprint's reach; the find outcome then lasts the estimated duration from
             departure, and the estimate depends on the approach, so it is not memoised).
         dwell: length of the dwell action, s (rounded to whole steps, at least one,
-            :func:`dwell_steps`); 0 (the paper): no dwell action.
+            :func:`dwell_steps`), or several lengths, one dwell action each (:func:`stay_steps`);
+            0 (the paper): no dwell action.
+        miss: what a miss does to the missed target: ``"drop"`` (the paper) takes it out of
+            the action list; ``"keep"`` leaves it in, its belief grown by the time spent, so
+            the search may pursue it again.
     """
 
     estimator: str = "paper"
-    dwell: float = 0.0
+    dwell: float | tuple[float, ...] = 0.0
+    miss: str = "drop"
 
 
 PAPER_SUBTASK = SubtaskOptions()
@@ -140,7 +145,9 @@ class SubtaskEnv(NamedTuple):
         means: ``(n, 4)`` belief means at the root, m and m/s.
         n_steps: ``N``, the steps left in the budget at the root.
         estimator: index of the estimator in :data:`ESTIMATORS`.
-        dwell_steps: length of the dwell action in steps; 0: no dwell action (the paper).
+        stay_steps: ``(k,)`` lengths of the dwell actions in steps (action ``n + j`` dwells
+            ``stay_steps[j]``); empty: no dwell action (the paper).
+        keep_missed: a miss leaves the target in the action list (``miss="keep"``).
         memo: the estimator results of this search.
     """
 
@@ -149,7 +156,8 @@ class SubtaskEnv(NamedTuple):
     means: np.ndarray
     n_steps: int
     estimator: int
-    dwell_steps: int
+    stay_steps: np.ndarray
+    keep_missed: bool
     memo: Memo
 
 
@@ -167,9 +175,9 @@ class PlanningProblem:
         available: ``(n,)`` targets still in the action list (not missed); default all.
         last_found: the target found by the sub-task that just ended, if any (choosing it again
             follows it to the end of the budget).
-        current_action: re-planning mode (Sec. IV-C-4): the target being pursued (or the
-            dwell, :func:`dwell_action`), fixed as the root's only action; ``None`` for a first
-            plan.
+        current_action: re-planning mode (Sec. IV-C-4): the target being pursued (or a
+            dwell, :func:`dwell_action` and after), fixed as the root's only action; ``None``
+            for a first plan.
         follow: the mission's Riccati tables (:func:`hptrack.models.mission.follow_tables`),
             built once per mission and shared; default built here.
     """
@@ -213,7 +221,7 @@ class PlanningProblem:
         action = self.current_action
         if action is not None and not (
             (0 <= action < n and available[action])
-            or (action == dwell_action(n) and self.last_found is not None)
+            or (action >= dwell_action(n) and self.last_found is not None)
         ):
             raise ValueError(f"current_action={action} is not an available target or the dwell")
         object.__setattr__(self, "remaining_budget", remaining)
@@ -264,18 +272,24 @@ class PlanningProblem:
         """The compiled kernels' view of the problem with ``options``, with a fresh memo.
 
         Raises:
-            ValueError: an unknown estimator or a negative dwell.
+            ValueError: an unknown estimator or miss rule, or a negative dwell.
         """
         if options.estimator not in ESTIMATORS:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {options.estimator!r}")
+        if options.miss not in MISS_RULES:
+            raise ValueError(f"miss must be one of {MISS_RULES}, got {options.miss!r}")
         n_steps = self.n_steps
+        stays = stay_steps(self.mission.time_step, options.dwell)
+        if self.current_action is not None and self.current_action >= self.n_targets + len(stays):
+            raise ValueError(f"current_action={self.current_action} is not a dwell of {stays}")
         return SubtaskEnv(
             self.mission,
             self.follow,
             np.ascontiguousarray(self.means),
             n_steps,
             ESTIMATORS.index(options.estimator),
-            dwell_steps(self.mission.time_step, options.dwell),
+            np.array(stays, dtype=np.int64),
+            options.miss == "keep",
             new_memo(self.n_targets, n_steps),
         )
 
@@ -291,9 +305,13 @@ class PlanningProblem:
         )
 
 
+MISS_RULES = ("drop", "keep")
+"""What a miss does to the missed target (:attr:`SubtaskOptions.miss`)."""
+
+
 def n_actions(n_targets: int, options: SubtaskOptions) -> int:
-    """Actions of the MDP: one per target, and the dwell if there is one."""
-    return n_targets + (1 if options.dwell > 0.0 else 0)
+    """Actions of the MDP: one per target, and one per dwell length."""
+    return n_targets + len(stay_steps(1.0, options.dwell))
 
 
 def dwell_steps(time_step: float, dwell: float) -> int:
@@ -305,9 +323,19 @@ def dwell_steps(time_step: float, dwell: float) -> int:
     return max(1, int(math.floor(dwell / time_step + 0.5)))
 
 
+def stay_steps(time_step: float, dwell: float | tuple[float, ...]) -> tuple[int, ...]:
+    """The dwell actions' lengths in whole steps (:func:`dwell_steps` of each length given;
+    none for a dwell of 0)."""
+    lengths = (dwell,) if isinstance(dwell, int | float) else tuple(dwell)
+    steps = tuple(dwell_steps(time_step, float(d)) for d in lengths)
+    if 0 in steps and len(steps) > 1:
+        raise ValueError(f"dwell lengths must be positive, got {dwell!r}")
+    return tuple(s for s in steps if s > 0)
+
+
 @numba.njit(cache=True, inline="always")
 def dwell_action(n_targets):
-    """The dwell's action index: ``n``, after the targets."""
+    """The first dwell's action index: ``n``, after the targets (dwell ``j`` is ``n + j``)."""
     return n_targets
 
 
@@ -372,8 +400,14 @@ def intercept_of(env, sf, a, t):
 
 @numba.njit(cache=True, inline="always")
 def is_dwell(env, a):
-    """Whether action ``a`` is the dwell (:func:`dwell_action`)."""
-    return a == dwell_action(env.means.shape[0])
+    """Whether action ``a`` is a dwell (:func:`dwell_action` and after)."""
+    return a >= dwell_action(env.means.shape[0])
+
+
+@numba.njit(cache=True, inline="always")
+def dwell_length(env, a):
+    """Steps of dwell action ``a``."""
+    return env.stay_steps[a - dwell_action(env.means.shape[0])]
 
 
 @numba.njit(cache=True)
@@ -387,7 +421,7 @@ def is_available(env, state, a):
     if t >= env.n_steps:
         return False
     if is_dwell(env, a):
-        return si[I_LAST] >= 0 and 0 < env.dwell_steps < env.n_steps - t
+        return si[I_LAST] >= 0 and dwell_length(env, a) < env.n_steps - t
     if not (si[I_MASK] >> a) & 1:
         return False
     if a == si[I_LAST]:
@@ -411,7 +445,8 @@ def expand_action(env, state, a, work):
     if a == si[I_LAST]:
         return 1.0, left, left
     if is_dwell(env, a):
-        return 1.0, env.dwell_steps, env.dwell_steps
+        d = dwell_length(env, a)
+        return 1.0, d, d
     ic = intercept_of(env, sf, a, t)
     start = t + ic
     if env.estimator == SHARP:
@@ -492,7 +527,8 @@ def apply_outcome(env, state, a, found, payload, work):
         base_step[a] = end
         si[I_LAST] = a
     else:
-        si[I_MASK] &= ~(np.int64(1) << a)
+        if not env.keep_missed:
+            si[I_MASK] &= ~(np.int64(1) << a)
         si[I_LAST] = -1
     si[I_STEP] = end
     x, y = mean_position_at(env.means[a], end * mission.time_step)

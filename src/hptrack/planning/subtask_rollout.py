@@ -118,6 +118,50 @@ def most_uncertain(policy, env, state, rng, candidates):
     return epsilon_greedy(policy.epsilon, env, state, rng, candidates, True)
 
 
+class Tour(NamedTuple):
+    """Tour rollouts: with probability ``1 - epsilon``, dwell on the target just found while its
+    velocity is uncertain, else pursue the nearest other target; otherwise an available action
+    drawn uniformly.
+
+    A single find fixes a target's position but not its velocity, so its belief grows back fast
+    (``docs/planner-improvements.md``, the dwell action); a target measured for a while grows
+    slowly and is cheap to find again. The tour measures each target it meets until its
+    velocity variance is below ``settle_velocity_variance`` (a dwell drawn uniformly among the
+    available lengths; none without dwell actions), then moves to the target it reaches first.
+
+    Attributes:
+        epsilon: probability of a uniformly random available action instead, in ``[0, 1]``.
+        settle_velocity_variance: mean of the two velocity variances, (m/s)^2, below which a
+            found target is left.
+    """
+
+    epsilon: float = 0.1
+    settle_velocity_variance: float = 0.05
+
+
+@numba.njit(cache=True)
+def tour(policy, env, state, rng, candidates):
+    """:class:`Tour`'s decision (``-1`` when no action is available)."""
+    count = available_actions(env, state, candidates)
+    if count == 0:
+        return -1
+    if uniform(rng) < policy.epsilon:
+        return candidates[int(uniform(rng) * count)]
+    si, base_cov = state[0], state[2]
+    last = si[I_LAST]
+    if last >= 0:
+        velocity_variance = 0.5 * (base_cov[last, 2, 2] + base_cov[last, 3, 3])
+        if velocity_variance > policy.settle_velocity_variance:
+            dwells = 0
+            for k in range(count):
+                if is_dwell(env, candidates[k]):
+                    dwells += 1
+            if dwells > 0:
+                return candidates[count - dwells + int(uniform(rng) * dwells)]
+    return epsilon_greedy(0.0, env, state, rng, candidates, False)
+
+
 register_policy(UniformNoFollow, uniform_no_follow)
+register_policy(Tour, tour)
 register_policy(Nearest, nearest)
 register_policy(MostUncertain, most_uncertain)

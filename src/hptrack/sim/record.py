@@ -17,7 +17,8 @@ PLANNED_ACTIONS = ("plan_after_find", "plan_after_miss", "plan_after_dwell")
 def subtasks_with_ids(entries: list[dict], target_ids: tuple[str, ...]) -> list[dict]:
     """A planner's sub-task log (indices into ``target_ids``, as planners keep it) naming
     targets by id: ``target_index`` becomes ``target``, ``follow`` and ``dwell`` hold ids, and a
-    planned action is an id, ``"dwell"`` (action ``n``) or ``None``."""
+    planned action is an id, ``"dwell"`` (action ``n``), ``"dwell j"`` (action ``n + j``, the
+    ``j``-th dwell length) or ``None``."""
     n = len(target_ids)
     out = []
     for entry in entries:
@@ -28,7 +29,13 @@ def subtasks_with_ids(entries: list[dict], target_ids: tuple[str, ...]) -> list[
             elif key in ("follow", "dwell"):
                 named[key] = None if value is None else target_ids[value]
             elif key in PLANNED_ACTIONS and value is not None:
-                named[key] = "dwell" if value == n else target_ids[value]
+                named[key] = (
+                    target_ids[value]
+                    if value < n
+                    else "dwell"
+                    if value == n
+                    else f"dwell {value - n}"
+                )
             else:
                 named[key] = value
         out.append(named)
