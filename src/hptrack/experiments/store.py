@@ -31,7 +31,7 @@ from hptrack.experiments.workers import process_alive
 from hptrack.interface import InputError
 from hptrack.settings import digest_of
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS episodes (
     planner TEXT NOT NULL,
@@ -102,7 +102,32 @@ def _migrate_2_to_3(db: sqlite3.Connection) -> None:
     db.execute("DROP TABLE episodes_layout_2")
 
 
-MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {2: _migrate_2_to_3}
+_ADDED_BY_LAYOUT_4 = {"mcts": {"miss": "drop"}}
+"""The mcts options that layout 4 adds to every identity, with the value every earlier run had."""
+
+
+def _identity_4(planner: str, text: str) -> str:
+    """Layout 3 -> 4: the identity with the options added since (:data:`_ADDED_BY_LAYOUT_4`)."""
+    values = {**_ADDED_BY_LAYOUT_4.get(planner, {}), **json.loads(text)}
+    return json.dumps(values, sort_keys=True, separators=(",", ":"))
+
+
+def _migrate_3_to_4(db: sqlite3.Connection) -> None:
+    """The sub-task MDP's ``miss`` option in every mcts identity."""
+    db.create_function("identity_4", 2, _identity_4, deterministic=True)
+    db.create_function("digest_of", 1, digest_of, deterministic=True)
+    db.execute("DELETE FROM claims")  # claims name the old hashes; their runs re-claim
+    db.execute(
+        "UPDATE OR IGNORE episodes SET "
+        "planner_settings = identity_4(planner, planner_settings), "
+        "planner_settings_hash = digest_of(identity_4(planner, planner_settings))"
+    )
+
+
+MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
+    2: _migrate_2_to_3,
+    3: _migrate_3_to_4,
+}
 """Layout version -> the step that makes a database of that layout one of the next."""
 
 
