@@ -16,9 +16,11 @@ from hptrack.planning.subtask_mdp import intercept_of, is_available
 from hptrack.planning.subtask_rollout import (
     MostUncertain,
     Nearest,
+    Tour,
     UniformNoFollow,
     most_uncertain,
     nearest,
+    tour,
     uniform_no_follow,
 )
 from hptrack.planning.tree import new_tree
@@ -132,6 +134,27 @@ def test_most_uncertain_rollout_follows_only_when_nothing_else_is_left():
         MostUncertain(0.0), env, state, np.array([1], dtype=np.uint64), np.empty(2, dtype=np.int64)
     )
     assert out == 0
+
+
+def test_tour_rollout_dwells_while_the_velocity_is_uncertain_then_goes_to_the_nearest():
+    """epsilon = 0. Target 0 just found with velocity variances 0.3 and 0.45 (m/s)^2: a dwell,
+    drawn among the lengths available (both here, each drawn). Once its mean velocity variance
+    is below ``settle_velocity_variance``, or without dwell actions: the nearest other target
+    (target 1, the only other one). epsilon = 1: uniform over the available actions."""
+    from hptrack.planning.subtask_mdp import SubtaskOptions
+
+    problem = two_targets(budget=900.0, last_found=0)
+    env = problem.env(SubtaskOptions(dwell=(5.0, 20.0)))
+    state = problem.root_state()
+    candidates = np.empty(4, dtype=np.int64)
+    rng = np.array([3], dtype=np.uint64)
+    draws = {tour(Tour(0.0), env, state, rng, candidates) for _ in range(200)}
+    assert draws == {2, 3}
+    assert tour(Tour(0.0, settle_velocity_variance=0.4), env, state, rng, candidates) == 1
+    plain = problem.env()
+    assert tour(Tour(0.0), plain, state, rng, candidates[:2]) == 1
+    draws = {tour(Tour(1.0), env, state, rng, candidates) for _ in range(300)}
+    assert draws == {0, 1, 2, 3}
 
 
 def test_root_parallel_trees_merge_their_statistics():

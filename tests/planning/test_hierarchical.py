@@ -279,3 +279,42 @@ def test_options_keep_their_names_from_the_settings_to_the_records():
     paper = MctsSettings(preset="paper")
     assert paper.search_options() == SearchOptions()
     assert paper.subtask_options() == SubtaskOptions()
+
+
+def test_several_dwell_lengths_are_flown_each_for_its_own_length():
+    """``dwell=[5, 20]``: every dwell in the log lasts one of the two lengths (10 or 40 steps),
+    as the plan chose it, and ``-o dwell=5,20`` means the same settings."""
+    scenario = random_scenario(3, seed=1, homogeneous=True)
+    record = run_episode(scenario, mcts(iterations=2000, preset="improved", dwell=[5.0, 20.0]))
+    dwells = [e for e in record.info["subtasks"] if "dwell" in e and "end_step" in e]
+    assert dwells, "the search never chose a dwell"
+    for entry in dwells:
+        assert entry["dwell_steps"] in (10, 40)
+        assert entry["end_step"] - entry["start_step"] == entry["dwell_steps"]
+    parsed = MctsSettings.from_options("mcts", {"dwell": "5,20"})
+    assert parsed.dwell == [5.0, 20.0]
+    assert '"dwell":[5.0,20.0]' in parsed.canonical()
+    assert MctsSettings.from_canonical(parsed.canonical()).dwell == [5.0, 20.0]
+    with pytest.raises(InputError, match=r"option dwell must be one length or several"):
+        MctsSettings.from_options("mcts", {"dwell": "5,-1"})
+
+
+def test_a_kept_miss_leaves_the_target_available_to_the_planner():
+    """``miss="keep"``: after a missed pursuit the target may be pursued again; with the
+    paper's ``drop`` it is not, until measured by chance."""
+    scenario = random_scenario(6, seed=3, homogeneous=True)
+    for miss in ("drop", "keep"):
+        planner = mcts(iterations=500, preset="improved", miss=miss)
+        record = run_episode(scenario, planner)
+        log = record.info["subtasks"]
+        missed = [e for e in log if e.get("outcome") == "missed"]
+        if miss == "keep":
+            assert planner._available.all()
+        for entry in missed:
+            later = [e for e in log if e.get("start_step", -1) >= entry["end_step"]]
+            again = [e for e in later if e.get("target_index") == entry["target_index"]]
+            if (
+                miss == "drop"
+                and not record.detections[entry["end_step"] :, entry["target_index"]].any()
+            ):
+                assert not again

@@ -85,11 +85,11 @@ def hand_estimate(cov, q, max_steps):
     return k, ps[-1], (k * ps[-1] - sum(ps[:-1])) / ps[-1]
 
 
-def setup(problem, dwell=0.0):
+def setup(problem, dwell=0.0, miss="drop"):
     """``env`` (with a dwell of ``dwell`` s), the root state and its arrays ``(si, sf, cov,
     step)`` (views of the state)."""
     state = problem.root_state()
-    env = problem.env(SubtaskOptions(dwell=dwell))
+    env = problem.env(SubtaskOptions(dwell=dwell, miss=miss))
     return env, state, *state
 
 
@@ -256,7 +256,7 @@ def test_dwell_measures_the_target_just_found_at_every_step_and_keeps_it_last():
     problem = make_problem(means, [prior(), prior()])
     assert n_actions(2, SubtaskOptions(dwell=10.0)) == 3
     env, state, si, sf, cov, step = setup(problem, dwell=10.0)
-    assert env.dwell_steps == 20
+    assert env.stay_steps.tolist() == [20]
     work = new_work()
     assert not is_available(env, state, 2)  # nothing found yet
     _, find_steps, _ = expand_action(env, state, 0, work)
@@ -299,3 +299,46 @@ def test_dwell_is_available_only_after_a_find_and_before_the_budget_ends():
     with pytest.raises(ValueError, match="dwell must be"):
         dwell_steps(TAU, -1.0)
     make_problem([[0, 0, 0, 0]], [prior()], last_found=0, current_action=1)
+
+
+def test_several_dwell_lengths_are_one_action_each_after_the_targets():
+    """``dwell=(5, 10, 40)`` s: actions ``n``, ``n + 1`` and ``n + 2`` dwell 10, 20 and 80
+    steps (``p_find = 1``), each available after a find while it ends before the budget; the
+    measured covariance is the one of a single dwell of the same length."""
+    means = [[900, 0, 1, 1], [0, 900, 0, 0]]
+    problem = make_problem(means, [prior(), prior()], budget=30.0, last_found=0)
+    options = SubtaskOptions(dwell=(5.0, 10.0, 40.0))
+    assert n_actions(2, options) == 5
+    env = problem.env(options)
+    state = problem.root_state()
+    work = new_work()
+    assert env.stay_steps.tolist() == [10, 20, 80]
+    assert [is_available(env, state, a) for a in (2, 3, 4)] == [True, True, False]  # 60 left
+    assert expand_action(env, state, 3, work) == (1.0, 20, 20)
+    apply_outcome(env, state, 3, True, 20, work)
+    single = make_problem(means, [prior(), prior()], budget=30.0, last_found=0)
+    env1, state1, *_ = setup(single, dwell=10.0)
+    apply_outcome(env1, state1, 2, True, 20, work)
+    np.testing.assert_array_equal(state[2], state1[2])
+    assert state[0].tolist() == state1[0].tolist() == [20, 0b11, 0]
+    with pytest.raises(ValueError, match="current_action=5"):
+        make_problem(means, [prior(), prior()], last_found=0, current_action=5).env(options)
+
+
+def test_a_miss_drops_the_target_as_in_the_paper_or_keeps_it_to_pursue_again():
+    """``miss="drop"`` (the paper): the missed target leaves the action list. ``"keep"``: it
+    stays, its belief unmeasured (its base unchanged, so it grows on from the root), and it can
+    be pursued again, now from a larger covariance: a longer coverage."""
+    problem = make_problem([[900, 0, 1, 1], [0, 900, 0, 0]], [prior(), prior()])
+    work = new_work()
+    for miss, mask in (("drop", 0b10), ("keep", 0b11)):
+        env, state, si, sf, cov, step = setup(problem, miss=miss)
+        p, find_steps, miss_steps = expand_action(env, state, 0, work)
+        apply_outcome(env, state, 0, False, miss_steps, work)
+        assert (si[I_STEP], si[I_MASK], si[I_LAST], step[0]) == (miss_steps, mask, -1, 0)
+        np.testing.assert_array_equal(cov[0], prior())
+        assert is_available(env, state, 0) == (miss == "keep")
+    again = expand_action(env, state, 0, work)
+    assert again[0] < p and again[2] > miss_steps - intercept_of(env, sf, 0, 0)
+    with pytest.raises(ValueError, match="miss must be one of"):
+        problem.env(SubtaskOptions(miss="forget"))
