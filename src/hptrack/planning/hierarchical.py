@@ -41,7 +41,13 @@ from hptrack.planning.subtask_mdp import (
     dwell_action,
     stay_steps,
 )
-from hptrack.planning.subtask_rollout import MostUncertain, Nearest, Tour, UniformNoFollow
+from hptrack.planning.subtask_rollout import (
+    MostUncertain,
+    Nearest,
+    Tour,
+    UniformNoDwell,
+    UniformNoFollow,
+)
 from hptrack.planning.subtask_search import search, warm_up
 from hptrack.settings import Iterations, PlannerSettings, TimeLimit
 
@@ -102,8 +108,9 @@ class MctsSettings(PlannerSettings):
         common_rollouts: the rollouts that value one state's actions and outcomes share their
             random draws (common random numbers) instead of all drawing from one stream.
         rollout: ``"uniform"`` (the paper's random policy), ``"uniform_no_follow"`` (the same
-            without following the target just found), ``"nearest"``, ``"most_uncertain"`` or
-            ``"tour"`` (:mod:`hptrack.planning.subtask_rollout`).
+            without following the target just found), ``"uniform_no_dwell"`` (the same
+            without the dwell actions), ``"nearest"``, ``"most_uncertain"`` or ``"tour"``
+            (:mod:`hptrack.planning.subtask_rollout`).
         rollout_epsilon: probability of a random action in a ``nearest``,
             ``most_uncertain`` or ``tour`` rollout.
         estimator: the sub-task outcome estimator of the search's expansions, ``"paper"``
@@ -126,9 +133,12 @@ class MctsSettings(PlannerSettings):
     max_weight: Annotated[float | None, Field(ge=0.0, le=1.0)] = None
     root_split: Literal["even", "weighted"] | None = None
     common_rollouts: bool | None = None
-    rollout: Literal["uniform", "uniform_no_follow", "nearest", "most_uncertain", "tour"] | None = (
-        None
-    )
+    rollout: (
+        Literal[
+            "uniform", "uniform_no_follow", "uniform_no_dwell", "nearest", "most_uncertain", "tour"
+        ]
+        | None
+    ) = None
     rollout_epsilon: Annotated[float, Field(ge=0.0, le=1.0)] = 0.1
     estimator: Literal["paper", "sharp"] | None = None
     dwell: DwellLength | list[DwellLength] | None = None
@@ -204,6 +214,8 @@ class MctsSettings(PlannerSettings):
             return Nearest(self.rollout_epsilon)
         if self.rollout == "tour":
             return Tour(self.rollout_epsilon)
+        if self.rollout == "uniform_no_dwell":
+            return UniformNoDwell()
         return UniformRandom()
 
     def search_options(self) -> SearchOptions:

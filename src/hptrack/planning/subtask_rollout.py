@@ -118,6 +118,25 @@ def most_uncertain(policy, env, state, rng, candidates):
     return epsilon_greedy(policy.epsilon, env, state, rng, candidates, True)
 
 
+class UniformNoDwell(NamedTuple):
+    """The paper's uniform draw over the available targets (the follow included), never a
+    dwell: the dwell actions are left to the tree. With several dwell lengths a uniform
+    rollout would spend most of its decisions after a find dwelling, and value every state as
+    if the mission were mostly spent dwelling."""
+
+
+@numba.njit(cache=True)
+def uniform_no_dwell(policy, env, state, rng, candidates):
+    """:class:`UniformNoDwell`'s decision (``-1`` when no action is available)."""
+    count = available_actions(env, state, candidates)
+    targets = 0
+    while targets < count and not is_dwell(env, candidates[targets]):
+        targets += 1  # the dwells come last
+    if targets == 0:
+        return candidates[int(uniform(rng) * count)] if count > 0 else -1
+    return candidates[int(uniform(rng) * targets)]
+
+
 class Tour(NamedTuple):
     """Tour rollouts: with probability ``1 - epsilon``, dwell on the target just found while its
     velocity is uncertain, else pursue the nearest other target; otherwise an available action
@@ -163,5 +182,6 @@ def tour(policy, env, state, rng, candidates):
 
 register_policy(UniformNoFollow, uniform_no_follow)
 register_policy(Tour, tour)
+register_policy(UniformNoDwell, uniform_no_dwell)
 register_policy(Nearest, nearest)
 register_policy(MostUncertain, most_uncertain)
