@@ -1,0 +1,97 @@
+"""The planner comparison scripts (``benchmarks/paper_flight.py`` and the reference rows of
+``benchmarks/quality_vs_time.py``) on inputs whose answers are known exactly."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
+from hptrack.planning.hierarchical import MctsSettings
+from hptrack.settings import NoSettings
+
+BENCHMARKS = Path(__file__).parents[2] / "benchmarks"
+
+
+def _script(name: str):
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def paper_flight():
+    return _script("paper_flight")
+
+
+@pytest.fixture(scope="module")
+def quality():
+    return _script("quality_vs_time")
+
+
+def test_visits_are_runs_of_detections_split_by_gaps_of_two_seconds(paper_flight):
+    """0.5 s steps: a gap of 4 steps without a detection (2 s) starts a new visit, one of 3
+    steps does not; a target never measured has no visit."""
+    column = np.zeros(30, dtype=bool)
+    column[[0, 1, 2, 6, 7, 11, 20, 21]] = True  # gaps: 3 (same visit), 3, 8 (new visit)
+    detections = np.stack([column, np.zeros(30, dtype=bool), column[::-1]], axis=1)
+    assert paper_flight.visits(detections, 0.5) == [2, 0, 2]
+    column[26] = True  # 4 steps (2 s) without a detection since step 21: a third visit
+    assert paper_flight.visits(column[:, None], 0.5) == [3]
+
+
+def test_paper_flight_rows_and_report(paper_flight, tmp_path):
+    """Three episodes of seed 0 (greedy, the reference, a 200-simulation search): their rows
+    are what ``run`` returns, and the report's difference from greedy and share of the gap
+    closed are the arithmetic of their U."""
+    search = MctsSettings.from_options("mcts", {"preset": "improved", "iterations": 200})
+    jobs = [
+        ("greedy", "greedy", 0.0, 0, NoSettings().canonical()),
+        ("clairvoyant", "clairvoyant", 0.0, 0, NoSettings().canonical()),
+        ("mcts", "improved", 0.0, 0, search.canonical()),
+    ]
+    path = tmp_path / "runs.csv"
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, paper_flight.FIELDS)
+        writer.writeheader()
+        rows = [paper_flight.run(job) for job in jobs]
+        writer.writerows(rows)
+    g, c, u = (float(r["U"]) for r in rows)
+    assert c < g  # the reference reads the truth
+    paper_flight.report(path, tmp_path / "out")
+    table = (tmp_path / "out" / "table.md").read_text()
+    line = next(x for x in table.splitlines() if x.startswith("| improved |"))
+    cells = [x.strip() for x in line.strip("|").split("|")]
+    assert cells[3] == f"{u:.2f} +- nan"
+    assert cells[4] == f"{u - g:+.2f} +- nan"
+    assert cells[5] == f"{100.0 * (g - u) / (g - c):.0f}"
+    alternating = int(min(json.loads(rows[2]["visits"])) >= 3)
+    assert cells[6] == f"{alternating} of 1"
+    assert (tmp_path / "out" / "paper-flight.png").stat().st_size > 0
+    assert paper_flight.identity(rows[2]) == ("mcts", search.canonical(), 0)
+
+
+def test_quality_report_gives_the_gap_closed_and_the_targets_never_detected(quality, tmp_path):
+    """Two scenarios at n = 3: greedy 100 and 80, clairvoyant 20 and 40, the paper's search
+    at 0.05 s 60 and 50 (never detected 1 and 0): the gap closed is 100 (90 - 55) / (90 - 30)
+    = 58 %, and 0.5 targets per episode are never detected."""
+    store = ResultStore(tmp_path / "toy.db")
+    paper = quality.settings("paper", 0.05)
+    values = {"greedy": (100.0, 80.0), "clairvoyant": (20.0, 40.0), "mcts": (60.0, 50.0)}
+    for planner, us in values.items():
+        for seed, u in enumerate(us):
+            text = paper if planner == "mcts" else NoSettings().canonical()
+            key = EpisodeKey(planner, 3, seed, quality.SETTING, text)
+            store.add(EpisodeRow(key, u, 77.0, 1, 0.1, {"targets_never_detected": 1 - seed}))
+    store.close()
+    quality.report(tmp_path / "toy.db", tmp_path / "out", [0.05], ["paper"])
+    table = (tmp_path / "out" / "table.md").read_text()
+    assert "| paper @ 0.05 s | 58 (2) |" in table
+    assert "| paper | 0.05 | 0.50 |" in table
+    assert "| clairvoyant | - | 30.00 +- 10.00 (2) |" in table
