@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import importlib.util
 import json
 import math
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -32,6 +33,14 @@ BASELINES = ("greedy", "clairvoyant")
 VISIT_GAP_S = 2.0
 """A detection after at least this long without one starts a new visit, s."""
 FIELDS = ("planner", "variant", "level_s", "seed", "settings", "U", "logdets", "visits")
+
+
+def _sibling(name: str):
+    """Another script of ``benchmarks/``, as a module."""
+    spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name(f"{name}.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def visits(detections: np.ndarray, time_step: float) -> list[int]:
@@ -200,13 +209,7 @@ def main() -> None:
     parser.add_argument("--report", action="store_true", help="only write the report")
     parser.add_argument("--out", type=Path, default=Path("results/paper-flight"))
     args = parser.parse_args()
-    for text in args.define:
-        name, _, options = text.partition("=")
-        VARIANTS[name] = json.loads(options)
-    variants = args.variants.split(",")
-    unknown = [v for v in variants if v not in VARIANTS]
-    if unknown:
-        parser.error(f"--variants: unknown {unknown} (known: {', '.join(VARIANTS)})")
+    variants = _sibling("quality_vs_time").chosen_variants(parser, args, VARIANTS)
     if args.report:
         report(args.csv, args.out)
         return

@@ -79,6 +79,31 @@ def label(key, levels, variants) -> tuple[str, float] | None:
     return None
 
 
+def chosen_variants(parser: argparse.ArgumentParser, args, table: dict) -> list[str]:
+    """Add ``--define NAME=JSON`` variants to ``table`` and return ``--variants`` (an unknown
+    name is a usage error)."""
+    for text in args.define:
+        name, _, options = text.partition("=")
+        table[name] = json.loads(options)
+    variants = args.variants.split(",")
+    unknown = [v for v in variants if v not in table]
+    if unknown:
+        parser.error(f"--variants: unknown {unknown} (known: {', '.join(table)})")
+    return variants
+
+
+def header(text: str, first: str, ns) -> list[str]:
+    """The lines that open a table of one column per ``n``, after a blank line and ``text``."""
+    columns = " | ".join(f"n={n}" for n in ns)
+    return [
+        "",
+        text,
+        "",
+        f"| {first} | {columns} |",
+        "|---" * (first.count("|") + 1) + "|" + "---|" * len(ns),
+    ]
+
+
 def mean_se(values) -> tuple[float, float]:
     a = np.asarray(values, dtype=float)
     return float(a.mean()), float(a.std(ddof=1) / math.sqrt(a.size)) if a.size > 1 else math.nan
@@ -131,13 +156,8 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
                 row.append("")
         lines.append(f"| {v} | {'-' if v in BASELINES else f'{lv:g}'} | " + " | ".join(row) + " |")
     if any(lost.values()):
-        lines += [
-            "",
-            "Targets never detected per episode, mean (episodes that record it).",
-            "",
-            "| variant | time, s | " + " | ".join(f"n={n}" for n in ns) + " |",
-            "|---|---|" + "---|" * len(ns),
-        ]
+        text = "Targets never detected per episode, mean (episodes that record it)."
+        lines += header(text, "variant | time, s", ns)
         for v, lv in cells:
             row = [f"{np.mean(lost[(v, lv, n)]):.2f}" if lost[(v, lv, n)] else "" for n in ns]
             if any(row):
@@ -160,14 +180,11 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
 
     gap_rows = [(f"{v} @ {lv:g} s", gap_closed((v, lv))) for v, lv in cells if v not in BASELINES]
     if any(any(c) for _, c in gap_rows):
-        lines += [
-            "",
+        text = (
             "Share of the gap from greedy (no look-ahead) to clairvoyant (reads the true target "
-            "states) closed, % (scenarios).",
-            "",
-            "| variant | " + " | ".join(f"n={n}" for n in ns) + " |",
-            "|---|" + "---|" * len(ns),
-        ]
+            "states) closed, % (scenarios)."
+        )
+        lines += header(text, "variant", ns)
         lines += [f"| {name} | " + " | ".join(c) + " |" for name, c in gap_rows if any(c)]
 
     def paired(a, b, relative=False):
@@ -222,14 +239,11 @@ def report(db: Path, out: Path, levels, variants, reference: str = "paper") -> N
         comparisons.append(
             (f"{v} @ {top:g} s - greedy, % of greedy", (v, top), ("greedy", 0.0), True)
         )
-    lines += [
-        "",
+    text = (
         "Paired differences of U on the same scenarios, mean +- standard error "
-        "(scenarios); negative: the first is better.",
-        "",
-        "| comparison | " + " | ".join(f"n={n}" for n in ns) + " |",
-        "|---|" + "---|" * len(ns),
-    ]
+        "(scenarios); negative: the first is better."
+    )
+    lines += header(text, "comparison", ns)
     for name, a, b, rel in comparisons:
         cells_ = paired(a, b, rel)
         if any(cells_):
@@ -299,13 +313,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/quality-vs-time"))
     args = parser.parse_args()
     levels = [float(x) for x in args.levels.split(",")]
-    for text in args.define:
-        name, _, options = text.partition("=")
-        VARIANTS[name] = json.loads(options)
-    variants = args.variants.split(",")
-    unknown = [v for v in variants if v not in VARIANTS]
-    if unknown:
-        parser.error(f"--variants: unknown {unknown} (known: {', '.join(VARIANTS)})")
+    variants = chosen_variants(parser, args, VARIANTS)
     only = None
     if args.only:
         only = set()
