@@ -295,6 +295,8 @@ def test_several_dwell_lengths_are_flown_each_for_its_own_length():
     assert parsed.dwell == [5.0, 20.0]
     assert '"dwell":[5.0,20.0]' in parsed.canonical()
     assert MctsSettings.from_canonical(parsed.canonical()).dwell == [5.0, 20.0]
+    one = MctsSettings.from_options("mcts", {"dwell": [20]})
+    assert one.canonical() == MctsSettings.from_options("mcts", {"dwell": 20}).canonical()
     with pytest.raises(InputError, match=r"option dwell must be one length or several"):
         MctsSettings.from_options("mcts", {"dwell": "5,-1"})
 

@@ -10,8 +10,9 @@
 4. When the sub-task ends, the outcome that happened picks the next target from the plan. A
    missed target leaves the action list (Sec. IV-C-2); choosing the target just found again means
    following it to the end of the budget. With the ``dwell`` option (beyond the paper) the plan
-   may also follow it for the dwell's length only (action index ``n``, also in the log's plans),
-   re-planning with the dwell fixed as it starts.
+   may also follow it for a dwell's length only (action index ``n + j`` for the ``j``-th
+   length, also in the log's plans), re-planning with the dwell fixed as it starts. With
+   ``miss="keep"`` a missed target stays in the action list.
 
 Choices the paper leaves open (``docs/model.md``): a missed target that the agent measures
 by chance later returns to the action list; a planned next action that the remaining budget can
@@ -172,7 +173,7 @@ class MctsSettings(PlannerSettings):
             lengths = []
         if not lengths or not all(0.0 < d <= 1e6 for d in lengths):
             raise ValueError("must be one length or several, each in (0, 1e6] s")
-        return lengths
+        return lengths[0] if len(lengths) == 1 else lengths  # one length: one identity
 
     @model_validator(mode="after")
     def _max_weight_needs_the_max_backup(self) -> MctsSettings:

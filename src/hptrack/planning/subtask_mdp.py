@@ -44,14 +44,19 @@ target found by the previous sub-task again follows it to the end of the budget 
 guaranteed: it is measured at every step, its covariance follows the Riccati recursion
 (:func:`hptrack.models.riccati.measured_covariance`).
 
-**Dwell** (an option beyond the paper, off by default: ``dwell = 0``). With a dwell of
-``dwell_steps > 0`` steps the MDP has one more action, index ``n`` (:func:`dwell_action`):
-follow the target just found for ``dwell_steps`` steps only, measured at every step, then choose
-again with that target still the last found. A single find fixes a target's position but leaves
-much of its velocity uncertain, so its belief grows fast afterwards; a short dwell measures the
-velocity too. The action is available when a target was just found and the dwell ends strictly
-before the budget (otherwise it is the follow). At the end of the budget, or when no action is
-available, the value of the state is ``-U`` with ``U = sum_i log det Sigma^xy_i`` at step ``N``
+**Dwell** (an option beyond the paper, off by default: ``dwell = 0``). With dwell lengths
+``stay_steps`` the MDP has one more action per length, index ``n + j`` for the ``j``-th
+(:func:`dwell_action`): follow the target just found for ``stay_steps[j]`` steps only,
+measured at every step, then choose again with that target still the last found. A single find
+fixes a target's position but leaves much of its velocity uncertain, so its belief grows fast
+afterwards; a short dwell measures the velocity too. A dwell is available when a target was
+just found and it ends strictly before the budget (otherwise it is the follow).
+
+**Kept misses** (``miss="keep"``, beyond the paper): a miss leaves the target in the action
+list, its belief unmeasured (its base unchanged), so it may be pursued again.
+
+At the end of the budget, or when no action is available, the value of the state is ``-U``
+with ``U = sum_i log det Sigma^xy_i`` at step ``N``
 (Sec. III).
 """
 
