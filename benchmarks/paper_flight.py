@@ -32,7 +32,7 @@ VARIANTS = {"paper": {"preset": "paper"}, "improved": {"preset": "improved"}}
 BASELINES = ("greedy", "clairvoyant")
 VISIT_GAP_S = 2.0
 """A detection after at least this long without one starts a new visit, s."""
-FIELDS = ("planner", "variant", "level_s", "seed", "settings", "U", "logdets", "visits")
+FIELDS = ("planner", "variant", "level_s", "seed", "planner_settings", "U", "logdets", "visits")
 
 
 def _sibling(name: str):
@@ -85,7 +85,7 @@ def run(job: tuple) -> dict:
         "variant": variant,
         "level_s": level,
         "seed": seed,
-        "settings": canonical,
+        "planner_settings": canonical,
         "U": repr(float(record.uncertainty)),
         "logdets": json.dumps([float(x) for x in record.per_target_logdet]),
         "visits": json.dumps(visits(record.detections, record.time_step)),
@@ -93,7 +93,7 @@ def run(job: tuple) -> dict:
 
 
 def identity(row: dict) -> tuple:
-    return (row["planner"], row["settings"], int(row["seed"]))
+    return (row["planner"], row["planner_settings"], int(row["seed"]))
 
 
 def read(path: Path) -> list[dict]:
