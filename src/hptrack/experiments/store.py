@@ -80,10 +80,15 @@ _LEFT_OUT_BY_LAYOUT_2 = {
 paper's search on one tree; ``rollout_epsilon`` also whenever the rollout took none)."""
 
 
+def _with_options(options: dict[str, dict], planner: str, text: str) -> str:
+    """The identity ``text`` of ``planner`` with ``options[planner]`` where it has none."""
+    values = {**options.get(planner, {}), **json.loads(text)}
+    return json.dumps(values, sort_keys=True, separators=(",", ":"))
+
+
 def _full_identity(planner: str, text: str) -> str:
     """Layout 2 -> 3: the identity with every option (:data:`_LEFT_OUT_BY_LAYOUT_2`)."""
-    values = {**_LEFT_OUT_BY_LAYOUT_2.get(planner, {}), **json.loads(text)}
-    return json.dumps(values, sort_keys=True, separators=(",", ":"))
+    return _with_options(_LEFT_OUT_BY_LAYOUT_2, planner, text)
 
 
 def _migrate_2_to_3(db: sqlite3.Connection) -> None:
@@ -108,8 +113,7 @@ _ADDED_BY_LAYOUT_4 = {"mcts": {"miss": "drop"}}
 
 def _identity_4(planner: str, text: str) -> str:
     """Layout 3 -> 4: the identity with the options added since (:data:`_ADDED_BY_LAYOUT_4`)."""
-    values = {**_ADDED_BY_LAYOUT_4.get(planner, {}), **json.loads(text)}
-    return json.dumps(values, sort_keys=True, separators=(",", ":"))
+    return _with_options(_ADDED_BY_LAYOUT_4, planner, text)
 
 
 def _migrate_3_to_4(db: sqlite3.Connection) -> None:
