@@ -316,7 +316,7 @@ MISS_RULES = ("drop", "keep")
 
 def n_actions(n_targets: int, options: SubtaskOptions) -> int:
     """Actions of the MDP: one per target, and one per dwell length."""
-    return n_targets + len(stay_steps(1.0, options.dwell))
+    return n_targets + len(dwell_lengths(options.dwell))
 
 
 def dwell_steps(time_step: float, dwell: float) -> int:
@@ -328,14 +328,21 @@ def dwell_steps(time_step: float, dwell: float) -> int:
     return max(1, int(math.floor(dwell / time_step + 0.5)))
 
 
-def stay_steps(time_step: float, dwell: float | tuple[float, ...]) -> tuple[int, ...]:
-    """The dwell actions' lengths in whole steps (:func:`dwell_steps` of each length given;
-    none for a dwell of 0)."""
-    lengths = (dwell,) if isinstance(dwell, int | float) else tuple(dwell)
-    steps = tuple(dwell_steps(time_step, float(d)) for d in lengths)
-    if 0 in steps and len(steps) > 1:
+def dwell_lengths(dwell: float | tuple[float, ...]) -> tuple[float, ...]:
+    """The dwell actions' lengths, s: the one given, or each of several (none for a dwell of 0).
+
+    Raises:
+        ValueError: a zero among several lengths.
+    """
+    lengths = (float(dwell),) if isinstance(dwell, int | float) else tuple(map(float, dwell))
+    if 0.0 in lengths and len(lengths) > 1:
         raise ValueError(f"dwell lengths must be positive, got {dwell!r}")
-    return tuple(s for s in steps if s > 0)
+    return tuple(d for d in lengths if d != 0.0)
+
+
+def stay_steps(time_step: float, dwell: float | tuple[float, ...]) -> tuple[int, ...]:
+    """The dwell actions' lengths in whole steps (:func:`dwell_steps` of each length)."""
+    return tuple(dwell_steps(time_step, d) for d in dwell_lengths(dwell))
 
 
 @numba.njit(cache=True, inline="always")

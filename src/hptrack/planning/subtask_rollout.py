@@ -59,6 +59,13 @@ def epsilon_greedy(epsilon, env, state, rng, candidates, uncertainty):
         return -1
     if uniform(rng) < epsilon:
         return candidates[int(uniform(rng) * count)]
+    return best_other(env, state, candidates, count, uncertainty)
+
+
+@numba.njit(cache=True)
+def best_other(env, state, candidates, count, uncertainty):
+    """:func:`epsilon_greedy`'s choice among the ``count`` available ``candidates``, without the
+    random draw."""
     mission = env.mission
     si, sf, base_cov, base_step = state
     t = si[I_STEP]
@@ -177,7 +184,7 @@ def tour(policy, env, state, rng, candidates):
                     dwells += 1
             if dwells > 0:
                 return candidates[count - dwells + int(uniform(rng) * dwells)]
-    return epsilon_greedy(0.0, env, state, rng, candidates, False)
+    return best_other(env, state, candidates, count, False)
 
 
 register_policy(UniformNoFollow, uniform_no_follow)
