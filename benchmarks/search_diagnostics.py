@@ -13,8 +13,8 @@
     python3 benchmarks/search_diagnostics.py rates --targets 6,12
     # what a rollout is: sub-tasks, how often it ends in a follow, its time, per policy
     python3 benchmarks/search_diagnostics.py rollouts --targets 6,12
-    # the sub-tasks each preset flies on a scenario file
-    python3 benchmarks/search_diagnostics.py subtasks examples/paper-flight.yaml
+    # the sub-tasks each preset flies on a scenario file, each pursuit with its estimate
+    python3 benchmarks/search_diagnostics.py subtasks examples/paper-flight.yaml --seed 0
     # how well the MDP predicts the sub-tasks flown: durations and find rates, per n and outcome
     python3 benchmarks/search_diagnostics.py model-accuracy --db results/targets.db
     # what a dwell after a find buys: the belief's uncertainty later, with and without it
@@ -196,7 +196,10 @@ def rollouts(targets: list[int], count: int) -> None:
             )
 
 
-def subtasks(path: Path, iterations: int) -> None:
+def subtasks(path: Path, iterations: int, seed: int | None = None) -> None:
+    """The sub-tasks each preset flies on a scenario file (seed: the file's, or ``seed``); a
+    pursuit is shown with the MDP's estimate when it started: ``p_find``, and the intercept
+    plus the expected time to find, s."""
     from hptrack.registry import make_planner
     from hptrack.scenario.io import load_scenario
     from hptrack.sim.episode import run_episode
@@ -205,12 +208,15 @@ def subtasks(path: Path, iterations: int) -> None:
     ids = scenario.target_ids
     for preset in ("paper", "improved"):
         record = run_episode(
-            scenario, make_planner("mcts", {"preset": preset, "iterations": iterations})
+            scenario,
+            make_planner("mcts", {"preset": preset, "iterations": iterations}),
+            seed=seed,
         )
         steps = [
-            f"follow {ids[e['follow']]}"
-            if "follow" in e and e["follow"] is not None
-            else f"{ids[e['target_index']]} {e.get('outcome', '')}".strip()
+            (f"follow {ids[e['follow']]}" if e["follow"] is not None else "hover")
+            if "follow" in e
+            else f"{ids[e['target_index']]} {e.get('outcome', '')} (p_find {e['p_find']:.2f}, "
+            f"{e['intercept_time'] + e['expected_time']:.1f} s)"
             for e in record.info["subtasks"]
             if "follow" in e or "target_index" in e
         ]
@@ -350,6 +356,7 @@ def main() -> None:
     p = sub.add_parser("subtasks")
     p.add_argument("scenario", type=Path)
     p.add_argument("--iterations", type=int, default=100_000)
+    p.add_argument("--seed", type=int, default=None)
     p = sub.add_parser("model-accuracy")
     p.add_argument("--db", type=Path, required=True)
     p = sub.add_parser("lost")
@@ -374,7 +381,7 @@ def main() -> None:
     elif args.command == "dwell":
         dwell(args.unseen, args.q)
     else:
-        subtasks(args.scenario, args.iterations)
+        subtasks(args.scenario, args.iterations, args.seed)
 
 
 if __name__ == "__main__":

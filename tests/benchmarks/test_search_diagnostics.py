@@ -139,3 +139,16 @@ def test_paired_pairs_episodes_by_resolved_options(tmp_path, diagnostics, capsys
     row = capsys.readouterr().out.strip().splitlines()[-1]
     # differences -3 and +1: mean -1, standard error 2
     assert re.fullmatch(r"\| homogeneous \| 3 \| -1\.00 \+- 2\.00 \(2\) \|", row)
+
+
+def test_subtasks_lists_each_pursuit_with_its_estimate(diagnostics, capsys):
+    """Each preset's line: U, then every sub-task flown, a pursuit with the ``p_find`` and
+    predicted duration the MDP gave it when it started (the paper's flight example)."""
+    scenario = Path(__file__).parents[2] / "examples" / "paper-flight.yaml"
+    diagnostics.subtasks(scenario, 200, seed=0)
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split(":")[0] for line in lines] == ["paper", "improved"]
+    for line in lines:
+        assert re.search(
+            r"U = \d+\.\d\d; p[12] (found|missed) \(p_find [01]\.\d\d, \d+\.\d s\)", line
+        )
