@@ -15,6 +15,8 @@
     python3 benchmarks/search_diagnostics.py rollouts --targets 6,12
     # the sub-tasks each preset flies on a scenario file, each pursuit with its estimate
     python3 benchmarks/search_diagnostics.py subtasks examples/paper-flight.yaml --seed 0
+    # the MDP's exact best plan from a small scenario's start, per estimator, against the search
+    python3 benchmarks/search_diagnostics.py optimum examples/paper-flight.yaml
     # how well the MDP predicts the sub-tasks flown: durations and find rates, per n and outcome
     python3 benchmarks/search_diagnostics.py model-accuracy --db results/targets.db
     # what a dwell after a find buys: the belief's uncertainty later, with and without it
@@ -223,6 +225,52 @@ def subtasks(path: Path, iterations: int, seed: int | None = None) -> None:
         print(f"{preset}: U = {record.uncertainty:.2f}; " + ", ".join(steps))
 
 
+def optimum(path: Path, iterations: int, miss: str) -> None:
+    """The sub-task MDP's exact best plan from a scenario file's start (a few targets), per
+    estimator: its expected ``U``, its first actions, the exact ``U`` of following the first
+    target found to the end against the best plan after that find, and the improved search's
+    value with ``iterations`` simulations."""
+    from hptrack.planning import PlanningProblem, search
+    from hptrack.planning.hierarchical import MctsSettings
+    from hptrack.planning.subtask_mdp import SubtaskOptions, apply_outcome
+    from hptrack.planning.subtask_optimum import action_values, optimal_plan
+    from hptrack.scenario.io import load_scenario
+
+    scenario = load_scenario(path)
+    ids = scenario.target_ids
+    problem = PlanningProblem(
+        scenario.mission_spec().record,
+        np.array(scenario.agent.position, dtype=float),
+        np.array([t.mean for t in scenario.targets]),
+        np.array([t.covariance for t in scenario.targets]),
+        scenario.budget,
+    )
+    for estimator in ("paper", "sharp"):
+        options = SubtaskOptions(estimator=estimator, miss=miss)
+        try:
+            best = optimal_plan(problem, options)
+        except ValueError as error:  # too many histories to enumerate
+            print(f"{estimator}: {error}")
+            continue
+        env, state = problem.env(options), problem.root_state()
+        first = best.actions[0]
+        apply_outcome(env, state, first, True, best.steps[0], np.zeros((5, 4, 4)))
+        after = action_values(env, state)
+        settings = MctsSettings(preset="improved", estimator=estimator, miss=miss)
+        found = search(problem, settings.search_options(), options, iterations=iterations)
+        plan = ", ".join(
+            f"{ids[a]} (p_find {p:.2f}, {s * scenario.time_step:g} s)"
+            for a, p, s in zip(best.actions[:6], best.p_find, best.steps, strict=False)
+        )
+        print(
+            f"{estimator}: best expected U {-best.value:.2f} ({best.nodes} states; the search, "
+            f"{iterations} simulations: {-found.root.values.max():.2f}); switches "
+            f"{sum(a != b for a, b in zip(best.actions, best.actions[1:], strict=False))}; "
+            f"plan {plan}, ...; after finding {ids[first]}: following it "
+            f"{-after[first]:.2f}, best {-max(after.values()):.2f}"
+        )
+
+
 def model_accuracy(db: Path) -> None:
     """Each pursuit sub-task flown by the max-backup searches of ``db``: its duration against
     the MDP's (intercept plus ``E[T_find]`` or ``t_cutoff``), and the find rate against the
@@ -357,6 +405,10 @@ def main() -> None:
     p.add_argument("scenario", type=Path)
     p.add_argument("--iterations", type=int, default=100_000)
     p.add_argument("--seed", type=int, default=None)
+    p = sub.add_parser("optimum")
+    p.add_argument("scenario", type=Path)
+    p.add_argument("--iterations", type=int, default=100_000)
+    p.add_argument("--miss", choices=("drop", "keep"), default="drop")
     p = sub.add_parser("model-accuracy")
     p.add_argument("--db", type=Path, required=True)
     p = sub.add_parser("lost")
@@ -380,6 +432,8 @@ def main() -> None:
         lost(args.db, args.where)
     elif args.command == "dwell":
         dwell(args.unseen, args.q)
+    elif args.command == "optimum":
+        optimum(args.scenario, args.iterations, args.miss)
     else:
         subtasks(args.scenario, args.iterations, args.seed)
 

@@ -10,13 +10,8 @@ import pytest
 from hptrack.models.mission import mission_record
 from hptrack.planning import PlanningProblem, search
 from hptrack.planning.search import SearchOptions, run_simulations
-from hptrack.planning.subtask_mdp import (
-    apply_outcome,
-    expand_action,
-    is_available,
-    new_work,
-    terminal_value,
-)
+from hptrack.planning.subtask_mdp import apply_outcome, expand_action, new_work
+from hptrack.planning.subtask_optimum import action_values
 from hptrack.planning.tree import grow_tree, new_tree
 
 TAU = 0.5
@@ -50,30 +45,12 @@ def expectimax(problem, first=None):
     """Exact values ``-E[U]`` of the root's actions under the optimal policy (small MDPs), or
     with ``first = (action, found)`` of the actions after that first sub-task."""
     env = problem.env()
-    work = new_work()
-
-    def value(state):
-        actions = [a for a in range(problem.n_targets) if is_available(env, state, a)]
-        if not actions:
-            return terminal_value(env, state), {}
-        q = {a: action_value(state, a) for a in actions}
-        return max(q.values()), q
-
-    def action_value(state, a):
-        p, find_steps, miss_steps = expand_action(env, state, a, work)
-        total = 0.0
-        for found, prob, steps in ((True, p, find_steps), (False, 1.0 - p, miss_steps)):
-            if prob > 0.0:
-                child = tuple(x.copy() for x in state)
-                apply_outcome(env, child, a, found, steps, work)
-                total += prob * value(child)[0]
-        return total
-
     state = problem.root_state()
     if first is not None:
+        work = new_work()
         _, find_steps, miss_steps = expand_action(env, state, first[0], work)
         apply_outcome(env, state, first[0], first[1], find_steps if first[1] else miss_steps, work)
-    return value(state)[1]
+    return action_values(env, state)
 
 
 def test_ucb_picks_the_clearly_better_order():
