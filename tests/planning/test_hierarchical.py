@@ -104,7 +104,7 @@ def test_settings_default_effort_and_identity():
     assert default.canonical() == (
         '{"backup":"max","common_rollouts":false,"dwell":0.0,"estimator":"paper",'
         '"exploration":0.5,"iterations":100000,"max_weight":1.0,"miss":"drop",'
-        '"rollout":"uniform","rollout_epsilon":0.1,"root_split":"even","threads":1,'
+        '"passes":"ignore","rollout":"uniform","rollout_epsilon":0.1,"root_split":"even","threads":1,'
         '"time_limit":null}'
     )
     assert default.digest() != timed.digest()

@@ -342,3 +342,31 @@ def test_a_miss_drops_the_target_as_in_the_paper_or_keeps_it_to_pursue_again():
     assert again[0] < p and again[2] > miss_steps - intercept_of(env, sf, 0, 0)
     with pytest.raises(ValueError, match="miss must be one of"):
         problem.env(SubtaskOptions(miss="forget"))
+
+
+def test_passes_credit_the_targets_a_flight_crosses():
+    """``passes="credit"``: pursuing target 0 900 m east flies over target 1, 450 m east, whose
+    belief is small: it is measured at the closest approach (half-way, by the step rounding of
+    the MDP) and, dropped before, is back in the action list. Target 2, 400 m off the line, is
+    not measured; with the paper's ``"ignore"`` neither is."""
+    small = prior(100.0, 100.0, 0.0)
+    means = [[900, 0, 0, 0], [450, 0, 0, 0], [450, 400, 0, 0]]
+    problem = make_problem(means, [prior(), small, small], available=[True, False, True])
+    work = new_work()
+    for passes in ("ignore", "credit"):
+        state = problem.root_state()
+        si, sf, cov, step = state
+        env = problem.env(SubtaskOptions(passes=passes))
+        p, find_steps, miss_steps = expand_action(env, state, 0, work)
+        apply_outcome(env, state, 0, True, find_steps, work)
+        np.testing.assert_array_equal(cov[2], small)
+        if passes == "ignore":
+            assert (step[1], si[I_MASK]) == (0, 0b101)
+            np.testing.assert_array_equal(cov[1], small)
+        else:
+            k = math.floor(find_steps / 2 + 0.5)
+            assert (step[1], si[I_MASK]) == (k, 0b111)
+            np.testing.assert_allclose(cov[1], kalman(predict(small, 3e-4, k)), rtol=1e-9)
+        assert (si[I_STEP], si[I_LAST], step[0], step[2]) == (find_steps, 0, find_steps, 0)
+    with pytest.raises(ValueError, match="passes must be one of"):
+        problem.env(SubtaskOptions(passes="always"))

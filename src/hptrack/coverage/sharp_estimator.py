@@ -91,7 +91,7 @@ _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 
 
 @numba.njit(cache=True, inline="always")
-def _upper_tail(x):
+def upper_tail(x):
     """Standard normal ``P(X >= x)``."""
     return 0.5 * math.erfc(x * (1.0 / math.sqrt(2.0)))
 
@@ -136,9 +136,9 @@ def strip_mass(h_found, strip):
     # int_{-w_n}^{w_n} phi(y) P(X >= sqrt(h - y^2)) dy
     y0, y1, y2 = w * STRIP_NODES[0], w * STRIP_NODES[1], w * STRIP_NODES[2]
     return (
-        strip[3] * _upper_tail(math.sqrt(h_found - y0 * y0))
-        + strip[4] * _upper_tail(math.sqrt(h_found - y1 * y1))
-        + strip[5] * _upper_tail(math.sqrt(h_found - y2 * y2))
+        strip[3] * upper_tail(math.sqrt(h_found - y0 * y0))
+        + strip[4] * upper_tail(math.sqrt(h_found - y1 * y1))
+        + strip[5] * upper_tail(math.sqrt(h_found - y2 * y2))
     )
 
 
@@ -149,7 +149,7 @@ def _tail_sum(mu, sd, n):
     (those below count 1 each)."""
     if sd >= 1.0:
         a0, an = -mu / sd, (n - mu) / sd
-        g0, gn = _upper_tail(a0), _upper_tail(an)
+        g0, gn = upper_tail(a0), upper_tail(an)
         f0, fn = _density(a0), _density(an)
         integral = sd * ((f0 - a0 * g0) - (fn - an * gn))
         return integral - 0.5 * (g0 - gn) + (f0 - fn) / (12.0 * sd)
@@ -157,7 +157,7 @@ def _tail_sum(mu, sd, n):
     high = min(n, int(math.ceil(mu + 8.0 * sd)))
     total = float(low - 1)
     for m in range(low, high + 1):
-        total += _upper_tail((m - mu) / sd)
+        total += upper_tail((m - mu) / sd)
     return total
 
 

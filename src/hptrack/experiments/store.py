@@ -31,7 +31,7 @@ from hptrack.experiments.workers import process_alive
 from hptrack.interface import InputError
 from hptrack.settings import digest_of
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS episodes (
     planner TEXT NOT NULL,
@@ -107,30 +107,32 @@ def _migrate_2_to_3(db: sqlite3.Connection) -> None:
     db.execute("DROP TABLE episodes_layout_2")
 
 
-_ADDED_BY_LAYOUT_4 = {"mcts": {"miss": "drop"}}
-"""The mcts options that layout 4 adds to every identity, with the value every earlier run had."""
+def _adding(added: dict[str, dict]) -> Callable[[sqlite3.Connection], None]:
+    """A migration step that adds the options ``added[planner]`` to every identity of that
+    planner, with the values every earlier run had."""
 
+    def step(db: sqlite3.Connection) -> None:
+        db.create_function(
+            "with_added",
+            2,
+            lambda planner, text: _with_options(added, planner, text),
+            deterministic=True,
+        )
+        db.create_function("digest_of", 1, digest_of, deterministic=True)
+        db.execute("DELETE FROM claims")  # claims name the old hashes; their runs re-claim
+        db.execute(
+            "UPDATE OR IGNORE episodes SET "
+            "planner_settings = with_added(planner, planner_settings), "
+            "planner_settings_hash = digest_of(with_added(planner, planner_settings))"
+        )
 
-def _identity_4(planner: str, text: str) -> str:
-    """Layout 3 -> 4: the identity with the options added since (:data:`_ADDED_BY_LAYOUT_4`)."""
-    return _with_options(_ADDED_BY_LAYOUT_4, planner, text)
-
-
-def _migrate_3_to_4(db: sqlite3.Connection) -> None:
-    """The sub-task MDP's ``miss`` option in every mcts identity."""
-    db.create_function("identity_4", 2, _identity_4, deterministic=True)
-    db.create_function("digest_of", 1, digest_of, deterministic=True)
-    db.execute("DELETE FROM claims")  # claims name the old hashes; their runs re-claim
-    db.execute(
-        "UPDATE OR IGNORE episodes SET "
-        "planner_settings = identity_4(planner, planner_settings), "
-        "planner_settings_hash = digest_of(identity_4(planner, planner_settings))"
-    )
+    return step
 
 
 MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
     2: _migrate_2_to_3,
-    3: _migrate_3_to_4,
+    3: _adding({"mcts": {"miss": "drop"}}),  # the sub-task MDP's miss rule
+    4: _adding({"mcts": {"passes": "ignore"}}),  # ... and its credit of passes
 }
 """Layout version -> the step that makes a database of that layout one of the next."""
 

@@ -66,6 +66,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "estimator": "paper",
         "dwell": 0.0,
         "miss": "drop",
+        "passes": "ignore",
     },
     "improved": {
         "backup": "max",
@@ -76,6 +77,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "estimator": "paper",
         "dwell": 0.0,
         "miss": "drop",
+        "passes": "ignore",
     },
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
@@ -121,6 +123,9 @@ class MctsSettings(PlannerSettings):
             lengths gives one such action each, the search choosing; 0 (the paper): none.
         miss: ``"drop"`` (the paper): a missed target leaves the action list until it is
             measured by chance; ``"keep"``: it stays, and the search may pursue it again.
+        passes: ``"ignore"`` (the paper): the MDP credits a sub-task with its own target
+            only; ``"credit"``: also with the other targets its flight passes over
+            (:mod:`hptrack.planning.subtask_mdp`).
         threads: independent trees searched in parallel and merged (root parallelism), each
             with the effort above; 1 (the paper's single tree) unless the machine has spare
             cores.
@@ -144,6 +149,7 @@ class MctsSettings(PlannerSettings):
     estimator: Literal["paper", "sharp"] | None = None
     dwell: DwellLength | list[DwellLength] | None = None
     miss: Literal["drop", "keep"] | None = None
+    passes: Literal["ignore", "credit"] | None = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}

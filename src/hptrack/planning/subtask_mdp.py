@@ -55,6 +55,12 @@ just found and it ends strictly before the budget (otherwise it is the follow).
 **Kept misses** (``miss="keep"``, beyond the paper): a miss leaves the target in the action
 list, its belief unmeasured (its base unchanged), so it may be pursued again.
 
+**Passes credited** (``passes="credit"``, beyond the paper; the paper's ``"ignore"`` credits a
+sub-task with its own target only): every sub-task is taken as the straight flight from the
+agent's position to where it ends, and each other target whose belief that flight crosses with
+probability at least :data:`PASS_CREDIT` (:func:`pass_probability`) counts as measured at the
+closest approach, its covariance updated there, and back in the action list if it was missed.
+
 At the end of the budget, or when no action is available, the value of the state is ``-U``
 with ``U = sum_i log det Sigma^xy_i`` at step ``N``
 (Sec. III).
@@ -71,6 +77,7 @@ import numpy as np
 
 from hptrack.coverage.estimator import coverage_outcome
 from hptrack.coverage.intercept import approach_step, intercept_steps
+from hptrack.coverage.passes import pass_probability
 from hptrack.coverage.sharp_estimator import sharp_coverage_outcome
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.measurement import update_covariance
@@ -116,11 +123,14 @@ class SubtaskOptions(NamedTuple):
         miss: what a miss does to the missed target: ``"drop"`` (the paper) takes it out of
             the action list; ``"keep"`` leaves it in, its belief grown by the time spent, so
             the search may pursue it again.
+        passes: ``"ignore"`` (the paper): a sub-task measures its own target only;
+            ``"credit"``: also the other targets its flight passes over (module docstring).
     """
 
     estimator: str = "paper"
     dwell: float | tuple[float, ...] = 0.0
     miss: str = "drop"
+    passes: str = "ignore"
 
 
 PAPER_SUBTASK = SubtaskOptions()
@@ -153,6 +163,8 @@ class SubtaskEnv(NamedTuple):
         stay_steps: ``(k,)`` lengths of the dwell actions in steps (action ``n + j`` dwells
             ``stay_steps[j]``); empty: no dwell action (the paper).
         keep_missed: a miss leaves the target in the action list (``miss="keep"``).
+        credit_passes: other targets a sub-task's flight passes over are measured
+            (``passes="credit"``).
         memo: the estimator results of this search.
     """
 
@@ -163,6 +175,7 @@ class SubtaskEnv(NamedTuple):
     estimator: int
     stay_steps: np.ndarray
     keep_missed: bool
+    credit_passes: bool
     memo: Memo
 
 
@@ -283,6 +296,8 @@ class PlanningProblem:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {options.estimator!r}")
         if options.miss not in MISS_RULES:
             raise ValueError(f"miss must be one of {MISS_RULES}, got {options.miss!r}")
+        if options.passes not in PASS_RULES:
+            raise ValueError(f"passes must be one of {PASS_RULES}, got {options.passes!r}")
         n_steps = self.n_steps
         stays = stay_steps(self.mission.time_step, options.dwell)
         if self.current_action is not None and self.current_action >= self.n_targets + len(stays):
@@ -295,6 +310,7 @@ class PlanningProblem:
             ESTIMATORS.index(options.estimator),
             np.array(stays, dtype=np.int64),
             options.miss == "keep",
+            options.passes == "credit",
             new_memo(self.n_targets, n_steps),
         )
 
@@ -312,6 +328,15 @@ class PlanningProblem:
 
 MISS_RULES = ("drop", "keep")
 """What a miss does to the missed target (:attr:`SubtaskOptions.miss`)."""
+
+PASS_RULES = ("ignore", "credit")
+"""What a sub-task's flight does to the other targets it passes over
+(:attr:`SubtaskOptions.passes`)."""
+
+PASS_CREDIT = 0.5
+"""With ``passes="credit"``, the least probability of a pass (:func:`pass_probability`) that
+counts as a measurement: the MDP's state holds one belief per target, so a pass either
+measures a target or does not."""
 
 
 def n_actions(n_targets: int, options: SubtaskOptions) -> int:
@@ -542,10 +567,52 @@ def apply_outcome(env, state, a, found, payload, work):
         if not env.keep_missed:
             si[I_MASK] &= ~(np.int64(1) << a)
         si[I_LAST] = -1
-    si[I_STEP] = end
     x, y = mean_position_at(env.means[a], end * mission.time_step)
+    if env.credit_passes:
+        credit_passes(env, state, a, x, y, end, work[4])
+    si[I_STEP] = end
     sf[0] = x
     sf[1] = y
+
+
+@numba.njit(cache=True)
+def credit_passes(env, state, a, end_x, end_y, end, prior):
+    """Measure every target other than ``a`` that the flight from the agent's position (at the
+    state's step) to ``(end_x, end_y)`` (at step ``end``) passes over with probability at least
+    :data:`PASS_CREDIT`, at the step of the closest approach to its belief mean, and put it back
+    in the action list (``passes="credit"``). ``prior`` is 4x4 scratch."""
+    mission = env.mission
+    si, sf, base_cov, base_step = state
+    t = si[I_STEP]
+    tau = mission.time_step
+    duration = (end - t) * tau
+    vx, vy = (end_x - sf[0]) / duration, (end_y - sf[1]) / duration
+    for b in range(base_cov.shape[0]):
+        if b == a:
+            continue
+        m = env.means[b]
+        mx, my = mean_position_at(m, t * tau)
+        # the agent relative to b's mean: from (ox, oy), at (rx, ry) m/s
+        ox, oy, rx, ry = sf[0] - mx, sf[1] - my, vx - m[2], vy - m[3]
+        speed = math.sqrt(rx * rx + ry * ry)
+        if speed * duration > 1e-9:
+            dx, dy = rx / speed, ry / speed
+            closest = min(max(-(ox * dx + oy * dy) / speed, 0.0), duration)
+        else:
+            dx, dy, closest = 1.0, 0.0, 0.5 * duration
+        k = t + int(math.floor(closest / tau + 0.5))
+        if k <= base_step[b]:
+            continue
+        q = mission.process_noise[b]
+        sxx, sxy, syy = position_covariance_on(mission, base_cov[b], q, float(k - base_step[b]))
+        p = pass_probability(
+            ox, oy, dx, dy, speed * duration, sxx, sxy, syy, mission.footprint_radius
+        )
+        if p >= PASS_CREDIT:
+            predict_covariance_on(mission, base_cov[b], q, k - base_step[b], prior)
+            update_covariance(prior, mission.measurement_noise, base_cov[b])
+            base_step[b] = k
+            si[I_MASK] |= np.int64(1) << b
 
 
 @numba.njit(cache=True)
