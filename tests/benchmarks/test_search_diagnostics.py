@@ -152,3 +152,16 @@ def test_subtasks_lists_each_pursuit_with_its_estimate(diagnostics, capsys):
         assert re.search(
             r"U = \d+\.\d\d; p[12] (found|missed) \(p_find [01]\.\d\d, \d+\.\d s\)", line
         )
+
+
+def test_optimum_prints_the_exact_best_plan_per_estimator(diagnostics, capsys):
+    """The paper's flight: each estimator's exact optimum (the values the MDP tests check),
+    the search's value, the switches of the best plan and the value of following instead."""
+    scenario = Path(__file__).parents[2] / "examples" / "paper-flight.yaml"
+    diagnostics.optimum(scenario, 2000, "drop")
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split(":")[0] for line in lines] == ["paper", "sharp"]
+    assert lines[0].startswith("paper: best expected U 15.61 (211 states; the search, 2000 ")
+    assert "switches 17;" in lines[0] and "following it 16.05, best 14.72" in lines[0]
+    assert lines[1].startswith("sharp: best expected U 7.12 (319 states;")
+    assert "switches 26;" in lines[1] and "following it 16.05, best 6.60" in lines[1]
