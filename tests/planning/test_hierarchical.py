@@ -321,3 +321,16 @@ def test_a_kept_miss_leaves_the_target_available_to_the_planner():
                 and not record.detections[entry["end_step"] :, entry["target_index"]].any()
             ):
                 assert not again
+
+
+def test_credited_passes_fly_end_to_end_and_name_themselves():
+    """``passes="credit"`` reaches the MDP, enters the identity, and a mission flies with it."""
+    settings = MctsSettings.from_options("mcts", {"passes": "credit"})
+    assert settings.subtask_options().passes == "credit"
+    assert '"passes":"credit"' in settings.canonical()
+    with pytest.raises(InputError, match=r"option passes must be 'ignore' or 'credit'"):
+        MctsSettings.from_options("mcts", {"passes": "always"})
+    record = run_episode(
+        random_scenario(6, seed=3, homogeneous=True), mcts(iterations=300, passes="credit")
+    )
+    assert np.isfinite(record.uncertainty) and record.info["subtasks"]
