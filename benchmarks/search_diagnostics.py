@@ -232,18 +232,14 @@ def optimum(path: Path, iterations: int, miss: str) -> None:
     value with ``iterations`` simulations."""
     from hptrack.planning import PlanningProblem, search
     from hptrack.planning.hierarchical import MctsSettings
-    from hptrack.planning.subtask_mdp import SubtaskOptions, apply_outcome
+    from hptrack.planning.subtask_mdp import SubtaskOptions, apply_outcome, new_work
     from hptrack.planning.subtask_optimum import action_values, optimal_plan
     from hptrack.scenario.io import load_scenario
 
     scenario = load_scenario(path)
     ids = scenario.target_ids
-    problem = PlanningProblem(
-        scenario.mission_spec().record,
-        np.array(scenario.agent.position, dtype=float),
-        np.array([t.mean for t in scenario.targets]),
-        np.array([t.covariance for t in scenario.targets]),
-        scenario.budget,
+    problem = PlanningProblem.from_observation(
+        scenario.mission_spec().record, scenario.initial_observation()
     )
     for estimator in ("paper", "sharp"):
         options = SubtaskOptions(estimator=estimator, miss=miss)
@@ -254,7 +250,7 @@ def optimum(path: Path, iterations: int, miss: str) -> None:
             continue
         env, state = problem.env(options), problem.root_state()
         first = best.actions[0]
-        apply_outcome(env, state, first, True, best.steps[0], np.zeros((5, 4, 4)))
+        apply_outcome(env, state, first, True, best.steps[0], new_work())
         after = action_values(env, state)
         settings = MctsSettings(preset="improved", estimator=estimator, miss=miss)
         found = search(problem, settings.search_options(), options, iterations=iterations)

@@ -4,7 +4,6 @@ tree search converging to it."""
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from hptrack.planning import PlanningProblem, search
@@ -19,12 +18,10 @@ EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "paper-flight.yaml"
 def paper_flight(budget=None):
     """The root of the paper's flight (two targets 20 m apart), its budget shortened if asked."""
     scenario = load_scenario(EXAMPLE)
-    return PlanningProblem(
-        scenario.mission_spec().record,
-        np.array(scenario.agent.position, dtype=float),
-        np.array([t.mean for t in scenario.targets]),
-        np.array([t.covariance for t in scenario.targets]),
-        scenario.budget if budget is None else budget,
+    if budget is not None:
+        scenario = scenario.model_copy(update={"budget": budget})
+    return PlanningProblem.from_observation(
+        scenario.mission_spec().record, scenario.initial_observation()
     )
 
 
