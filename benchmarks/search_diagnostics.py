@@ -15,6 +15,8 @@
     python3 benchmarks/search_diagnostics.py rollouts --targets 6,12
     # the sub-tasks each preset flies on a scenario file, each pursuit with its estimate
     python3 benchmarks/search_diagnostics.py subtasks examples/paper-flight.yaml --seed 0
+    python3 benchmarks/search_diagnostics.py subtasks examples/paper-flight.yaml --seed 6 \\
+        --options '{"estimator": "sharp", "miss": "keep"}'
     # the MDP's exact best plan from a small scenario's start, per estimator, against the search
     python3 benchmarks/search_diagnostics.py optimum examples/paper-flight.yaml
     # how well the MDP predicts the sub-tasks flown: durations and find rates, per n and outcome
@@ -198,10 +200,10 @@ def rollouts(targets: list[int], count: int) -> None:
             )
 
 
-def subtasks(path: Path, iterations: int, seed: int | None = None) -> None:
-    """The sub-tasks each preset flies on a scenario file (seed: the file's, or ``seed``); a
-    pursuit is shown with the MDP's estimate when it started: ``p_find``, and the intercept
-    plus the expected time to find, s."""
+def subtasks(path: Path, iterations: int, seed: int | None = None, options: str = "{}") -> None:
+    """The sub-tasks each preset flies on a scenario file (seed: the file's, or ``seed``;
+    ``options``: more mcts options, JSON); a pursuit is shown with the MDP's estimate when it
+    started: ``p_find``, and the intercept plus the expected time to find, s."""
     from hptrack.registry import make_planner
     from hptrack.scenario.io import load_scenario
     from hptrack.sim.episode import run_episode
@@ -211,7 +213,9 @@ def subtasks(path: Path, iterations: int, seed: int | None = None) -> None:
     for preset in ("paper", "improved"):
         record = run_episode(
             scenario,
-            make_planner("mcts", {"preset": preset, "iterations": iterations}),
+            make_planner(
+                "mcts", {"preset": preset, "iterations": iterations, **json.loads(options)}
+            ),
             seed=seed,
         )
         steps = [
@@ -401,6 +405,7 @@ def main() -> None:
     p.add_argument("scenario", type=Path)
     p.add_argument("--iterations", type=int, default=100_000)
     p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--options", default="{}", help="more mcts options, JSON")
     p = sub.add_parser("optimum")
     p.add_argument("scenario", type=Path)
     p.add_argument("--iterations", type=int, default=100_000)
@@ -431,7 +436,7 @@ def main() -> None:
     elif args.command == "optimum":
         optimum(args.scenario, args.iterations, args.miss)
     else:
-        subtasks(args.scenario, args.iterations, args.seed)
+        subtasks(args.scenario, args.iterations, args.seed, args.options)
 
 
 if __name__ == "__main__":

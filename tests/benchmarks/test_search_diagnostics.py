@@ -165,3 +165,15 @@ def test_optimum_prints_the_exact_best_plan_per_estimator(diagnostics, capsys):
     assert "switches 17;" in lines[0] and "following it 16.05, best 14.72" in lines[0]
     assert lines[1].startswith("sharp: best expected U 7.12 (319 states;")
     assert "switches 26;" in lines[1] and "following it 16.05, best 6.60" in lines[1]
+
+
+def test_subtasks_takes_more_options(diagnostics, capsys):
+    """``--options`` reaches both presets' planners: an unknown value is refused by them."""
+    scenario = Path(__file__).parents[2] / "examples" / "paper-flight.yaml"
+    diagnostics.subtasks(scenario, 200, seed=0, options='{"estimator": "sharp"}')
+    assert [line.split(":")[0] for line in capsys.readouterr().out.splitlines()] == [
+        "paper",
+        "improved",
+    ]
+    with pytest.raises(Exception, match="estimator"):
+        diagnostics.subtasks(scenario, 200, seed=0, options='{"estimator": "blunt"}')
