@@ -33,15 +33,15 @@ def plain_python_search() -> object:
     rollout = importlib.import_module("hptrack.planning.rollout")
     backups = importlib.import_module("hptrack.planning.backups")
 
-    def back_up(backup, tree, path_state, path_action, path_found, depth, ret):
-        backups.back_sampled(backup, tree, path_state, path_action, path_found, depth, ret)
+    def back_up(backup, tree, path_state, path_action, path_outcome, depth, ret):
+        backups.back_sampled(backup, tree, path_state, path_action, path_outcome, depth, ret)
         tree.value_range[0] = min(tree.value_range[0], ret)
         tree.value_range[1] = max(tree.value_range[1], ret)
         tree.counts[2] += 1
 
     search.mdp_copy_state = mdp.copy_state
     search.mdp_is_available = mdp.is_available
-    search.mdp_expand = mdp.expand_action
+    search.mdp_expand = mdp.expand_outcomes
     search.mdp_apply = mdp.apply_outcome
     search.mdp_value = mdp.terminal_value
     rollout.mdp_is_available = mdp.is_available

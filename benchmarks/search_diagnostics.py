@@ -169,7 +169,8 @@ def rollouts(targets: list[int], count: int) -> None:
                 follows += a == state[0][mdp.I_LAST]
                 p, payload0, payload1 = mdp.expand_action(env, state, a, work)
                 found = uniform(rng) < p
-                mdp.apply_outcome(env, state, a, found, payload0 if found else payload1, work)
+                outcome, payload = (mdp.FIND, payload0) if found else (mdp.MISS, payload1)
+                mdp.apply_outcome(env, state, a, outcome, payload, work)
                 subtasks += 1
             total += mdp.terminal_value(env, state)
         return subtasks, follows, total
@@ -236,7 +237,7 @@ def optimum(path: Path, iterations: int, miss: str) -> None:
     value with ``iterations`` simulations."""
     from hptrack.planning import PlanningProblem, search
     from hptrack.planning.hierarchical import MctsSettings
-    from hptrack.planning.subtask_mdp import SubtaskOptions, apply_outcome, new_work
+    from hptrack.planning.subtask_mdp import FIND, SubtaskOptions, apply_outcome, new_work
     from hptrack.planning.subtask_optimum import action_values, optimal_plan
     from hptrack.scenario.io import load_scenario
 
@@ -254,7 +255,7 @@ def optimum(path: Path, iterations: int, miss: str) -> None:
             continue
         env, state = problem.env(options), problem.root_state()
         first = best.actions[0]
-        apply_outcome(env, state, first, True, best.steps[0], new_work())
+        apply_outcome(env, state, first, FIND, best.steps[0], new_work())
         after = action_values(env, state)
         settings = MctsSettings(preset="improved", estimator=estimator, miss=miss)
         found = search(problem, settings.search_options(), options, iterations=iterations)

@@ -12,7 +12,7 @@ from hptrack.models.motion import position_covariance_after
 from hptrack.planning import SearchOptions, search, search_mdp
 from hptrack.planning.backups import Expected, Max, Robust, back_max, backup_of
 from hptrack.planning.search import _root_outcome
-from hptrack.planning.subtask_mdp import intercept_of, is_available
+from hptrack.planning.subtask_mdp import FIND, MISS, intercept_of, is_available
 from hptrack.planning.subtask_rollout import (
     MostUncertain,
     Nearest,
@@ -63,9 +63,10 @@ def test_max_backup_matches_expectimax_on_the_subtask_mdp():
     result = search(two_targets(), MAX, iterations=30000, seed=0)
     np.testing.assert_allclose(result.root.values, [exact[0], exact[1]], rtol=1e-9)
     after = search(two_targets(current_action=0), MAX, iterations=30000, seed=1)
-    exact_after = expectimax(two_targets(), first=(0, True))
+    exact_after = expectimax(two_targets(), first=(0, FIND))
+    after_find = after.after[FIND]
     np.testing.assert_allclose(
-        after.after_find.values, [exact_after[a] for a in after.after_find.actions], rtol=1e-9
+        after_find.values, [exact_after[a] for a in after_find.actions], rtol=1e-9
     )
 
 
@@ -182,7 +183,7 @@ def test_root_parallel_trees_merge_their_statistics():
     assert merged.best_action == merged.root.best
     assert merge_stats([None, None]) is None
     plan = search(six_targets(current_action=2), iterations=1000, seed=1, threads=2)
-    assert plan.best_action == 2 and plan.after_find.visits.sum() > 0
+    assert plan.best_action == 2 and plan.after[FIND].visits.sum() > 0
 
 
 def test_robust_backup_finds_the_gamble_optimum_with_values_between_mean_and_max():
@@ -211,9 +212,9 @@ def test_mixmax_backup_mixes_the_best_action_and_the_mean_return(weight):
     tree.s_first[1], tree.s_count[1] = 1, 2
     tree.a_p[:3] = 1.0
     tree.a_child[0, 0] = 1
-    path_state, path_found = np.array([0, 1]), np.array([True, True])
+    path_state, path_outcome = np.array([0, 1]), np.array([FIND, FIND])
     for x, ret in ((1, -10.0), (2, -20.0)):
-        back_max(Max(weight), tree, path_state, np.array([0, x]), path_found, 2, ret)
+        back_max(Max(weight), tree, path_state, np.array([0, x]), path_outcome, 2, ret)
     assert tree.a_value[0] == weight * -10.0 + (1.0 - weight) * -15.0
     assert list(tree.a_value[1:3]) == [-10.0, -20.0]
 
@@ -240,26 +241,39 @@ def test_even_root_split_alternates_and_the_weighted_split_follows_the_probabili
     """Even: simulation ``k`` takes the find exactly when ``k`` is odd (the paper's rule).
     Weighted: after ``K`` simulations the find had ``floor(K f)`` of them, with
     ``f = p^(2/3) / (p^(2/3) + (1 - p)^(2/3))``."""
-    assert [_root_outcome(k, 0.9, False) for k in range(10)] == [k % 2 == 1 for k in range(10)]
+    two = np.array([0.9, 1.0 - 0.9])
+    assert [_root_outcome(k, two, False) for k in range(10)] == [
+        FIND if k % 2 == 1 else MISS for k in range(10)
+    ]
     for p in (0.5, 0.9, 0.99):
         f = p ** (2 / 3) / (p ** (2 / 3) + (1 - p) ** (2 / 3))
         for total in (10, 101, 1000):
-            finds = sum(_root_outcome(k, p, True) for k in range(total))
-            assert finds == int(np.floor(total * f))
+            outcomes = [_root_outcome(k, np.array([p, 1.0 - p]), True) for k in range(total)]
+            assert outcomes.count(FIND) == int(np.floor(total * f))
+
+
+def test_root_split_over_three_outcomes_gives_each_its_share_in_turn():
+    """Three outcomes, one impossible: even, the two possible ones alternate and the impossible
+    one gets none; weighted, after ``K`` simulations outcome 0 had ``floor(K f_0)`` and each
+    count is within one of ``K f_o``, ``f_o`` proportional to ``p_o^(2/3)``."""
+    p = np.array([0.6, 0.0, 0.4])
+    assert [_root_outcome(k, p, False) for k in range(6)] == [2, 0, 2, 0, 2, 0]
+    p = np.array([0.7, 0.2, 0.1])
+    w = p ** (2 / 3)
+    for total in (10, 101, 1000):
+        counts = np.bincount([_root_outcome(k, p, True) for k in range(total)], minlength=3)
+        assert counts[0] == int(np.floor(total * w[0] / w.sum()))
+        assert np.all(np.abs(counts - total * w / w.sum()) <= 1.0)
 
 
 def test_weighted_root_split_gives_the_likely_outcome_more_simulations():
     problem = six_targets(current_action=0)
     even = search(problem, MAX, iterations=4000, seed=1)
     weighted = search(problem, MAX._replace(root_split="weighted"), iterations=4000, seed=1)
-    p = even.root.p_find[0]
+    p = even.root.p[0, FIND]
     assert 0.5 < p < 1.0
-    share = weighted.after_find.visits.sum() / (
-        weighted.after_find.visits.sum() + weighted.after_miss.visits.sum()
-    )
-    even_share = even.after_find.visits.sum() / (
-        even.after_find.visits.sum() + even.after_miss.visits.sum()
-    )
+    share = weighted.after[FIND].visits.sum() / sum(a.visits.sum() for a in weighted.after)
+    even_share = even.after[FIND].visits.sum() / sum(a.visits.sum() for a in even.after)
     f = p ** (2 / 3) / (p ** (2 / 3) + (1 - p) ** (2 / 3))
     assert abs(even_share - 0.5) < 0.01 and abs(share - f) < 0.01
 

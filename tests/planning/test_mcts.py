@@ -10,7 +10,7 @@ import pytest
 from hptrack.models.mission import mission_record
 from hptrack.planning import PlanningProblem, search
 from hptrack.planning.search import SearchOptions, run_simulations
-from hptrack.planning.subtask_mdp import apply_outcome, expand_action, new_work
+from hptrack.planning.subtask_mdp import FIND, MISS, apply_outcome, expand_action, new_work
 from hptrack.planning.subtask_optimum import action_values
 from hptrack.planning.tree import grow_tree, new_tree
 
@@ -43,13 +43,14 @@ def six_targets(seed=0, **kw):
 
 def expectimax(problem, first=None):
     """Exact values ``-E[U]`` of the root's actions under the optimal policy (small MDPs), or
-    with ``first = (action, found)`` of the actions after that first sub-task."""
+    with ``first = (action, outcome)`` of the actions after that first sub-task."""
     env = problem.env()
     state = problem.root_state()
     if first is not None:
         work = new_work()
         _, find_steps, miss_steps = expand_action(env, state, first[0], work)
-        apply_outcome(env, state, first[0], first[1], find_steps if first[1] else miss_steps, work)
+        payload = find_steps if first[1] == FIND else miss_steps
+        apply_outcome(env, state, first[0], first[1], payload, work)
     return action_values(env, state)
 
 
@@ -70,23 +71,24 @@ def test_replanning_returns_one_action_per_outcome():
     assert result.root.visits.tolist() == [result.simulations - 1]
     # after finding target 0 both targets remain (0 again = follow it to the end); after a
     # miss only target 1 is left
-    assert result.after_find.actions.tolist() == [0, 1]
-    assert result.after_miss.actions.tolist() == [1]
-    assert result.best_after_find in (0, 1)
-    assert result.best_after_miss == 1
-    assert result.after_find.visits.sum() + result.after_miss.visits.sum() <= result.simulations
-    exact = expectimax(two_targets(), first=(0, True))
-    assert result.best_after_find == max(exact, key=exact.get)
+    after_find, after_miss = result.after
+    assert after_find.actions.tolist() == [0, 1]
+    assert after_miss.actions.tolist() == [1]
+    assert result.best_after(FIND) in (0, 1)
+    assert result.best_after(MISS) == 1
+    assert after_find.visits.sum() + after_miss.visits.sum() <= result.simulations
+    exact = expectimax(two_targets(), first=(0, FIND))
+    assert result.best_after(FIND) == max(exact, key=exact.get)
 
 
 def test_replanning_with_six_targets():
     result = search(replace(six_targets(3), current_action=2), iterations=5000, seed=2)
-    for stats in (result.after_find, result.after_miss):
+    for stats in result.after:
         assert stats.visits.sum() > 0
         visited = stats.visits > 0
         assert stats.best == stats.actions[visited][np.argmax(stats.values[visited])]
-    assert 2 in result.after_find.actions
-    assert 2 not in result.after_miss.actions
+    assert 2 in result.after[FIND].actions
+    assert 2 not in result.after[MISS].actions
 
 
 def test_same_seed_and_iterations_give_the_same_plan():
@@ -94,7 +96,7 @@ def test_same_seed_and_iterations_give_the_same_plan():
     b = search(six_targets(), iterations=1500, seed=7)
     c = search(six_targets(), iterations=1500, seed=8)
     assert a.best_action == b.best_action
-    for name in ("actions", "visits", "values", "p_find", "find_steps", "miss_steps"):
+    for name in ("actions", "visits", "values", "p", "payload"):
         np.testing.assert_array_equal(getattr(a.root, name), getattr(b.root, name))
     assert (a.state_nodes, a.action_nodes) == (b.state_nodes, b.action_nodes)
     assert not np.array_equal(a.root.visits, c.root.visits)

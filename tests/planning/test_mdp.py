@@ -10,9 +10,11 @@ from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import mission_record
 from hptrack.models.motion import ConstantVelocityModel
 from hptrack.planning.subtask_mdp import (
+    FIND,
     I_LAST,
     I_MASK,
     I_STEP,
+    MISS,
     PlanningProblem,
     SubtaskOptions,
     apply_outcome,
@@ -134,7 +136,7 @@ def test_find_miss_and_terminal_transitions_by_hand():
     work = new_work()
     p, find_steps, miss_steps = expand_action(env, state, 0, work)
     # find target 0: its belief is the posterior of a measurement at the end of the sub-task
-    apply_outcome(env, state, 0, True, find_steps, work)
+    apply_outcome(env, state, 0, FIND, find_steps, work)
     t1 = find_steps
     assert (si[I_STEP], si[I_MASK], si[I_LAST]) == (t1, 0b11, 0)
     np.testing.assert_allclose(sf, means[0, :2] + means[0, 2:] * t1 * TAU, rtol=1e-12)
@@ -152,7 +154,7 @@ def test_find_miss_and_terminal_transitions_by_hand():
     assert ic1 == math.ceil(t_hand / TAU)
     assert (p1, find1, miss1) == (pytest.approx(p_hand, rel=1e-12), ic1 + round(expected), ic1 + k)
     # miss target 1: it leaves the action list, nothing found
-    apply_outcome(env, state, 1, False, miss1, work)
+    apply_outcome(env, state, 1, MISS, miss1, work)
     t2 = t1 + miss1
     assert (si[I_STEP], si[I_MASK], si[I_LAST]) == (t2, 0b01, -1)
     np.testing.assert_allclose(sf, means[1, :2] + means[1, 2:] * t2 * TAU, rtol=1e-12)
@@ -180,10 +182,10 @@ def test_follow_to_the_end_after_a_find():
     model = env
     work = new_work()
     _, find_steps, _ = expand_action(env, state, 0, work)
-    apply_outcome(env, state, 0, True, find_steps, work)
+    apply_outcome(env, state, 0, FIND, find_steps, work)
     left = model.n_steps - find_steps
     assert expand_action(env, state, 0, work) == (1.0, left, left)
-    apply_outcome(env, state, 0, True, left, work)
+    apply_outcome(env, state, 0, FIND, left, work)
     expected = kalman(predict(prior(), q, find_steps))
     for _ in range(left):
         expected = kalman(predict(expected, q, 1))
@@ -260,10 +262,10 @@ def test_dwell_measures_the_target_just_found_at_every_step_and_keeps_it_last():
     work = new_work()
     assert not is_available(env, state, 2)  # nothing found yet
     _, find_steps, _ = expand_action(env, state, 0, work)
-    apply_outcome(env, state, 0, True, find_steps, work)
+    apply_outcome(env, state, 0, FIND, find_steps, work)
     assert is_available(env, state, 2)
     assert expand_action(env, state, 2, work) == (1.0, 20, 20)
-    apply_outcome(env, state, 2, True, 20, work)
+    apply_outcome(env, state, 2, FIND, 20, work)
     expected = kalman(predict(prior(), q, find_steps))
     for _ in range(20):
         expected = kalman(predict(expected, q, 1))
@@ -273,11 +275,11 @@ def test_dwell_measures_the_target_just_found_at_every_step_and_keeps_it_last():
     np.testing.assert_allclose(sf, [900 + end * TAU, end * TAU])
     # dwelling, then following to the end, is following from the find to the end
     left = env.n_steps - end
-    apply_outcome(env, state, 0, True, expand_action(env, state, 0, work)[1], work)
+    apply_outcome(env, state, 0, FIND, expand_action(env, state, 0, work)[1], work)
     followed = make_problem(means, [prior(), prior()])
     env2, state2, si2, sf2, cov2, step2 = setup(followed)
-    apply_outcome(env2, state2, 0, True, find_steps, work)
-    apply_outcome(env2, state2, 0, True, 20 + left, work)
+    apply_outcome(env2, state2, 0, FIND, find_steps, work)
+    apply_outcome(env2, state2, 0, FIND, 20 + left, work)
     np.testing.assert_allclose(cov[0], cov2[0], rtol=1e-9, atol=1e-12)
     assert terminal_value(env, state) == pytest.approx(terminal_value(env2, state2), rel=1e-12)
 
@@ -315,10 +317,10 @@ def test_several_dwell_lengths_are_one_action_each_after_the_targets():
     assert env.stay_steps.tolist() == [10, 20, 80]
     assert [is_available(env, state, a) for a in (2, 3, 4)] == [True, True, False]  # 60 left
     assert expand_action(env, state, 3, work) == (1.0, 20, 20)
-    apply_outcome(env, state, 3, True, 20, work)
+    apply_outcome(env, state, 3, FIND, 20, work)
     single = make_problem(means, [prior(), prior()], budget=30.0, last_found=0)
     env1, state1, *_ = setup(single, dwell=10.0)
-    apply_outcome(env1, state1, 2, True, 20, work)
+    apply_outcome(env1, state1, 2, FIND, 20, work)
     np.testing.assert_array_equal(state[2], state1[2])
     assert state[0].tolist() == state1[0].tolist() == [20, 0b11, 0]
     with pytest.raises(ValueError, match="current_action=5"):
@@ -334,7 +336,7 @@ def test_a_miss_drops_the_target_as_in_the_paper_or_keeps_it_to_pursue_again():
     for miss, mask in (("drop", 0b10), ("keep", 0b11)):
         env, state, si, sf, cov, step = setup(problem, miss=miss)
         p, find_steps, miss_steps = expand_action(env, state, 0, work)
-        apply_outcome(env, state, 0, False, miss_steps, work)
+        apply_outcome(env, state, 0, MISS, miss_steps, work)
         assert (si[I_STEP], si[I_MASK], si[I_LAST], step[0]) == (miss_steps, mask, -1, 0)
         np.testing.assert_array_equal(cov[0], prior())
         assert is_available(env, state, 0) == (miss == "keep")
@@ -358,7 +360,7 @@ def test_passes_credit_the_targets_a_flight_crosses():
         si, sf, cov, step = state
         env = problem.env(SubtaskOptions(passes=passes))
         p, find_steps, miss_steps = expand_action(env, state, 0, work)
-        apply_outcome(env, state, 0, True, find_steps, work)
+        apply_outcome(env, state, 0, FIND, find_steps, work)
         np.testing.assert_array_equal(cov[2], small)
         if passes == "ignore":
             assert (step[1], si[I_MASK]) == (0, 0b101)

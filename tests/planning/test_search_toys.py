@@ -1,7 +1,7 @@
 """The tree search (paper Algorithm 1) apart from the sub-task MDP, on toy MDPs whose answers are
 known exactly: a one-action problem (the running-mean backup), a two-armed bandit (exact visit
-counts from the textbook UCB1 rule and the published splitmix64 stream) and a three-step gamble
-solved by expectimax."""
+counts from the textbook UCB1 rule and the published splitmix64 stream), a three-step gamble
+solved by expectimax, and a dice game whose actions have three chance outcomes."""
 
 import math
 import os
@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from hptrack.planning import MdpKernels, register_mdp, search_mdp
-from hptrack.planning.search import DEFAULT_EXPLORATION
+from hptrack.planning.backups import Max
+from hptrack.planning.search import DEFAULT_EXPLORATION, SearchOptions
 
 MASK64 = 2**64 - 1
 
@@ -56,14 +57,15 @@ def bandit_available(env, state, a):
 
 
 @numba.njit
-def bandit_expand(env, state, a, work):
-    return env.p[a], 0, 0
+def bandit_expand(env, state, a, p, payload, work):
+    p[0], p[1] = env.p[a], 1.0 - env.p[a]
+    payload[0] = payload[1] = 0
 
 
 @numba.njit
-def bandit_apply(env, state, a, found, payload, work):
+def bandit_apply(env, state, a, outcome, payload, work):
     state[0][0] = a
-    state[0][1] = 1 if found else 0
+    state[0][1] = 1 if outcome == 0 else 0
 
 
 @numba.njit
@@ -166,12 +168,13 @@ def gamble_available(env, state, a):
 
 
 @numba.njit
-def gamble_expand(env, state, a, work):
-    return env.p[a], env.reward[a], 0
+def gamble_expand(env, state, a, p, payload, work):
+    p[0], p[1] = env.p[a], 1.0 - env.p[a]
+    payload[0], payload[1] = env.reward[a], 0
 
 
 @numba.njit
-def gamble_apply(env, state, a, found, payload, work):
+def gamble_apply(env, state, a, outcome, payload, work):
     state[0][0] += 1
     state[0][1] += payload
 
@@ -268,3 +271,123 @@ def test_an_mdp_declaring_more_actions_than_the_tree_holds_is_refused():
     root = (np.array([-1, 0], dtype=np.int64),)
     with pytest.raises(ValueError, match=f"declares {MAX_ACTIONS + 1} actions; the search takes"):
         search_mdp(env, root, MAX_ACTIONS + 1, 2, np.zeros(1), iterations=1)
+
+
+# --- dice: two throws, each of one of three dice with three faces (an impossible one) ---------
+class Dice(NamedTuple):
+    """The gamble's state ``[throws, score]`` and kernels, but each die has three faces."""
+
+    p: np.ndarray  # (dice, faces): each face's probability
+    reward: np.ndarray  # (dice, faces): each face's points
+    steps: int
+    goal: float
+
+
+@numba.njit
+def dice_expand(env, state, a, p, payload, work):
+    for o in range(env.p.shape[1]):
+        p[o] = env.p[a, o]
+        payload[o] = env.reward[a, o]
+
+
+register_mdp(
+    Dice,
+    MdpKernels(
+        gamble_copy,
+        gamble_available,
+        dice_expand,
+        gamble_apply,
+        gamble_value,
+        n_outcomes=lambda env: env.p.shape[1],
+    ),
+)
+
+DICE = Dice(
+    np.array([[0.5, 0.3, 0.2], [0.1, 0.8, 0.1], [0.6, 0.0, 0.4]]),
+    np.array([[0, 1, 3], [0, 2, 4], [0, 1, 5]]),
+    2,
+    5.0,
+)
+
+
+@cache
+def dice_value_exact(throws: int, score: int) -> float:
+    """Expectimax over three outcomes: the optimal expected value of a state."""
+    if throws == DICE.steps:
+        return -((score - DICE.goal) ** 2)
+    return max(dice_q_exact(throws, score, a) for a in range(3))
+
+
+def dice_q_exact(throws: int, score: int, a: int) -> float:
+    return sum(
+        DICE.p[a, o] * dice_value_exact(throws + 1, score + int(DICE.reward[a, o]))
+        for o in range(3)
+        if DICE.p[a, o] > 0.0
+    )
+
+
+MAX = SearchOptions(backup=Max())
+
+
+def dice_search(iterations, seed, fixed=-1):
+    root = (np.zeros(2, dtype=np.int64),)
+    return search_mdp(
+        DICE, root, 3, 3, np.zeros(1), MAX, iterations=iterations, seed=seed, fixed=fixed
+    )
+
+
+def test_three_outcomes_reach_the_expectimax_values_exactly():
+    """With the max backup the search over 3 x 3 outcomes per throw ends with the exact
+    expectimax values of every root action once the tree holds the whole game."""
+    exact = [dice_q_exact(0, 0, a) for a in range(3)]
+    assert sorted(exact)[-1] - sorted(exact)[-2] > 0.3  # a clear optimum
+    result = dice_search(5000, 3)
+    assert result.root.p.shape == (3, 3)
+    np.testing.assert_array_equal(result.root.p, DICE.p)
+    np.testing.assert_array_equal(result.root.payload, DICE.reward)
+    np.testing.assert_allclose(result.root.values, exact, rtol=1e-12)
+    assert result.best_action == int(np.argmax(exact))
+
+
+def test_replanning_with_three_outcomes_plans_after_each_and_shares_the_root_evenly():
+    """The current action fixed: one plan per outcome, each the exact best next throw, and the
+    simulations after the first shared evenly among the three outcomes."""
+    sims = 3001
+    result = dice_search(sims, 4, fixed=0)
+    assert len(result.after) == 3
+    for o in range(3):
+        exact = [dice_q_exact(1, int(DICE.reward[0, o]), a) for a in range(3)]
+        np.testing.assert_allclose(result.after[o].values, exact, rtol=1e-12)
+        assert result.best_after(o) == int(np.argmax(exact))
+    shares = [result.after[o].visits.sum() for o in range(3)]
+    assert max(shares) - min(shares) <= 1 and sum(shares) >= sims - 4
+
+
+def test_an_impossible_outcome_is_never_drawn_nor_planned():
+    """Die 2 never shows its middle face: after fixing it, that outcome's child is never
+    reached, so no plan exists for it."""
+    result = dice_search(600, 5, fixed=2)
+    assert result.after[1] is None and result.best_after(1) is None
+    assert result.after[0].visits.sum() > 0 and result.after[2].visits.sum() > 0
+
+
+def test_outcome_draws_over_three_faces_follow_the_stream():
+    """One throw of one die: after the root's rollout, each simulation draws a face from the
+    tree's stream (face ``o`` when ``u`` falls in its share of ``[0, 1)``, in order) and the
+    paper's backup keeps the running mean of the returns, exactly."""
+    one = Dice(DICE.p[:1], DICE.reward[:1], 1, 5.0)
+    seed, sims = 9, 40
+    stream = Stream(seed)
+    stream.uniform()  # the rollout's choice of the only action
+    stream.uniform()  # ... and its face
+    cumulative = np.cumsum(one.p[0])
+    returns = []
+    for _ in range(sims - 1):
+        face = min(int(np.searchsorted(cumulative, stream.uniform(), side="right")), 2)
+        returns.append(-((one.reward[0, face] - one.goal) ** 2))
+    result = search_mdp(
+        one, (np.zeros(2, dtype=np.int64),), 1, 2, np.zeros(1), iterations=sims, seed=seed
+    )
+    assert result.root.visits.tolist() == [sims - 1]
+    assert result.root.values[0] == pytest.approx(np.mean(returns), rel=1e-12)
+    assert len(set(returns)) == 3  # the seed shows every face

@@ -1,19 +1,20 @@
 """The backups of the tree search (paper Algorithm 1 lines 31-33 and three alternatives),
-registered like the rollout policies (:mod:`hptrack.planning.rollout`).
+registered like the rollout policies (`hptrack.planning.rollout`).
 
 A backup is a ``NamedTuple`` class (its fields are its parameters) registered with
-:func:`register_backup` and a compiled kernel ``back(backup, tree, path_state, path_action,
-path_found, depth, ret)`` that backs the return ``ret`` of one simulation up its path of
-``depth`` (state node, action node, outcome) triples; ``pairs_outcomes`` says whether it keeps a
-value per outcome (then the search's second visit of an action takes the outcome not yet
-visited: both values are combined with the known ``p``, so both are needed). Compiled code
-calls :func:`back_up`, dispatched on the backup's class, so the search is compiled (and cached)
-once per backup class. The four backups (:data:`BACKUPS`, by their settings' names):
+`register_backup` and a compiled kernel ``back(backup, tree, path_state, path_action,
+path_outcome, depth, ret)`` that backs the return ``ret`` of one simulation up its path of
+``depth`` (state node, action node, outcome index) triples; ``pairs_outcomes`` says whether it
+keeps a value per outcome (then the search's later visits of an action take the possible
+outcomes not yet visited: the values are combined with the known ``p``, so each is needed).
+Compiled code calls `back_up`, dispatched on the backup's class, so the search is compiled
+(and cached) once per backup class. The four backups (:data:`BACKUPS`, by their settings' names):
 
 * ``"sampled"``, the paper's (:class:`Sampled`): ``V(N^a)`` is the running mean of the returns
   of the simulations through the action, whose outcomes were drawn from ``p``;
-* ``"expected"`` (:class:`Expected`): each action node keeps a running mean per outcome and
-  ``V(N^a) = p V_find + (1 - p) V_miss`` with the known ``p``, so the outcome draws add no noise;
+* ``"expected"`` (`Expected`): each action node keeps a running mean per outcome and
+  ``V(N^a) = sum_o p_o V_o`` with the known ``p`` (two outcomes: ``p V_find + (1 - p) V_miss``),
+  so the outcome draws add no noise;
 * ``"max"`` (:class:`Max`): the expected combination of the outcomes' *values*, where a state's
   value is that of its best action (a Bellman backup; a state visited once is worth its
   rollout's return). Mean backups average the returns of every action tried below, which the
@@ -64,7 +65,7 @@ def _registered(backup) -> _Registered:
     return _BACKUPS[cls]
 
 
-def back_up(backup, tree, path_state, path_action, path_found, depth, ret):
+def back_up(backup, tree, path_state, path_action, path_outcome, depth, ret):
     """Back ``ret`` up the path with ``backup``'s registered kernel, then widen the return
     range and count the simulation (compiled code only)."""
     raise NotImplementedError
@@ -76,11 +77,11 @@ def pairs_outcomes(backup):
 
 
 @overload(back_up)
-def _back_up(backup, tree, path_state, path_action, path_found, depth, ret):
+def _back_up(backup, tree, path_state, path_action, path_outcome, depth, ret):
     back = _registered(backup).back
 
-    def impl(backup, tree, path_state, path_action, path_found, depth, ret):
-        back(backup, tree, path_state, path_action, path_found, depth, ret)
+    def impl(backup, tree, path_state, path_action, path_outcome, depth, ret):
+        back(backup, tree, path_state, path_action, path_outcome, depth, ret)
         tree.value_range[0] = min(tree.value_range[0], ret)
         tree.value_range[1] = max(tree.value_range[1], ret)
         tree.counts[2] += 1
@@ -136,21 +137,32 @@ def _count(tree, s, x):
 
 @numba.njit(cache=True)
 def _outcome_mean(tree, x):
-    """``p V_0 + (1 - p) V_1`` of action node ``x`` (the visited outcome's value while only
-    one has been visited)."""
-    n_find, n_miss = tree.a_out_visits[x, 0], tree.a_out_visits[x, 1]
-    if n_miss == 0:
-        return tree.a_out_value[x, 0]
-    if n_find == 0:
-        return tree.a_out_value[x, 1]
-    p = tree.a_p[x]
-    return p * tree.a_out_value[x, 0] + (1.0 - p) * tree.a_out_value[x, 1]
+    """``sum_o p_o V_o`` of action node ``x`` over its visited outcomes (two: ``p V_0 + (1 -
+    p) V_1``), renormalised while a possible outcome is still unvisited (the visited outcome's
+    value while only one has been visited)."""
+    visited = 0
+    last = 0
+    complete = True
+    for o in range(tree.a_p.shape[1]):
+        if tree.a_out_visits[x, o] > 0:
+            visited += 1
+            last = o
+        elif tree.a_p[x, o] > 0.0:
+            complete = False
+    if visited <= 1:
+        return tree.a_out_value[x, last]
+    total = 0.0
+    weight = 0.0
+    for o in range(tree.a_p.shape[1]):
+        if tree.a_out_visits[x, o] > 0:
+            total += tree.a_p[x, o] * tree.a_out_value[x, o]
+            weight += tree.a_p[x, o]
+    return total if complete else total / weight
 
 
 @numba.njit(cache=True, inline="always")
-def _set_outcome_value(tree, x, found, value):
-    """Outcome ``found``'s value of action node ``x`` is ``value``; ``V(N^a)`` follows."""
-    o = 0 if found else 1
+def _set_outcome_value(tree, x, o, value):
+    """Outcome ``o``'s value of action node ``x`` is ``value``; ``V(N^a)`` follows."""
     tree.a_out_visits[x, o] += 1
     tree.a_out_value[x, o] = value
     tree.a_value[x] = _outcome_mean(tree, x)
@@ -180,7 +192,7 @@ def _most_visited_value(tree, s):
 
 
 @numba.njit(cache=True)
-def back_sampled(backup, tree, path_state, path_action, path_found, depth, ret):
+def back_sampled(backup, tree, path_state, path_action, path_outcome, depth, ret):
     """:class:`Sampled`: ``V(N^a) += (ret - V(N^a)) / N(N^a)`` along the path."""
     for d in range(depth - 1, -1, -1):
         x = path_action[d]
@@ -189,19 +201,19 @@ def back_sampled(backup, tree, path_state, path_action, path_found, depth, ret):
 
 
 @numba.njit(cache=True)
-def back_expected(backup, tree, path_state, path_action, path_found, depth, ret):
+def back_expected(backup, tree, path_state, path_action, path_outcome, depth, ret):
     """:class:`Expected`: a running mean per outcome, ``V(N^a)`` their ``p``-weighted sum."""
     for d in range(depth - 1, -1, -1):
         x = path_action[d]
         _count(tree, path_state[d], x)
-        o = 0 if path_found[d] else 1
+        o = path_outcome[d]
         tree.a_out_visits[x, o] += 1
         tree.a_out_value[x, o] += (ret - tree.a_out_value[x, o]) / tree.a_out_visits[x, o]
         tree.a_value[x] = _outcome_mean(tree, x)
 
 
 @numba.njit(cache=True)
-def back_max(backup, tree, path_state, path_action, path_found, depth, ret):
+def back_max(backup, tree, path_state, path_action, path_outcome, depth, ret):
     """:class:`Max`: the outcome's value is the next state's (mixmax) value."""
     value = ret
     max_weight = backup.max_weight
@@ -209,7 +221,7 @@ def back_max(backup, tree, path_state, path_action, path_found, depth, ret):
         x = path_action[d]
         s = path_state[d]
         _count(tree, s, x)
-        _set_outcome_value(tree, x, path_found[d], value)
+        _set_outcome_value(tree, x, path_outcome[d], value)
         value = _best_value(tree, s)
         if max_weight < 1.0:
             tree.s_mean[s] += (ret - tree.s_mean[s]) / tree.s_visits[s]
@@ -217,14 +229,14 @@ def back_max(backup, tree, path_state, path_action, path_found, depth, ret):
 
 
 @numba.njit(cache=True)
-def back_robust(backup, tree, path_state, path_action, path_found, depth, ret):
+def back_robust(backup, tree, path_state, path_action, path_outcome, depth, ret):
     """:class:`Robust`: the outcome's value is the next state's most visited action's."""
     value = ret
     for d in range(depth - 1, -1, -1):
         x = path_action[d]
         s = path_state[d]
         _count(tree, s, x)
-        _set_outcome_value(tree, x, path_found[d], value)
+        _set_outcome_value(tree, x, path_outcome[d], value)
         value = _most_visited_value(tree, s)
 
 

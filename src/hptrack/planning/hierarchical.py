@@ -37,6 +37,8 @@ from hptrack.planning.backups import backup_of
 from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchOptions, SearchResult
 from hptrack.planning.subtask_mdp import (
+    FIND,
+    MISS,
     PlanningProblem,
     SubtaskOptions,
     dwell_action,
@@ -325,7 +327,7 @@ class HierarchicalPlanner:
         length = self._dwell_length(action)
         self._dwell_end = observation.step + length
         plan = self._search(observation, current_action=action, last_found=target)
-        self._plan = (plan.best_after_find, None)
+        self._plan = (plan.best_after(FIND), None)
         self._log.append(
             {
                 "dwell": target,
@@ -339,7 +341,7 @@ class HierarchicalPlanner:
         """Begin a sub-task on ``target`` and re-plan with it fixed (conditional plan)."""
         self._subtask = CoverageSubtask.from_observation(observation, target, self._mission)
         plan = self._search(observation, current_action=target)
-        self._plan = (plan.best_after_find, plan.best_after_miss)
+        self._plan = (plan.best_after(FIND), plan.best_after(MISS))
         self._log.append(
             {
                 **self._subtask.summary(),

@@ -4,7 +4,8 @@ An MDP is a class of ``env`` (a ``NamedTuple`` of its constant data) registered 
 :func:`register_mdp` and its compiled kernels (:class:`MdpKernels`). Compiled code calls them as
 ``mdp_*(env, ...)``, dispatched at compile time on ``env``'s class, so that the search compiles
 one version per MDP. An MDP declares its number of actions to the search, at most
-:data:`hptrack.planning.tree.MAX_ACTIONS`; the search refuses more.
+:data:`hptrack.planning.tree.MAX_ACTIONS` (the search refuses more), and how many chance outcomes
+an action has (`outcome_count`): the tree sizes its per-outcome arrays from it.
 """
 
 from __future__ import annotations
@@ -17,13 +18,15 @@ from numba.extending import overload
 
 
 class MdpKernels(NamedTuple):
-    """The compiled kernels of an MDP (module docstring)."""
+    """The compiled kernels of an MDP (signatures in `hptrack.planning.search`) and its
+    number of chance outcomes per action: an integer, or a function of ``env`` returning one."""
 
     copy_state: Callable
     is_available: Callable
     expand: Callable
     apply: Callable
     value: Callable
+    n_outcomes: int | Callable[[tuple], int] = 2
 
 
 _MDPS: dict[type, MdpKernels] = {}
@@ -33,6 +36,21 @@ def register_mdp(env_class: type, kernels: MdpKernels) -> None:
     """Make the search run on environments of ``env_class`` with ``kernels`` (register before
     the first search of that class in a process)."""
     _MDPS[env_class] = kernels
+
+
+def outcome_count(env: tuple) -> int:
+    """How many chance outcomes an action of ``env``'s registered MDP has.
+
+    Raises:
+        ValueError: no MDP registered for ``env``'s class, or a count below 1.
+    """
+    if type(env) not in _MDPS:
+        raise ValueError(f"no MDP registered for {type(env).__name__}")
+    declared = _MDPS[type(env)].n_outcomes
+    count = declared(env) if callable(declared) else declared
+    if count < 1:
+        raise ValueError(f"the MDP declares {count} outcomes; the search takes at least 1")
+    return int(count)
 
 
 def _kernel(env, field: str):
@@ -52,12 +70,12 @@ def mdp_is_available(env, state, a):
     raise NotImplementedError
 
 
-def mdp_expand(env, state, a, work):
+def mdp_expand(env, state, a, p, payload, work):
     """The registered ``expand`` of ``env``'s MDP (compiled code only)."""
     raise NotImplementedError
 
 
-def mdp_apply(env, state, a, found, payload, work):
+def mdp_apply(env, state, a, outcome, payload, work):
     """The registered ``apply`` of ``env``'s MDP (compiled code only)."""
     raise NotImplementedError
 
@@ -78,12 +96,12 @@ def _is_available(env, state, a):
 
 
 @overload(mdp_expand)
-def _expand(env, state, a, work):
+def _expand(env, state, a, p, payload, work):
     return _kernel(env, "expand")
 
 
 @overload(mdp_apply)
-def _apply(env, state, a, found, payload, work):
+def _apply(env, state, a, outcome, payload, work):
     return _kernel(env, "apply")
 
 

@@ -2,19 +2,20 @@
 lines 9-12), apart from the MDP it searches and its rollout policy.
 
 The search takes its model as compiled functions, in the spirit of mctx's ``recurrent_fn``. An MDP
-with chance nodes of two outcomes is a class of ``env`` (a ``NamedTuple`` of the MDP's constant
-data) registered with :func:`hptrack.planning.mdp.register_mdp` and these kernels, all taking
-``env`` first:
+is a class of ``env`` (a ``NamedTuple`` of the MDP's constant data) registered with
+`hptrack.planning.mdp.register_mdp` and these kernels, all taking ``env`` first:
 
 * ``copy_state(env, src, dst)``: copy a state (a tuple of arrays) into scratch;
 * ``is_available(env, state, a) -> bool``; a state without an available action is terminal;
-* ``expand(env, state, a, work) -> (p, payload0, payload1)``: the probability of outcome 0 and
-  one integer per outcome that ``apply`` needs (deterministic, so it is stored in the tree);
-* ``apply(env, state, a, outcome0, payload, work)``: the transition, in place;
+* ``expand(env, state, a, p, payload, work)``: write each chance outcome ``o``'s probability
+  ``p[o]`` (they sum to 1) and one integer ``payload[o]`` that ``apply`` needs (deterministic, so
+  both are stored in the tree);
+* ``apply(env, state, a, outcome, payload, work)``: the transition after ``outcome``, in place;
 * ``value(env, state) -> float``: the return of a terminal state (``-U`` in this project).
 
-An MDP declares its number of actions, at most :data:`~hptrack.planning.tree.MAX_ACTIONS`
-(the search refuses more).
+An MDP declares its number of actions, at most `hptrack.planning.tree.MAX_ACTIONS` (the search
+refuses more), and the number of chance outcomes of an action
+(`hptrack.planning.mdp.outcome_count`; the sub-task MDP's two are the find and the miss).
 
 The search's options are one record, :class:`SearchOptions`, under the planner settings' names.
 Its rollout policy is a class of ``policy`` (a ``NamedTuple`` of its parameters, possibly empty)
@@ -39,7 +40,7 @@ wall-clock checks.
   deterministic, so it is stored lazily: the action slots are allocated on the second visit and
   each action's ``expand`` is called the first time the action is selected; the tree's statistics
   are the same as with an eager expansion, at a fraction of the cost;
-* otherwise UCB1 picks an action (:func:`hptrack.planning.tree.select`), the outcome is drawn
+* otherwise UCB1 picks an action (`hptrack.planning.tree.select`), the outcome is drawn
   from ``p`` (line 25), the child state is created on first draw (lines 26-29) and values are
   backed up by the options' backup (:mod:`hptrack.planning.backups`; the paper's running
   means, lines 31-33, or another).
@@ -49,11 +50,11 @@ transitions, only when it is needed (a first visit, opening the action slots, or
 expansion), so a descent to a cached terminal node costs no transition at all.
 
 **Re-planning** (lines 9-12): the root's only action is the current one (``fixed``), and the
-result gives ``argmax V`` over the actions of its find child and of its miss child. As both
-answers are needed whatever ``p`` is (it is often above 0.99), the root's outcome is not drawn:
-it alternates between find and miss, so each child gets half of the simulations, or with
-``root_split="weighted"`` the find gets a share that grows with ``p`` (:func:`_root_outcome`);
-below the root everything is as above.
+result gives ``argmax V`` over the actions of the child after each of its outcomes (the find
+child and the miss child). As every answer is needed whatever ``p`` is (a find is often above
+0.99), the root's outcome is not drawn: the simulations are shared out among the possible
+outcomes, evenly (two outcomes alternate) or with ``root_split="weighted"`` by a share that grows
+with ``p`` (`_root_outcome`); below the root everything is as above.
 """
 
 from __future__ import annotations
@@ -68,7 +69,14 @@ import numba
 import numpy as np
 
 from hptrack.planning.backups import Sampled, back_up, pairs_outcomes
-from hptrack.planning.mdp import mdp_apply, mdp_copy_state, mdp_expand, mdp_is_available, mdp_value
+from hptrack.planning.mdp import (
+    mdp_apply,
+    mdp_copy_state,
+    mdp_expand,
+    mdp_is_available,
+    mdp_value,
+    outcome_count,
+)
 from hptrack.planning.rollout import UniformRandom, choose_action
 from hptrack.planning.stream import seed_value, substream, uniform
 from hptrack.planning.tree import (
@@ -89,10 +97,24 @@ DEFAULT_EXPLORATION = 0.5
 """UCB1 constant ``c`` on values normalised to the observed return range."""
 
 
+@numba.njit(cache=True, inline="always")
+def draw_outcome(p, u):
+    """The outcome whose share of ``[0, 1)`` holds ``u``, outcome 0's first (Algorithm 1 line
+    25: with two outcomes, 0 iff ``u < p[0]``); the last one takes what rounding leaves."""
+    last = p.shape[0] - 1
+    total = 0.0
+    for o in range(last):
+        total += p[o]
+        if u < total:
+            return o
+    return last
+
+
 @numba.njit
-def rollout(env, state, forced, policy, rng, candidates, work):
+def rollout(env, state, forced, policy, rng, candidates, p, payload, work):
     """Run ``policy`` from ``state`` to a terminal state (Algorithm 1 line 21) and return its
-    value; ``forced >= 0`` fixes the first action (re-planning at the root)."""
+    value; ``forced >= 0`` fixes the first action (re-planning at the root). ``p`` and
+    ``payload`` are scratch of one entry per outcome."""
     while True:
         if forced >= 0:
             a = forced
@@ -101,14 +123,14 @@ def rollout(env, state, forced, policy, rng, candidates, work):
             a = choose_action(policy, env, state, rng, candidates)
             if a < 0:
                 break
-        p, payload0, payload1 = mdp_expand(env, state, a, work)
-        found = uniform(rng) < p
-        mdp_apply(env, state, a, found, payload0 if found else payload1, work)
+        mdp_expand(env, state, a, p, payload, work)
+        o = draw_outcome(p, uniform(rng))
+        mdp_apply(env, state, a, o, payload[o], work)
     return mdp_value(env, state)
 
 
 ROOT_SPLITS = ("even", "weighted")
-"""How re-planning shares the root's simulations between the current action's outcomes."""
+"""How re-planning shares the root's simulations among the current action's outcomes."""
 
 
 class SearchOptions(NamedTuple):
@@ -119,7 +141,7 @@ class SearchOptions(NamedTuple):
         exploration: UCB1 constant ``c`` on values normalised to the observed return range.
         backup: a registered backup instance (:mod:`hptrack.planning.backups`).
         root_split: re-planning: the root's simulations go to the current action's outcomes
-            ``"even"``ly or ``"weighted"`` by their probability (:func:`_root_outcome`).
+            ``"even"``ly or ``"weighted"`` by their probability (`_root_outcome`).
         common_rollouts: a rollout from a new node draws from a stream derived from its parent
             node (common random numbers): the rollouts that value the actions and outcomes of
             one state take the same random decisions wherever they can, so their differences
@@ -151,22 +173,66 @@ def checked_options(options: SearchOptions) -> SearchOptions:
     )
 
 
+@numba.njit(cache=True, inline="always")
+def _share_weight(p, weighted):
+    """An outcome's weight in the root's share-out: 1 (even) or ``p^(2/3)`` (weighted); 0 for
+    an impossible outcome."""
+    if p <= 0.0:
+        return 0.0
+    return p ** (2.0 / 3.0) if weighted else 1.0
+
+
 @numba.njit(cache=True)
 def _root_outcome(k, p, weighted):
-    """Re-planning: whether simulation ``k`` takes the current action's find outcome at the root.
+    """Re-planning: the outcome of the current action that simulation ``k`` takes at the root.
 
-    Both outcomes need a plan whatever ``p`` is, so the outcome is not drawn: a share ``f`` of
-    the simulations goes to the find (``floor((k + 1) f) > floor(k f)``). Evenly (``f = 1/2``,
-    the paper's, Algorithm 1 lines 9-12), every other simulation; weighted, ``f = p^(2/3) /
-    (p^(2/3) + (1 - p)^(2/3))``, the split that minimises ``p / sqrt(n_find) + (1 - p) /
-    sqrt(n_miss)``: each plan's error, shrinking as one over the square root of its
+    Every possible outcome needs a plan whatever ``p`` is, so the outcome is not drawn: outcome
+    ``o`` gets a share ``f_o`` of the simulations, taken in turn: simulation ``k`` goes to
+    outcome 0 when ``floor((k + 1) f_0) > floor(k f_0)``, else the rest are shared the same way
+    among the later outcomes (the ``k - floor(k f_0)``-th of them). Evenly (the paper's,
+    Algorithm 1 lines 9-12) every possible outcome gets the same share: with two, every other
+    simulation. Weighted, ``f_o`` is proportional to ``p_o^(2/3)``, the split that minimises
+    ``sum_o p_o / sqrt(n_o)``: each plan's error, shrinking as one over the square root of its
     simulations, weighted by how likely the plan is to be flown.
     """
-    f = 0.5
-    if weighted:
-        a, b = p ** (2.0 / 3.0), (1.0 - p) ** (2.0 / 3.0)
-        f = a / (a + b)
-    return math.floor((k + 1) * f) > math.floor(k * f)
+    last = p.shape[0] - 1
+    while last > 0 and p[last] <= 0.0:
+        last -= 1
+    j = k
+    for o in range(last):
+        w = _share_weight(p[o], weighted)
+        if w == 0.0:
+            continue
+        rest = 0.0
+        for r in range(o, p.shape[0]):
+            rest += _share_weight(p[r], weighted)
+        f = w / rest
+        if math.floor((j + 1) * f) > math.floor(j * f):
+            return o
+        j -= int(math.floor(j * f))
+    return last
+
+
+@numba.njit(cache=True, inline="always")
+def _uncertain(p):
+    """Whether more than one outcome is possible."""
+    possible = 0
+    for o in range(p.shape[0]):
+        if p[o] > 0.0:
+            possible += 1
+    return possible > 1
+
+
+@numba.njit(cache=True)
+def _first_unvisited(tree, x):
+    """The first possible outcome of action node ``x`` not visited yet, ``-1`` if none or if
+    only one outcome is possible."""
+    if not _uncertain(tree.a_p[x]):
+        return -1
+    for o in range(tree.a_p.shape[1]):
+        if tree.a_p[x, o] > 0.0 and tree.a_out_visits[x, o] == 0:
+            return o
+    return -1
 
 
 @numba.njit
@@ -179,7 +245,7 @@ def _open_slots(tree, env, s, state, fixed, n_actions):
         if (fixed < 0 or s != 0 or a == fixed) and mdp_is_available(env, state, a):
             x = first + count
             tree.a_action[x] = a
-            tree.a_p[x] = -1.0
+            tree.a_p[x, 0] = -1.0
             count += 1
     tree.counts[1] += count
     tree.s_first[s] = first
@@ -187,7 +253,7 @@ def _open_slots(tree, env, s, state, fixed, n_actions):
 
 
 @numba.njit
-def _catch_up(tree, env, path_action, path_found, applied, depth, root, state, work):
+def _catch_up(tree, env, path_action, path_outcome, applied, depth, root, state, work):
     """Bring the scratch state from path level ``applied`` (``-1``: not reset yet) to ``depth``
     by re-applying the stored transitions from the root; returns ``depth``."""
     if applied < 0:
@@ -195,15 +261,8 @@ def _catch_up(tree, env, path_action, path_found, applied, depth, root, state, w
         applied = 0
     for d in range(applied, depth):
         x = path_action[d]
-        found = path_found[d]
-        mdp_apply(
-            env,
-            state,
-            np.int64(tree.a_action[x]),
-            found,
-            tree.a_payload[x, 0 if found else 1],
-            work,
-        )
+        o = path_outcome[d]
+        mdp_apply(env, state, np.int64(tree.a_action[x]), o, tree.a_payload[x, o], work)
     return depth
 
 
@@ -216,19 +275,21 @@ def run_simulations(
     simulation's nodes (:func:`~hptrack.planning.tree.grow_tree` makes room).
 
     ``root`` is the root state (never modified), ``state`` scratch of the same shapes, ``work``
-    the MDP's scratch; ``options`` a :class:`SearchOptions`; ``max_depth`` bounds the number
+    the MDP's scratch; ``options`` a `SearchOptions`; ``max_depth`` bounds the number
     of transitions of a history. With a backup that keeps a value per outcome, an action's
-    second visit takes the outcome not yet visited (their values are combined with the known
-    ``p``, so both are needed, and the draw no longer weights them).
+    later visits take the possible outcomes not yet visited, in order (their values are
+    combined with the known ``p``, so each is needed, and the draw no longer weights them).
     """
     exploration, policy = options.exploration, options.rollout
     paired = pairs_outcomes(options.backup)
     weighted = options.root_split == "weighted"
     candidates = np.empty(n_actions, dtype=np.int64)
     common = np.empty(1, dtype=np.uint64)
+    p_scratch = np.empty(tree.a_p.shape[1])
+    payload_scratch = np.empty(tree.a_p.shape[1], dtype=tree.a_payload.dtype)
     path_state = np.empty(max_depth, dtype=np.int64)
     path_action = np.empty(max_depth, dtype=np.int64)
-    path_found = np.empty(max_depth, dtype=np.bool_)
+    path_outcome = np.empty(max_depth, dtype=np.int64)
     cap_s = tree.s_first.shape[0]
     cap_a = tree.a_action.shape[0]
     for sim in range(n_simulations):
@@ -244,7 +305,7 @@ def run_simulations(
                 break
             if first < 0:
                 applied = _catch_up(
-                    tree, env, path_action, path_found, applied, depth, root, state, work
+                    tree, env, path_action, path_outcome, applied, depth, root, state, work
                 )
             if first == UNVISITED:
                 live = False
@@ -262,42 +323,45 @@ def run_simulations(
                 if options.common_rollouts and depth > 0:
                     substream(tree.rng[1], path_state[depth - 1], common)
                     stream = common
-                ret = rollout(env, state, fixed if s == 0 else -1, policy, stream, candidates, work)
+                ret = rollout(
+                    env,
+                    state,
+                    fixed if s == 0 else -1,
+                    policy,
+                    stream,
+                    candidates,
+                    p_scratch,
+                    payload_scratch,
+                    work,
+                )
                 break
             if first == LEAF:
                 _open_slots(tree, env, s, state, fixed, n_actions)
             x = select(tree, s, exploration)
-            if tree.a_p[x] < 0.0:
+            if tree.a_p[x, 0] < 0.0:
                 applied = _catch_up(
-                    tree, env, path_action, path_found, applied, depth, root, state, work
+                    tree, env, path_action, path_outcome, applied, depth, root, state, work
                 )
-                p, payload0, payload1 = mdp_expand(env, state, np.int64(tree.a_action[x]), work)
-                tree.a_p[x] = p
-                tree.a_payload[x, 0] = payload0
-                tree.a_payload[x, 1] = payload1
-            if s == 0 and fixed >= 0 and 0.0 < tree.a_p[x] < 1.0:
-                found = _root_outcome(tree.counts[2], tree.a_p[x], weighted)
-            elif (
-                paired
-                and tree.a_visits[x] > 0
-                and 0.0 < tree.a_p[x] < 1.0
-                and tree.a_out_visits[x, 0] * tree.a_out_visits[x, 1] == 0
-            ):
-                found = tree.a_out_visits[x, 0] == 0
-            else:
-                found = uniform(tree.rng) < tree.a_p[x]
+                a = np.int64(tree.a_action[x])
+                mdp_expand(env, state, a, tree.a_p[x], tree.a_payload[x], work)
+            outcome = -1
+            if s == 0 and fixed >= 0 and _uncertain(tree.a_p[x]):
+                outcome = _root_outcome(tree.counts[2], tree.a_p[x], weighted)
+            elif paired and tree.a_visits[x] > 0:
+                outcome = _first_unvisited(tree, x)
+            if outcome < 0:
+                outcome = draw_outcome(tree.a_p[x], uniform(tree.rng))
             path_state[depth] = s
             path_action[depth] = x
-            path_found[depth] = found
+            path_outcome[depth] = outcome
             depth += 1
-            outcome = 0 if found else 1
             child = tree.a_child[x, outcome]
             if child < 0:
                 child = tree.counts[0]
                 tree.counts[0] += 1
                 tree.a_child[x, outcome] = child
             s = child
-        back_up(options.backup, tree, path_state, path_action, path_found, depth, ret)
+        back_up(options.backup, tree, path_state, path_action, path_outcome, depth, ret)
     return n_simulations
 
 
@@ -309,9 +373,10 @@ class SearchResult:
         best_action: the action to take (first plan), or the fixed current action
             (re-planning); ``None`` when no action is available.
         root: statistics of the root's actions.
-        after_find: re-planning only: the actions after the current one's outcome 0 (find)
-            (``None`` when that state was never reached or is terminal).
-        after_miss: likewise after outcome 1 (miss).
+        after: re-planning only (empty otherwise): per outcome of the current action, the
+            statistics of the actions after it (``None`` when that state was never reached or
+            is terminal); in the sub-task MDP ``after[0]`` follows the find, ``after[1]`` the
+            miss.
         simulations: number of simulations run.
         stopped_by: ``"iterations"`` or ``"time_limit"``.
         elapsed: wall time of the search, s.
@@ -322,8 +387,7 @@ class SearchResult:
 
     best_action: int | None
     root: ActionStats
-    after_find: ActionStats | None
-    after_miss: ActionStats | None
+    after: tuple[ActionStats | None, ...]
     simulations: int
     stopped_by: Literal["iterations", "time_limit"]
     elapsed: float
@@ -331,15 +395,11 @@ class SearchResult:
     action_nodes: int
     tree_bytes: int
 
-    @property
-    def best_after_find(self) -> int | None:
-        """Re-planning: the next action if the current one finds its target."""
-        return None if self.after_find is None else self.after_find.best
-
-    @property
-    def best_after_miss(self) -> int | None:
-        """Re-planning: the next action if the current one misses its target."""
-        return None if self.after_miss is None else self.after_miss.best
+    def best_after(self, outcome: int) -> int | None:
+        """Re-planning: the next action if the current one has ``outcome`` (``None`` when
+        none was searched)."""
+        stats = self.after[outcome] if outcome < len(self.after) else None
+        return None if stats is None else stats.best
 
 
 def check_limits(iterations: int | None, time_limit: float | None) -> None:
@@ -359,8 +419,10 @@ def run_search(
     seed: int | np.random.Generator,
     fixed: int = -1,
     start: float | None = None,
+    n_outcomes: int = 2,
 ) -> SearchResult:
-    """The ``TreeSearch`` loop of Algorithm 1 around a compiled ``simulate(tree, count)``.
+    """The ``TreeSearch`` loop of Algorithm 1 around a compiled ``simulate(tree, count)`` on a
+    tree for actions of ``n_outcomes`` chance outcomes.
 
     Simulations run in chunks; between chunks the tree grows when full and the wall clock is
     checked (from ``start``, a ``time.perf_counter()`` reading, default now). With both limits,
@@ -368,7 +430,7 @@ def run_search(
     """
     check_limits(iterations, time_limit)
     start = time.perf_counter() if start is None else start
-    tree = new_tree(seed_value(seed))
+    tree = new_tree(seed_value(seed), n_outcomes=n_outcomes)
     done = 0
     chunk = 64
     while True:
@@ -427,31 +489,34 @@ def search_mdp(
             of it.
 
     Raises:
-        ValueError: more actions than the tree holds, a bad option or limit.
+        ValueError: more actions than the tree holds, no outcome, a bad option or limit.
     """
     if not 1 <= n_actions <= MAX_ACTIONS:
         raise ValueError(
             f"the MDP declares {n_actions} actions; the search takes 1 to {MAX_ACTIONS}"
         )
+    n_outcomes = outcome_count(env)
     options = checked_options(options)
     state = tuple(np.array(a, copy=True) for a in root)
 
     def simulate(tree: Tree, count: int) -> int:
         return kernel(tree, env, root, state, work, options, n_actions, max_depth, fixed, count)
 
-    return run_search(simulate, n_actions, iterations, time_limit, seed, fixed, start)
+    return run_search(simulate, n_actions, iterations, time_limit, seed, fixed, start, n_outcomes)
 
 
 def merged(results: list[SearchResult], fixed: int) -> SearchResult:
     """One result from root-parallel trees: statistics merged action by action."""
     root = merge_stats([r.root for r in results])
-    after_find = merge_stats([r.after_find for r in results]) if fixed >= 0 else None
-    after_miss = merge_stats([r.after_miss for r in results]) if fixed >= 0 else None
+    outcomes = max(len(r.after) for r in results) if fixed >= 0 else 0
+    after = tuple(
+        merge_stats([r.after[o] if o < len(r.after) else None for r in results])
+        for o in range(outcomes)
+    )
     return SearchResult(
         best_action=root.best if fixed < 0 else results[0].best_action,
         root=root,
-        after_find=after_find,
-        after_miss=after_miss,
+        after=after,
         simulations=sum(r.simulations for r in results),
         stopped_by=results[0].stopped_by,
         elapsed=max(r.elapsed for r in results),
@@ -463,19 +528,23 @@ def merged(results: list[SearchResult], fixed: int) -> SearchResult:
 
 def _result(tree: Tree, fixed: int, stopped_by: str, elapsed: float) -> SearchResult:
     root = node_stats(tree, 0)
-    empty = np.zeros(0, dtype=np.int64)
     if root is None:
-        root = ActionStats(empty, empty, np.zeros(0), np.zeros(0), empty, empty)
-    after_find = after_miss = None
+        empty, n_outcomes = np.zeros(0, dtype=np.int64), tree.a_p.shape[1]
+        root = ActionStats(
+            empty,
+            empty,
+            np.zeros(0),
+            np.zeros((0, n_outcomes)),
+            np.zeros((0, n_outcomes), dtype=np.int64),
+        )
+    after: tuple[ActionStats | None, ...] = ()
     if fixed >= 0 and root.actions.size:
         children = tree.a_child[int(tree.s_first[0])]
-        after_find = None if children[0] < 0 else node_stats(tree, int(children[0]))
-        after_miss = None if children[1] < 0 else node_stats(tree, int(children[1]))
+        after = tuple(None if c < 0 else node_stats(tree, int(c)) for c in children)
     return SearchResult(
         best_action=root.best,
         root=root,
-        after_find=after_find,
-        after_miss=after_miss,
+        after=after,
         simulations=int(tree.counts[2]),
         stopped_by=stopped_by,
         elapsed=elapsed,

@@ -101,6 +101,10 @@ if TYPE_CHECKING:
 I_STEP, I_MASK, I_LAST = 0, 1, 2
 """Indices of ``t``, the action bitmask and the last found target in the state array ``si``."""
 
+OUTCOMES = ("find", "miss")
+"""A sub-task's chance outcomes, by index (the search's outcome ``o``)."""
+FIND, MISS = 0, 1
+
 WORK_SLOTS = 5
 """Number of 4x4 scratch matrices the kernels need (:func:`new_work`)."""
 
@@ -523,8 +527,20 @@ def _expand_sharp(env, state, a, ic, cov):
 
 
 @numba.njit(cache=True)
-def apply_outcome(env, state, a, found, payload, work):
-    """Move the state through the sub-task "pursue ``a``" lasting ``payload`` steps.
+def expand_outcomes(env, state, a, p, payload, work):
+    """`expand_action` as the search asks of an MDP: ``p`` and ``payload`` of outcome
+    `FIND` then `MISS` (the miss's probability ``1 - p_find``)."""
+    p_find, find_steps, miss_steps = expand_action(env, state, a, work)
+    p[FIND] = p_find
+    p[MISS] = 1.0 - p_find
+    payload[FIND] = find_steps
+    payload[MISS] = miss_steps
+
+
+@numba.njit(cache=True)
+def apply_outcome(env, state, a, outcome, payload, work):
+    """Move the state through the sub-task "pursue ``a``" lasting ``payload`` steps, after
+    ``outcome`` (`FIND` or `MISS`).
 
     Found: ``a``'s covariance becomes the posterior of a measurement at the end step (or, when
     following or dwelling, the covariance measured at every step to the end). Missed: ``a``
@@ -537,7 +553,7 @@ def apply_outcome(env, state, a, found, payload, work):
     end = t + payload
     if is_dwell(env, a):
         a = si[I_LAST]  # the dwell measures the target just found, which stays the last found
-    if found:
+    if outcome == FIND:
         prior = work[4]
         q = mission.process_noise[a]
         if a == si[I_LAST]:
@@ -631,5 +647,8 @@ def terminal_value(env, state):
 
 
 register_mdp(
-    SubtaskEnv, MdpKernels(copy_state, is_available, expand_action, apply_outcome, terminal_value)
+    SubtaskEnv,
+    MdpKernels(
+        copy_state, is_available, expand_outcomes, apply_outcome, terminal_value, len(OUTCOMES)
+    ),
 )

@@ -20,6 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from hptrack.planning.subtask_mdp import (
+    FIND,
+    MISS,
     PAPER_SUBTASK,
     PlanningProblem,
     SubtaskOptions,
@@ -78,12 +80,12 @@ class _Expectimax:
                 continue
             p, find_steps, miss_steps = expand_action(env, state, a, work)
             after = tuple(x.copy() for x in state)
-            apply_outcome(env, after, a, True, find_steps, work)
+            apply_outcome(env, after, a, FIND, find_steps, work)
             v_find, rest = self.value(after)
             v = p * v_find
             if p < 1.0:
                 after = tuple(x.copy() for x in state)
-                apply_outcome(env, after, a, False, miss_steps, work)
+                apply_outcome(env, after, a, MISS, miss_steps, work)
                 v += (1.0 - p) * self.value(after)[0]
             values[a] = v
             if best is None or v > values[best]:

@@ -2,16 +2,17 @@
 spirit of mctx: state nodes ``s_*`` and action (chance) nodes ``a_*``.
 
 A state node stores its visit count ``N(N^s)``, its first action slot and the number of slots;
-an action node stores its action, the expansion results (``p`` of outcome 0, and one integer
-payload per outcome that the MDP needs to replay the transition, e.g. a duration, in
-``a_payload[:, outcome]``), ``N(N^a)``,
-``V(N^a)`` and its two children (outcome 0, outcome 1). States themselves are not stored: the
-search rebuilds them from the root by replaying the stored transitions.
+an action node stores its action, ``N(N^a)``, ``V(N^a)`` and, in one column per chance outcome
+(as many as the MDP declares, `hptrack.planning.mdp.outcome_count`), the expansion results
+(``a_p[:, o]``, the outcome's probability, and ``a_payload[:, o]``, one integer that the MDP needs
+to replay the transition, e.g. a duration), the child state node and the per-outcome statistics
+of the backups that keep them. States themselves are not stored: the search rebuilds them from
+the root by replaying the stored transitions.
 
-:func:`select` is UCB1 (paper Algorithm 1, line 23), the tree's whatever the MDP; the backups
-are registered kernels (:mod:`hptrack.planning.backups`).
+`select` is UCB1 (paper Algorithm 1, line 23), the tree's whatever the MDP; the backups
+are registered kernels (`hptrack.planning.backups`).
 
-Action slots hold action indices as ``int16``: an MDP may declare up to :data:`MAX_ACTIONS`
+Action slots hold action indices as ``int16``: an MDP may declare up to `MAX_ACTIONS`
 actions (the search refuses more).
 """
 
@@ -73,18 +74,22 @@ _FILL = {
     "a_out_visits": (0, np.int32),
     "a_out_value": (0.0, np.float64),
 }
-"""Initial value and dtype of each node array of :class:`Tree` (``a_child``, ``a_out_*``: one
-column per outcome)."""
+"""Initial value and dtype of each node array of `Tree` (those in `PER_OUTCOME`: one column
+per outcome; ``a_p < 0``: not expanded yet)."""
 
 MAX_ACTIONS = int(np.iinfo(np.int16).max)
 """Most actions an MDP may declare: action slots and a state's slot count are ``int16``."""
-PAIRED = ("a_payload", "a_child", "a_out_visits", "a_out_value")
+PER_OUTCOME = ("a_p", "a_payload", "a_child", "a_out_visits", "a_out_value")
+"""The action-node arrays with one column per chance outcome."""
 
 
-def new_tree(seed: int, capacity: int = 1024) -> Tree:
-    """An empty tree holding only the root (state node 0), with the random stream seeded."""
+def new_tree(seed: int, capacity: int = 1024, n_outcomes: int = 2) -> Tree:
+    """An empty tree holding only the root (state node 0), with the random stream seeded, for
+    an MDP whose actions have ``n_outcomes`` chance outcomes."""
     arrays = {
-        name: np.full((capacity, 2) if name in PAIRED else capacity, fill, dtype=dtype)
+        name: np.full(
+            (capacity, n_outcomes) if name in PER_OUTCOME else capacity, fill, dtype=dtype
+        )
         for name, (fill, dtype) in _FILL.items()
     }
     return Tree(
@@ -146,17 +151,17 @@ class ActionStats:
         actions: action indices (target indices in the sub-task MDP).
         visits: ``N(N^a)``.
         values: ``V(N^a)``, the mean return (``-U``) over the simulations through the action.
-        p_find: probability of outcome 0, "find" (NaN if never expanded).
-        find_steps: the outcome-0 payload (the sub-task's duration if found, steps).
-        miss_steps: the outcome-1 payload (its duration if missed, steps).
+        p: ``(actions, outcomes)``, each outcome's probability (NaN if never expanded); in the
+            sub-task MDP outcome 0 is the find, 1 the miss.
+        payload: ``(actions, outcomes)``, each outcome's payload (the sub-task MDP: the
+            sub-task's duration after that outcome, steps).
     """
 
     actions: np.ndarray
     visits: np.ndarray
     values: np.ndarray
-    p_find: np.ndarray
-    find_steps: np.ndarray
-    miss_steps: np.ndarray
+    p: np.ndarray
+    payload: np.ndarray
 
     @property
     def best(self) -> int | None:
@@ -175,21 +180,19 @@ def merge_stats(stats: list[ActionStats | None]) -> ActionStats | None:
     if not present:
         return None
     actions = np.unique(np.concatenate([s.actions for s in present]))
+    n_outcomes = present[0].p.shape[1]
     visits = np.zeros(actions.size, dtype=np.int64)
     weighted = np.zeros(actions.size)
-    p, find, miss = np.full(actions.size, np.nan), np.zeros_like(visits), np.zeros_like(visits)
+    p = np.full((actions.size, n_outcomes), np.nan)
+    payload = np.zeros((actions.size, n_outcomes), dtype=np.int64)
     for s in present:
         at = np.searchsorted(actions, s.actions)
         visits[at] += s.visits
         weighted[at] += s.visits * s.values
-        new = np.isnan(p[at]) & ~np.isnan(s.p_find)
-        p[at[new]], find[at[new]], miss[at[new]] = (
-            s.p_find[new],
-            s.find_steps[new],
-            s.miss_steps[new],
-        )
+        new = np.isnan(p[at, 0]) & ~np.isnan(s.p[:, 0])
+        p[at[new]], payload[at[new]] = s.p[new], s.payload[new]
     values = np.divide(weighted, visits, out=np.zeros(actions.size), where=visits > 0)
-    return ActionStats(actions, visits, values, p, find, miss)
+    return ActionStats(actions, visits, values, p, payload)
 
 
 def node_stats(tree: Tree, s: int) -> ActionStats | None:
@@ -199,12 +202,11 @@ def node_stats(tree: Tree, s: int) -> ActionStats | None:
         return None
     xs = slice(first, first + int(tree.s_count[s]))
     p = tree.a_p[xs].copy()
-    p[p < 0.0] = np.nan
+    p[p[:, 0] < 0.0] = np.nan
     return ActionStats(
         tree.a_action[xs].astype(np.int64),
         tree.a_visits[xs].astype(np.int64),
         tree.a_value[xs].copy(),
         p,
-        tree.a_payload[xs, 0].astype(np.int64),
-        tree.a_payload[xs, 1].astype(np.int64),
+        tree.a_payload[xs].astype(np.int64),
     )
