@@ -1,20 +1,20 @@
 """The backups of the tree search (paper Algorithm 1 lines 31-33 and three alternatives),
-registered like the rollout policies (:mod:`hptrack.planning.rollout`).
+registered like the rollout policies (`hptrack.planning.rollout`).
 
 A backup is a ``NamedTuple`` class (its fields are its parameters) registered with
-:func:`register_backup` and a compiled kernel ``back(backup, tree, path_state, path_action,
+`register_backup` and a compiled kernel ``back(backup, tree, path_state, path_action,
 path_found, depth, ret)`` that backs the return ``ret`` of one simulation up its path of
 ``depth`` (state node, action node, outcome) triples; ``pairs_outcomes`` says whether it keeps a
 value per outcome (then the search's second visit of an action takes the outcome not yet
 visited: both values are combined with the known ``p``, so both are needed). Compiled code
-calls :func:`back_up`, dispatched on the backup's class, so the search is compiled (and cached)
-once per backup class. The four backups (:data:`BACKUPS`, by their settings' names):
+calls `back_up`, dispatched on the backup's class, so the search is compiled (and cached)
+once per backup class. The four backups (`BACKUPS`, by their settings' names):
 
-* ``"sampled"``, the paper's (:class:`Sampled`): ``V(N^a)`` is the running mean of the returns
+* ``"sampled"``, the paper's (`Sampled`): ``V(N^a)`` is the running mean of the returns
   of the simulations through the action, whose outcomes were drawn from ``p``;
-* ``"expected"`` (:class:`Expected`): each action node keeps a running mean per outcome and
+* ``"expected"`` (`Expected`): each action node keeps a running mean per outcome and
   ``V(N^a) = p V_find + (1 - p) V_miss`` with the known ``p``, so the outcome draws add no noise;
-* ``"max"`` (:class:`Max`): the expected combination of the outcomes' *values*, where a state's
+* ``"max"`` (`Max`): the expected combination of the outcomes' *values*, where a state's
   value is that of its best action (a Bellman backup; a state visited once is worth its
   rollout's return). Mean backups average the returns of every action tried below, which the
   random rollouts drag down; an action whose value is exact from the start (following a target
@@ -23,13 +23,13 @@ once per backup class. The four backups (:data:`BACKUPS`, by their settings' nam
   tree grows: with ``max_weight`` ``lambda < 1`` a state is worth ``lambda max_a V(N^a) + (1 -
   lambda)`` times the mean return of the simulations through it (the "mixmax" backup of
   Jacobsen et al., 2014);
-* ``"robust"`` (:class:`Robust`): like ``"max"``, but a state is worth its most visited action
+* ``"robust"`` (`Robust`): like ``"max"``, but a state is worth its most visited action
   (ties: the better value). At the frontier of the tree, actions are valued by one or a few
   rollouts, and the largest of several noisy values is biased upwards; UCB1 concentrates its
   visits on the best action, so the most visited one is the best without picking a lucky
   rollout.
 
-Every backup counts ``N(N^s) += 1`` and ``N(N^a) += 1`` along the path; :func:`back_up` then
+Every backup counts ``N(N^s) += 1`` and ``N(N^a) += 1`` along the path; `back_up` then
 widens the observed return range and counts the simulation.
 """
 
@@ -181,7 +181,7 @@ def _most_visited_value(tree, s):
 
 @numba.njit(cache=True)
 def back_sampled(backup, tree, path_state, path_action, path_found, depth, ret):
-    """:class:`Sampled`: ``V(N^a) += (ret - V(N^a)) / N(N^a)`` along the path."""
+    """`Sampled`: ``V(N^a) += (ret - V(N^a)) / N(N^a)`` along the path."""
     for d in range(depth - 1, -1, -1):
         x = path_action[d]
         _count(tree, path_state[d], x)
@@ -190,7 +190,7 @@ def back_sampled(backup, tree, path_state, path_action, path_found, depth, ret):
 
 @numba.njit(cache=True)
 def back_expected(backup, tree, path_state, path_action, path_found, depth, ret):
-    """:class:`Expected`: a running mean per outcome, ``V(N^a)`` their ``p``-weighted sum."""
+    """`Expected`: a running mean per outcome, ``V(N^a)`` their ``p``-weighted sum."""
     for d in range(depth - 1, -1, -1):
         x = path_action[d]
         _count(tree, path_state[d], x)
@@ -202,7 +202,7 @@ def back_expected(backup, tree, path_state, path_action, path_found, depth, ret)
 
 @numba.njit(cache=True)
 def back_max(backup, tree, path_state, path_action, path_found, depth, ret):
-    """:class:`Max`: the outcome's value is the next state's (mixmax) value."""
+    """`Max`: the outcome's value is the next state's (mixmax) value."""
     value = ret
     max_weight = backup.max_weight
     for d in range(depth - 1, -1, -1):
@@ -218,7 +218,7 @@ def back_max(backup, tree, path_state, path_action, path_found, depth, ret):
 
 @numba.njit(cache=True)
 def back_robust(backup, tree, path_state, path_action, path_found, depth, ret):
-    """:class:`Robust`: the outcome's value is the next state's most visited action's."""
+    """`Robust`: the outcome's value is the next state's most visited action's."""
     value = ret
     for d in range(depth - 1, -1, -1):
         x = path_action[d]

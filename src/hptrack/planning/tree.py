@@ -8,10 +8,10 @@ payload per outcome that the MDP needs to replay the transition, e.g. a duration
 ``V(N^a)`` and its two children (outcome 0, outcome 1). States themselves are not stored: the
 search rebuilds them from the root by replaying the stored transitions.
 
-:func:`select` is UCB1 (paper Algorithm 1, line 23), the tree's whatever the MDP; the backups
-are registered kernels (:mod:`hptrack.planning.backups`).
+`select` is UCB1 (paper Algorithm 1, line 23), the tree's whatever the MDP; the backups
+are registered kernels (`hptrack.planning.backups`).
 
-Action slots hold action indices as ``int16``: an MDP may declare up to :data:`MAX_ACTIONS`
+Action slots hold action indices as ``int16``: an MDP may declare up to `MAX_ACTIONS`
 actions (the search refuses more).
 """
 
@@ -37,7 +37,7 @@ class Tree(NamedTuple):
 
     ``counts`` holds ``[state nodes, action nodes, simulations run]``; ``value_range`` the
     smallest and largest return seen; ``rng`` the random stream's state and the seed it started
-    from (the seed of the search's derived streams, :func:`hptrack.planning.stream.substream`).
+    from (the seed of the search's derived streams, `hptrack.planning.stream.substream`).
     """
 
     s_first: np.ndarray
@@ -73,7 +73,7 @@ _FILL = {
     "a_out_visits": (0, np.int32),
     "a_out_value": (0.0, np.float64),
 }
-"""Initial value and dtype of each node array of :class:`Tree` (``a_child``, ``a_out_*``: one
+"""Initial value and dtype of each node array of `Tree` (``a_child``, ``a_out_*``: one
 column per outcome)."""
 
 MAX_ACTIONS = int(np.iinfo(np.int16).max)
