@@ -130,3 +130,71 @@ def test_every_object_the_api_page_lists_exists():
 
     missing = [name for name in api_objects() if not exists(name) and not defined(name)]
     assert missing == []
+
+
+USER_PAGES = [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]
+NOT_FOR_USERS = re.compile(r"quality goals?|shared with other jobs", re.I)
+
+
+def test_user_pages_speak_of_options_not_of_project_goals_or_machine_load():
+    found = [
+        f"{page.relative_to(ROOT)}: {match.group(0)!r}"
+        for page in USER_PAGES
+        for match in NOT_FOR_USERS.finditer(page.read_text())
+    ]
+    assert found == []
+
+
+def nav_pages(nav) -> list[str]:
+    """Every page the mkdocs nav lists, in order, repeats included."""
+    if isinstance(nav, str):
+        return [nav]
+    if isinstance(nav, dict):
+        return [page for value in nav.values() for page in nav_pages(value)]
+    return [page for entry in nav for page in nav_pages(entry)]
+
+
+def test_nav_lists_every_page_once():
+    config = yaml.safe_load((ROOT / "mkdocs.yml").read_text())
+    pages = nav_pages(config["nav"])
+    repeated = sorted({page for page in pages if pages.count(page) > 1})
+    assert repeated == []
+    on_disk = [
+        str(path.relative_to(DOCS))
+        for path in [*DOCS.glob("*.md"), *(DOCS / "results").glob("*.md")]
+    ]
+    assert sorted(set(on_disk) - set(pages)) == []
+
+
+def test_nav_repeats_are_caught():
+    assert nav_pages([{"A": [{"x": "a.md"}, {"y": "b.md"}]}, {"B": [{"z": "a.md"}]}]) == [
+        "a.md",
+        "b.md",
+        "a.md",
+    ]
+
+
+# a link whose text is a file or folder name (``[model.md](model.md)``, ``[results/x/](...)``)
+# rather than a title; code spans (``[`Scenario`](api.md)``) are names, not file names
+LINK = re.compile(r"(?<!!)\[([^\]`]+)\]\(([^)\s]+)\)")
+FILE_NAME = re.compile(r"^[\w./-]+\.(?:md|txt|csv|json|yaml|png|gif)$|^[\w.-]+/(?:[\w.-]+/)*$")
+
+
+def file_name_links(text: str) -> list[str]:
+    return [match.group(0) for match in LINK.finditer(text) if FILE_NAME.match(match.group(1))]
+
+
+def test_links_read_as_titles():
+    pages = [*USER_PAGES, *sorted((DOCS / "results").glob("*.md"))]
+    found = [
+        f"{page.relative_to(ROOT)}: {link}"
+        for page in pages
+        for link in file_name_links(page.read_text())
+    ]
+    assert found == []
+
+
+def test_a_file_name_link_is_caught():
+    text = "see [results/speed.md](results/speed.md), [results/x/](x/table.md), [model.md](m.md)"
+    assert len(file_name_links(text)) == 3
+    assert file_name_links("see [speed results](results/speed.md) and [`Scenario`](api.md)") == []
