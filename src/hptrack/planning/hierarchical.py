@@ -81,7 +81,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     },
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
-improvements measured in ``docs/planner-improvements.md``."""
+improvements measured in ``docs/results/search-options.md``."""
 
 DEFAULT_PRESET = "improved"
 

@@ -13,7 +13,7 @@ position uncertainty ``log det Sigma^xy`` is largest when the agent would reach 
 otherwise an available action drawn uniformly. It follows the target just found only when no
 other action is available, so a rollout does not end its history early by chance. Informed
 rollouts can also mislead the search (their errors are systematic); the benchmark in
-``docs/planner-improvements.md`` measures it against the random policy.
+``docs/results/search-options.md`` measures it against the random policy.
 """
 
 from __future__ import annotations
