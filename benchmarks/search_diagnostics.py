@@ -1,4 +1,4 @@
-"""Diagnostics of the tree search quoted in the README and ``docs/planner-improvements.md``.
+"""Diagnostics of the tree search quoted in the README and ``docs/results/search-options.md``.
 
     # early follows (the first "follow" before 60 % of the budget) per setting, n and settings
     python3 benchmarks/search_diagnostics.py follows --db results/effort.db

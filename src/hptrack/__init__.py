@@ -5,7 +5,7 @@ Tracking Under Target Motion Uncertainty" (arXiv:2510.10421). SI units throughou
 seconds, metres per second.
 
 The public API is importable from here; each name loads its module on first use, so that
-``import hptrack`` stays cheap::
+``import hptrack`` stays cheap:
 
     import hptrack
 

@@ -7,7 +7,7 @@ hptrack module they import are hashed, and numba caches in ``<base>/numba-<hash>
 any of them gives a new directory, so nothing stale is ever loaded and nobody deletes files. The
 base is ``$HPTRACK_CACHE_DIR``, else ``$NUMBA_CACHE_DIR/hptrack``, else the user's cache directory
 (``~/.cache/hptrack`` on Linux), else, if that cannot be written (a read-only home), one in the
-system's temporary directory. Directories of other hashes unused for :data:`KEEP_DAYS` are removed.
+system's temporary directory. Directories of other hashes unused for `KEEP_DAYS` are removed.
 
 ``hptrack/__init__.py`` imports this module first: numba chooses a kernel's cache directory when
 the kernel is defined. It imports no numerics: it sets ``NUMBA_CACHE_DIR`` (and
@@ -130,7 +130,7 @@ def cache_directory(root: Path = PACKAGE) -> Path | None:
 
 
 def configure() -> None:
-    """Point numba's cache at :func:`cache_directory` (kernels defined from now on)."""
+    """Point numba's cache at `cache_directory` (kernels defined from now on)."""
     directory = cache_directory()
     if directory is None:
         return

@@ -1,6 +1,6 @@
 """Plan the next decision in one call, from a scenario or from current beliefs.
 
-:func:`plan` hands a planner the mission and one observation, as the simulator does at the start
+`plan` hands a planner the mission and one observation, as the simulator does at the start
 of an episode, and returns what it decided: the waypoint to fly towards and, for the paper's
 hierarchical planner (Sec. IV-C), the target it pursues and the coverage sub-task it planned.
 """
@@ -55,15 +55,15 @@ def plan(
     """The next decision of ``planner`` for a scenario or for current beliefs.
 
     Args:
-        source: a :class:`~hptrack.scenario.Scenario` (planned from its priors at time 0 unless
-            ``observation`` is given) or a :class:`~hptrack.interface.MissionSpec` with the
+        source: a `Scenario` (planned from its priors at time 0 unless
+            ``observation`` is given) or a `MissionSpec` with the
             current ``observation`` (time, remaining budget, agent position, beliefs).
         planner: a registered planner name (``hptrack planners``) or a planner object.
         observation: the planner's current view; default ``source.initial_observation()``.
         seed: seeds the planner's random generator (the tree search's rollouts).
         **options: the planner's options when ``planner`` is a name, e.g. ``iterations=20_000``
             or ``preset="paper"``; validated, a bad one raises
-            :class:`~hptrack.interface.InputError`.
+            `InputError`.
 
     Example:
         >>> import hptrack

@@ -1,16 +1,16 @@
 """What every layer above the models may use: the mission's constants, what a planner sees, and
 the planner protocol (Gymnasium-like; a planner never sees the truth, except a reference that
-declares it reads it, :class:`TruthReader`).
+declares it reads it, `TruthReader`).
 
 Every planner, whether it chooses sub-tasks (the paper's hierarchical planner), controls (ARVI,
-A*) or a learned policy, implements :class:`Planner`. Each step the simulator (or the real-time
-controller) hands it an :class:`Observation` (what a real UAV would know: time, remaining budget,
+A*) or a learned policy, implements `Planner`. Each step the simulator (or the real-time
+controller) hands it an `Observation` (what a real UAV would know: time, remaining budget,
 its own position, the target beliefs and which targets it just measured) and receives a
 waypoint: the position the agent should fly towards, at most ``agent_speed * time_step`` away.
 
-:class:`MissionSpec` is the one vocabulary for the mission constants (time step, budget, speed,
+`MissionSpec` is the one vocabulary for the mission constants (time step, budget, speed,
 sensor diameter, measurement noise, process noise); the compiled kernels receive them as one
-record, :attr:`MissionSpec.record` (:class:`hptrack.models.mission.Mission`), built and
+record, `MissionSpec.record` (`hptrack.models.mission.Mission`), built and
 validated once.
 """
 
@@ -42,9 +42,9 @@ class InputError(ValueError):
 
 
 MAX_SHOWN_CHARS = 80
-"""Longest shown value in an error message (:func:`shown`)."""
+"""Longest shown value in an error message (`shown`)."""
 MAX_MESSAGE_CHARS = 600
-"""Longest error message (:func:`one_line`)."""
+"""Longest error message (`one_line`)."""
 
 
 class _ShortRepr(reprlib.Repr):
@@ -101,7 +101,7 @@ class MissionSpec:
         agent_speed: ``v_a``, m/s.
         sensor_diameter: footprint diameter ``w``, m; targets within ``w/2`` are measured.
         measurement_noise: ``(2, 2)`` position measurement covariance ``R``, m^2.
-        process_noise_form: which per-step ``Q`` (:mod:`hptrack.models.motion`).
+        process_noise_form: which per-step ``Q`` (`hptrack.models.motion`).
         process_noise: ``(n,)`` per-target noise intensities ``q``, m^2/s^3.
         target_ids: the targets' names.
     """
@@ -190,7 +190,7 @@ class Observation:
 
 class SettingsRecord(Protocol):
     """A planner's settings as the layers above read them (a
-    :class:`~hptrack.settings.PlannerSettings`)."""
+    `PlannerSettings`)."""
 
     def as_json(self) -> dict[str, Any]:
         """The settings as JSON-ready options (they rebuild the same planner)."""

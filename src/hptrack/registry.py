@@ -1,8 +1,8 @@
 """Planner registry: names to planner classes and their settings, so that the simulator and the
 CLI never import a planner.
 
-Each entry builds a fresh :class:`~hptrack.interface.Planner` from validated settings
-(:mod:`hptrack.settings`).
+Each entry builds a fresh `Planner` from validated settings
+(`hptrack.settings`).
 """
 
 from __future__ import annotations
@@ -72,7 +72,7 @@ PLANNERS: dict[str, PlannerEntry] = {
 
 
 def planner_entry(name: str) -> PlannerEntry:
-    """The entry of ``name``, or an :class:`~hptrack.interface.InputError` listing the names."""
+    """The entry of ``name``, or an `InputError` listing the names."""
     try:
         return PLANNERS[name]
     except KeyError:

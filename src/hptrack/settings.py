@@ -1,15 +1,15 @@
 """Planner settings as validated data, and part of every result's identity.
 
-Each planner declares its settings as one :class:`PlannerSettings` subclass (pydantic: types,
+Each planner declares its settings as one `PlannerSettings` subclass (pydantic: types,
 ranges, defaults, one docstring line per field with its unit). Options from the command line
 (``-o KEY=VALUE``, values read as integers, numbers, ``true``/``false``, ``none`` or text,
-:func:`hptrack.cli.common.parse_value`) or from Python are validated into it, and a bad
-value is refused with one line that names the planner, the option and the value::
+`hptrack.cli.common.parse_value`) or from Python are validated into it, and a bad
+value is refused with one line that names the planner, the option and the value:
 
     planner 'mcts': option exploration must be > 0, got -1
 
-:meth:`PlannerSettings.canonical` is the settings' canonical JSON (every field, defaults
-included, keys sorted); :meth:`PlannerSettings.digest` hashes it. The benchmark store keys every
+`PlannerSettings.canonical` is the settings' canonical JSON (every field, defaults
+included, keys sorted); `PlannerSettings.digest` hashes it. The benchmark store keys every
 episode by it, so a run with another value of any option never reuses another run's rows.
 
 The generic effort flags of the CLI (``--iterations``, ``--time-limit``) map to a planner's own
@@ -34,9 +34,9 @@ billion take hours for one decision."""
 MAX_TIME_LIMIT_S = 3600.0
 """Longest planning time per decision, s (an hour)."""
 Iterations = Annotated[int, Field(ge=1, le=MAX_ITERATIONS)]
-"""A per-decision effort count, bounded by :data:`MAX_ITERATIONS`."""
+"""A per-decision effort count, bounded by `MAX_ITERATIONS`."""
 TimeLimit = Annotated[float, Field(gt=0.0, le=MAX_TIME_LIMIT_S)]
-"""A per-decision planning time, s, bounded by :data:`MAX_TIME_LIMIT_S`."""
+"""A per-decision planning time, s, bounded by `MAX_TIME_LIMIT_S`."""
 
 _PHRASES = {
     "greater_than": "must be > {gt}",
@@ -138,7 +138,7 @@ class PlannerSettings(BaseModel):
 
     @classmethod
     def from_canonical(cls, text: str) -> Self:
-        """The settings a :meth:`canonical` text stands for (a stored result's identity)."""
+        """The settings a `canonical` text stands for (a stored result's identity)."""
         return cls.model_validate(json.loads(text))
 
     def canonical(self) -> str:
@@ -146,7 +146,7 @@ class PlannerSettings(BaseModel):
         return json.dumps(self.as_json(), sort_keys=True, separators=(",", ":"))
 
     def digest(self) -> str:
-        """A short hash of :meth:`canonical`."""
+        """A short hash of `canonical`."""
         return digest_of(self.canonical())
 
     def effort_label(self) -> str:

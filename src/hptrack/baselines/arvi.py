@@ -8,7 +8,7 @@ the cost of a plan is the total ``log det Sigma^xy`` at the end of the horizon m
 Set-up and defaults: ``docs/baselines.md``.
 
 One pass is a forward search, level by level over the horizon, on the deterministic covariance
-sequences of :mod:`hptrack.baselines.information`. Every kept node of a level is expanded with
+sequences of `hptrack.baselines.information`. Every kept node of a level is expanded with
 every control (all at once, compiled), the children are sorted by accumulated cost and pruned
 greedily: a child is dropped when a kept child of the same level lies closer than ``delta`` to
 it and is at least as good up to ``epsilon``, ``Sigma_kept <= Sigma_new + epsilon I`` in the
@@ -254,7 +254,7 @@ class ArviPlanner(PrimitivePlanner):
         """One reduced value iteration pass with pruning ``(delta_m, epsilon)``.
 
         ``means`` are the predicted mean positions of every sub-step of the ``horizon``
-        primitives (:func:`~hptrack.baselines.information.mean_positions`).
+        primitives (`mean_positions`).
         """
         k = self.settings.control_steps
         n_controls = self.step_displacements.shape[0]

@@ -7,8 +7,8 @@ modification (Sec. V-B): the step cost is the change of the total uncertainty
 ``docs/baselines.md``.
 
 Best-first search over the tree of motion-primitive sequences (the one ARVI searches), on the
-deterministic covariance sequences of :mod:`hptrack.baselines.information`: ``g`` is the
-accumulated step cost and ``h`` the :class:`~hptrack.baselines.information.RiccatiBound` lower
+deterministic covariance sequences of `hptrack.baselines.information`: ``g`` is the
+accumulated step cost and ``h`` the `RiccatiBound` lower
 bound on the cost still to come, so ``f = g + h`` is admissible and the first complete
 horizon-length node popped is optimal. With the difference cost the costs telescope and ``f`` is
 the bound on the total ``log det`` at the end of the horizon. Ties in ``f`` go to the

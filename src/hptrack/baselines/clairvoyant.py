@@ -2,12 +2,12 @@
 
 It measures how far a planner is from perfect information, not a planner that can fly: only the
 simulator knows the truth, and hands it only to a planner that declares it reads it
-(:class:`hptrack.interface.TruthReader`); the flight controller refuses it.
+(`hptrack.interface.TruthReader`); the flight controller refuses it.
 
 A *visit* flies straight at the point where the true target will be met (its true position and
 velocity, the footprint's edge reached at ``v_a``), then stays on it, measured every step, for a
 chosen time. As a visit ends (or at the start) the planner scores every plan of two visits
-``(target, stay)`` then ``(other target, stay)``, stays from :data:`STAYS`, by the decrease of
+``(target, stay)`` then ``(other target, stay)``, stays from `STAYS`, by the decrease of
 ``U`` at the end of the budget that the two visits buy (each belief predicted to its arrival,
 updated at every step of its stay, predicted to the end; Eq. (1) and the Kalman update) per second
 the plan takes, and flies the first visit of the best plan. A plan of one visit is scored the same

@@ -5,7 +5,7 @@ hover, each held for ``control_steps`` simulator steps (default 10 steps = 5 s =
 30 m/s). Control 0 is hover, so index order is the planners' tie-break (hover first); heading
 ``k`` points at ``2 pi (k - 1) / n_headings`` from the x axis, counter-clockwise.
 
-:class:`PrimitivePlanner` implements the simulator's :class:`~hptrack.interface.Planner`
+`PrimitivePlanner` implements the simulator's `Planner`
 protocol for any planner that chooses sequences of primitives over a receding horizon: it asks
 the subclass for a plan at a primitive boundary, executes the first ``replan_period`` primitives
 of it and turns each into one waypoint per simulator step.
@@ -94,9 +94,9 @@ class PrimitivePlanner(ABC):
     """Receding-horizon planner over motion primitives (the simulator's ``Planner`` protocol).
 
     At a primitive boundary, when the current plan is used up or ``replan_period`` primitives
-    of it have run, :meth:`search` returns a new sequence of control indices. Each simulator
+    of it have run, `search` returns a new sequence of control indices. Each simulator
     step then returns the waypoint one full-speed step along the current control (or the agent
-    position for hover). ``decisions`` logs one :class:`DecisionStats` per search.
+    position for hover). ``decisions`` logs one `DecisionStats` per search.
     """
 
     name: str

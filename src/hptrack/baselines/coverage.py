@@ -28,7 +28,7 @@ class CoveragePlanner:
     """Pursue one target with coverage sub-tasks (name ``"coverage"``).
 
     While the target is measured the agent flies to its belief mean one step ahead (it keeps
-    seeing it); otherwise it runs a :class:`~hptrack.coverage.subtask.CoverageSubtask`, planning
+    seeing it); otherwise it runs a `CoverageSubtask`, planning
     a new one from the current belief when the last one was found or reached ``t_cutoff``
     without a detection.
     """

@@ -16,19 +16,19 @@ sequences (``docs/baselines.md``, "Shared model"):
   the uncertainty itself ``sum_i log det Sigma_i^xy(t+1)`` summed over the steps, is the option
   ``"sum"``.
 
-Runs of unmeasured sub-steps use the closed-form prediction of :mod:`hptrack.models.motion` and
-the Kalman update of :mod:`hptrack.models.measurement` (any 2x2 ``R``), so a
+Runs of unmeasured sub-steps use the closed-form prediction of `hptrack.models.motion` and
+the Kalman update of `hptrack.models.measurement` (any 2x2 ``R``), so a
 primitive costs one prediction per measurement plus one, whatever its duration; a target that no
 control of a node can bring into the footprint during the primitive is predicted once for all of
 that node's children. Searches that prune before they need the children's covariances
-(ARVI with ``epsilon = inf``) ask for the uncertainties first (:func:`expand_uncertainty`) and for
-the covariances of the kept children only (:func:`child_covariances`).
+(ARVI with ``epsilon = inf``) ask for the uncertainties first (`expand_uncertainty`) and for
+the covariances of the kept children only (`child_covariances`).
 
-:class:`RiccatiBound` is the admissible heuristic of A* (Schlotfeldt, Atanasov, Pappas, IROS
+`RiccatiBound` is the admissible heuristic of A* (Schlotfeldt, Atanasov, Pappas, IROS
 2019, "Maximum Information Bounds for Planning Active Sensing Trajectories"), with the step cost
 changed to match: every target is measured at every sub-step from the first one at which the
 agent could have reached its predicted mean. The "measured at every step" Riccati recursion is
-precomputed once per mission (:mod:`hptrack.models.riccati`), so the bound costs O(1) per
+precomputed once per mission (`hptrack.models.riccati`), so the bound costs O(1) per
 target and node, whatever the horizon.
 """
 
@@ -72,7 +72,7 @@ def rollout_children(
     out_covariances,
     out_uncertainty,
 ):
-    """Compiled kernel of :func:`expand`: children ``a C + c`` listed in ``children``
+    """Compiled kernel of `expand`: children ``a C + c`` listed in ``children``
     (``mission``: the mission record).
 
     Writes each child's total ``log det Sigma^xy`` to ``out_uncertainty`` and, if ``store``, its
@@ -185,7 +185,7 @@ def expand(
         mission: the mission constants.
         step_displacements: ``(C, 2)`` agent displacement per sub-step of each control, m.
         level_means: ``(K + 1, n, 2)`` predicted mean positions at the primitive's sub-steps
-            ``0..K`` (a slice of :func:`mean_positions`), m.
+            ``0..K`` (a slice of `mean_positions`), m.
         positions: ``(N, 2)`` agent positions of the nodes, m.
         covariances: ``(N, n, 4, 4)`` target covariances of the nodes.
 
@@ -209,7 +209,7 @@ def expand_uncertainty(
     positions: np.ndarray,
     covariances: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`expand` without the child covariances: ``(N C, 2)`` positions, ``(N C,)``
+    """`expand` without the child covariances: ``(N C, 2)`` positions, ``(N C,)``
     total uncertainty (for searches that prune before storing covariances)."""
     children = np.arange(positions.shape[0] * step_displacements.shape[0])
     _, uncertainty = _run_rollout(
@@ -257,8 +257,8 @@ def step_costs(
 
 @numba.njit(cache=True)
 def bound_children(mission, follow, positions, covariances, start, boundaries, all_means, out):
-    """Compiled kernel of :meth:`RiccatiBound.lower_bounds` (``mission``: the mission record,
-    ``follow``: its :class:`~hptrack.models.mission.FollowTables`); adds the bounds to
+    """Compiled kernel of `RiccatiBound.lower_bounds` (``mission``: the mission record,
+    ``follow``: its `FollowTables`); adds the bounds to
     ``out``."""
     process_noise, noise = mission.process_noise, mission.measurement_noise
     step_length, radius = mission.step_length, mission.footprint_radius
@@ -312,7 +312,7 @@ class RiccatiBound:
     allowed to measure them all at once), which keeps it admissible.
 
     The "measured at every sub-step" maps of each target's ``q``
-    (:func:`hptrack.models.riccati.riccati_table`) are built once, for ``max_sub_steps``.
+    (`hptrack.models.riccati.riccati_table`) are built once, for ``max_sub_steps``.
     """
 
     def __init__(self, mission: MissionSpec, max_sub_steps: int) -> None:
@@ -334,7 +334,7 @@ class RiccatiBound:
             covariances: ``(N, n, 4, 4)`` their target covariances.
             start: the nodes' sub-step index, counted from the decision.
             boundaries: ``(B,)`` later sub-step indices, at most ``start + max_sub_steps``.
-            all_means: ``(S + 1, n, 2)`` predicted mean positions (:func:`mean_positions`), m.
+            all_means: ``(S + 1, n, 2)`` predicted mean positions (`mean_positions`), m.
         """
         out = np.zeros((positions.shape[0], len(boundaries)))
         bound_children(

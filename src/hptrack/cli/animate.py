@@ -1,7 +1,7 @@
 """``hptrack animate``: a saved episode record as a GIF (or MP4 with ffmpeg), with progress of
 the drawing and then of the GIF's encoding.
 
-:func:`write_animation` is the same rendering for other commands (``simulate --animate``).
+`write_animation` is the same rendering for other commands (``simulate --animate``).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from hptrack.sim.record import EpisodeRecord
 
 
 def load_record(path: Path) -> EpisodeRecord:
-    """Read an episode record, or raise a one-line :class:`InputError` naming the file."""
+    """Read an episode record, or raise a one-line `InputError` naming the file."""
     if not path.is_file():
         raise InputError(f"RECORD {str(path)!r}: no such file")
     try:

@@ -1,6 +1,6 @@
 """``hptrack`` command line: thin typer commands over the library, rendered with rich.
 
-:func:`main` is the entry point: bad input (an :class:`~hptrack.interface.InputError` or a
+`main` is the entry point: bad input (an `InputError` or a
 command-line usage error) is one line on stderr and exit code 2; any other exception is a bug:
 its traceback, a line asking to report it, and exit code 1.
 """
@@ -204,7 +204,7 @@ def simulate(
 
 
 def _check_record_size(n_targets: int, n_steps: int, belief_stride: int) -> None:
-    """Refuse, before the mission, a record larger than :data:`MAX_RECORD_BYTES`, naming the
+    """Refuse, before the mission, a record larger than `MAX_RECORD_BYTES`, naming the
     smallest ``--belief-stride`` that fits (the per-step part does not shrink with it)."""
     need = record_bytes(n_targets, n_steps, belief_stride)
     if need <= MAX_RECORD_BYTES:

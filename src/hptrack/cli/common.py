@@ -1,8 +1,8 @@
 """Shared CLI helpers: the rich consoles, progress display, planner options, output paths and
 JSON output.
 
-Errors are not handled here: :func:`hptrack.cli.app.main` turns an
-:class:`~hptrack.interface.InputError` (and a command-line usage error) into one line and exit
+Errors are not handled here: `hptrack.cli.app.main` turns an
+`InputError` (and a command-line usage error) into one line and exit
 code 2, and lets every other exception show its traceback with exit code 1.
 """
 
@@ -27,13 +27,13 @@ console = Console()
 error_console = Console(stderr=True)
 
 PLAIN_PROGRESS_INTERVAL_S = 30.0
-"""Time between two lines of :class:`PlainProgress`, s."""
+"""Time between two lines of `PlainProgress`, s."""
 
 
 class PlainProgress:
     """Progress as plain lines, for a log file or a pipe (rich's bar is for terminals): the
-    subset of :class:`rich.progress.Progress` that the commands use. A line at a task's first
-    update, then every :data:`PLAIN_PROGRESS_INTERVAL_S`, and when it completes,
+    subset of `rich.progress.Progress` that the commands use. A line at a task's first
+    update, then every `PLAIN_PROGRESS_INTERVAL_S`, and when it completes,
     e.g. ``benchmark: 12/30 episodes (40 %), 00:01:10; mcts n=2 seed=3: U=40.12``."""
 
     def __init__(self, label: str, unit: str, output: Console | None = None) -> None:
@@ -85,7 +85,7 @@ class PlainProgress:
 def progress_display(
     label: str, unit: str, *columns: str | ProgressColumn, transient: bool = False
 ) -> Progress | PlainProgress:
-    """A rich progress bar of ``columns`` on a terminal; :class:`PlainProgress` lines
+    """A rich progress bar of ``columns`` on a terminal; `PlainProgress` lines
     (``label: done/total unit``) otherwise."""
     if console.is_terminal:
         return Progress(*columns, console=console, transient=transient)
@@ -242,7 +242,7 @@ def check_output_path(path: Path | None, option: str) -> None:
 
 
 def check_figure_path(path: Path | None, option: str) -> None:
-    """:func:`check_output_path` for a figure, whose suffix must be a format matplotlib writes
+    """`check_output_path` for a figure, whose suffix must be a format matplotlib writes
     (without one, matplotlib would add ``.png`` and write another file)."""
     if path is None:
         return

@@ -301,7 +301,7 @@ def fly(
 
 def planned_speed(scenario_speed: float, limits: Any, cap: bool) -> float:
     """The speed to plan with: the scenario's, unless the vehicle's limit (``limits``, a
-    :class:`~hptrack.runtime.mavsdk_adapter.VehicleLimits`) is lower, m/s.
+    `VehicleLimits`) is lower, m/s.
 
     Raises:
         InputError: the scenario asks for more than the vehicle's limit and ``cap`` is off.

@@ -1,10 +1,10 @@
 """Coverage sub-task (paper Sec. IV-A, IV-B): interception, shifting spiral, outcome estimator.
 
-Compiled kernels for the tree search: :func:`intercept_time`, :func:`intercept_steps`,
-:func:`coverage_outcome` (the paper's estimator), :func:`sharp_coverage_outcome` with
-:func:`approach_step` (the sharp estimator: flight detections and the spiral's footprint), and
-:func:`spiral_phases` for the path. Python objects for planners: :class:`CoverageSubtask`,
-:func:`estimate_coverage`.
+Compiled kernels for the tree search: `intercept_time`, `intercept_steps`,
+`coverage_outcome` (the paper's estimator), `sharp_coverage_outcome` with
+`approach_step` (the sharp estimator: flight detections and the spiral's footprint), and
+`spiral_phases` for the path. Python objects for planners: `CoverageSubtask`,
+`estimate_coverage`.
 """
 
 from hptrack.coverage.estimator import (

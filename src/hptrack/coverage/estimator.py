@@ -12,10 +12,10 @@ and ``E[T_find]`` is the expected finding time given the target is found by ``t_
 measured from the start of the coverage. When the remaining budget ends first, everything is
 truncated at the budget's end.
 
-:func:`coverage_outcome` is the compiled kernel used by the tree search: O(t_cutoff) arithmetic
+`coverage_outcome` is the compiled kernel used by the tree search: O(t_cutoff) arithmetic
 with the covariance as polynomials in the step count (closed form), one root and one exponential
-per step, no allocation. :func:`estimate_coverage` is its validated
-Python wrapper, returning a :class:`CoverageEstimate` in seconds with the CDF.
+per step, no allocation. `estimate_coverage` is its validated
+Python wrapper, returning a `CoverageEstimate` in seconds with the CDF.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ MAX_COVERAGE_STEPS = 10_000_000
 
 @numba.njit(cache=True, inline="always")
 def position_det(poly, n):
-    """``det Sigma^xy`` (m^4) after ``n`` steps from :func:`position_polynomials`' ``poly``
+    """``det Sigma^xy`` (m^4) after ``n`` steps from `position_polynomials`' ``poly``
     (its first ten entries), by Horner's rule."""
     x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = (
         poly[0],

@@ -16,7 +16,7 @@ the mean reaches at step ``n``, ``mean + v_hat n tau``, which it can reach by th
 ``|d + v_hat s| - v_a s`` decreases in ``s``; the last step may be shorter than ``v_a tau``.
 The coverage starts at step ``n`` from the covariance propagated ``n`` steps. If the belief mean
 already lies inside the sensor footprint (``|d| <= w/2``) the coverage starts at once: ``n = 0``
-and the spiral is anchored at the agent's position (see :mod:`hptrack.coverage.subtask`).
+and the spiral is anchored at the agent's position (see `hptrack.coverage.subtask`).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def intercept_time(
     """Smallest ``t >= 0`` (s) with ``|mean + vel t - agent| = speed t`` (closed form).
 
     Positions in m, velocities in m/s. Returns ``inf`` when ``|vel| >= speed`` (the target cannot
-    be caught for sure; :func:`plan_intercept` turns that into an error) and ``0`` when the agent
+    be caught for sure; `plan_intercept` turns that into an error) and ``0`` when the agent
     is on the mean.
     """
     dx = mean_x - agent_x

@@ -2,7 +2,7 @@
 during the intercept flight and the spiral's real footprint (``docs/coverage-validation.md``,
 "The sharp estimator").
 
-The paper's estimator (:func:`hptrack.coverage.estimator.coverage_outcome`, Eqs. (6)-(8)) counts a
+The paper's estimator (`hptrack.coverage.estimator.coverage_outcome`, Eqs. (6)-(8)) counts a
 target found when it lies, at step ``k`` of the spiral, inside an ellipse of the belief's shape and
 of area ``S_cover(k)``. Two things it leaves out make it conservative after a departure delay:
 
@@ -46,9 +46,9 @@ find probability is ``F(K)`` and the expected finding time
     E = ((n + K) F(K) - sum_{j<n} F_flight(j) - sum_{k<K} F(k)) / F(K)
 
 is counted in steps from the start of the sub-task (departure), the flight included: the
-sub-task's duration given a find. :func:`sharp_coverage_outcome` is the compiled kernel (cost
+sub-task's duration given a find. `sharp_coverage_outcome` is the compiled kernel (cost
 ``O(t_cutoff)`` cheap steps plus a fixed number of quadrature evaluations, no allocation);
-:func:`estimate_sharp` its validated Python wrapper.
+`estimate_sharp` its validated Python wrapper.
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def ellipse_perimeter(semi_a, semi_b):
 
 @numba.njit(cache=True)
 def strip_constants(strip_halfwidth):
-    """What :func:`strip_mass` needs of a strip of half-width ``w_n``, computed once per
+    """What `strip_mass` needs of a strip of half-width ``w_n``, computed once per
     estimate: ``(w_n, H(w_n^2), e^{-w_n^2/2})`` and the three node weights times ``2 w_n
     phi(y_i)``."""
     w = strip_halfwidth
@@ -129,7 +129,7 @@ def strip_constants(strip_halfwidth):
 @numba.njit(cache=True)
 def strip_mass(h_found, strip):
     """``H``: standard normal mass of the half-strip ``{x >= 0, |y| <= w_n}`` outside the disk
-    of radius ``sqrt(h_found)``; ``strip`` from :func:`strip_constants`."""
+    of radius ``sqrt(h_found)``; ``strip`` from `strip_constants`."""
     w = strip[0]
     if h_found < w * w:  # polar: half of each circle of radius below w_n lies in the strip
         return 0.5 * (math.exp(-0.5 * h_found) - strip[2]) + strip[1]
@@ -281,7 +281,7 @@ def sharp_coverage_outcome(
             budget ends before the coverage starts.
         flight_steps: whole steps of the intercept flight ``n`` (0: none).
         approach_x, approach_y: the agent's displacement per flight step relative to the belief
-            mean, m (:func:`hptrack.coverage.intercept.approach_step`); unused when ``n = 0``.
+            mean, m (`hptrack.coverage.intercept.approach_step`); unused when ``n = 0``.
 
     Returns:
         ``(cutoff_steps, p_find, expected_steps)``: the paper's ``t_cutoff`` in steps from the
@@ -417,14 +417,14 @@ def estimate_sharp(
 ) -> SharpEstimate:
     """The sharp estimate of a sub-task whose coverage starts from ``covariance`` after an
     intercept flight of ``flight_steps`` steps, ``approach`` (m) per step relative to the belief
-    mean (:func:`hptrack.coverage.intercept.approach_step`).
+    mean (`hptrack.coverage.intercept.approach_step`).
 
     ``remaining_time`` is the budget left when the coverage starts (s; ``None``: no budget), as
-    for :func:`hptrack.coverage.estimator.estimate_coverage`, whose checks and ``t_cutoff`` this
+    for `hptrack.coverage.estimator.estimate_coverage`, whose checks and ``t_cutoff`` this
     shares.
 
     Raises:
-        ValueError: what :func:`estimate_coverage` refuses, a negative flight, or an approach
+        ValueError: what `estimate_coverage` refuses, a negative flight, or an approach
             that is not two finite numbers (non-zero when there is a flight).
     """
     paper = estimate_coverage(covariance, q, mission, remaining_time)

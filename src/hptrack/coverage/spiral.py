@@ -17,7 +17,7 @@ every step of the agent is exactly ``v_a tau`` long. ``f(theta_k) = (|v_hat|^2 -
 the root is bracketed by marching ``theta`` up in increments that move the spiral point by at
 most ``v_a tau / 32`` and refined by bisection to machine precision (far below a millimetre).
 
-:func:`spiral_phases` is the compiled kernel; :class:`ShiftingSpiral` extends it lazily.
+`spiral_phases` is the compiled kernel; `ShiftingSpiral` extends it lazily.
 """
 
 from __future__ import annotations

@@ -1,13 +1,13 @@
 """One coverage sub-task (paper Sec. IV-C, "Markov Decision Process"): intercept, then spiral.
 
 When the agent pursues target ``a`` it flies straight at full speed to intercept the belief mean
-(:mod:`hptrack.coverage.intercept`), then flies the shifting spiral of Sec. IV-A
-(:mod:`hptrack.coverage.spiral`) until the target is detected or ``t_cutoff`` of Sec. IV-B is
+(`hptrack.coverage.intercept`), then flies the shifting spiral of Sec. IV-A
+(`hptrack.coverage.spiral`) until the target is detected or ``t_cutoff`` of Sec. IV-B is
 reached, or the budget ends. Its outcome is estimated by the paper's estimator
-(:attr:`CoverageSubtask.estimate`) and by the sharp one (:attr:`CoverageSubtask.sharp_estimate`,
-:mod:`hptrack.coverage.sharp_estimator`). :class:`CoverageSubtask` is the plan the hierarchical
+(`CoverageSubtask.estimate`) and by the sharp one (`CoverageSubtask.sharp_estimate`,
+`hptrack.coverage.sharp_estimator`). `CoverageSubtask` is the plan the hierarchical
 planner executes inside its ``Planner.act`` loop (and the ``coverage`` planner of
-:mod:`hptrack.baselines.coverage` flies on its own).
+`hptrack.baselines.coverage` flies on its own).
 
 Step bookkeeping: a sub-task built at step ``s`` (the observation it was planned from) has its
 planned positions ``path[j]`` for steps ``s + j``: ``path[0]`` is the agent's position, the
@@ -129,7 +129,7 @@ class CoverageSubtask:
     @cached_property
     def sharp_estimate(self) -> SharpEstimate:
         """The sharp estimator's outcome of this sub-task (flight detections included, expected
-        duration from its start; :mod:`hptrack.coverage.sharp_estimator`)."""
+        duration from its start; `hptrack.coverage.sharp_estimator`)."""
         m, n, mean = self.mission, self.intercept.steps, self.mean
         approach = approach_step(
             self.agent_position[0],

@@ -2,8 +2,8 @@
 
 Importing this package registers them (Gymnasium 1.x has no plugin entry points):
 
-* ``hptrack/Tracking-v0``: one simulator step per action (:mod:`hptrack.envs.tracking`);
-* ``hptrack/SubtaskTracking-v0``: one coverage sub-task per action (:mod:`hptrack.envs.subtask`).
+* ``hptrack/Tracking-v0``: one simulator step per action (`hptrack.envs.tracking`);
+* ``hptrack/SubtaskTracking-v0``: one coverage sub-task per action (`hptrack.envs.subtask`).
 
 ``gym.make("hptrack.envs:Tracking-v0")`` imports this package and then looks up the name after
 the colon, so the two are also registered without the namespace (``Tracking-v0``,

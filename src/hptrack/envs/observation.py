@@ -1,6 +1,6 @@
 """The observation vector of the environments: the belief state scaled to O(1), flat float32.
 
-Per target slot, six features (:data:`FEATURES`):
+Per target slot, six features (`FEATURES`):
 
 * ``dx, dy``: belief mean minus agent position, per axis, / 1000 m;
 * ``vx, vy``: belief mean velocity / 3 m/s;
@@ -41,7 +41,7 @@ def _clip(value, bound):
 
 @numba.njit(cache=True)
 def encode(agent, means, logdets, seen, budget_fraction, n_slots, masked, out):
-    """Fill ``out`` (float32, :attr:`ObservationLayout.size`) from the beliefs ``means`` ``(n,
+    """Fill ``out`` (float32, `ObservationLayout.size`) from the beliefs ``means`` ``(n,
     4)``, per-target ``logdets`` ``(n,)``, measurement flags ``seen`` ``(n,)`` and the fraction of
     the budget left; slots ``n .. n_slots - 1`` are padding."""
     b = FEATURE_BOUND
@@ -131,7 +131,7 @@ class ObservationLayout:
         return out
 
     def encode_observation(self, observation: Observation, budget: float) -> np.ndarray:
-        """The vector of a planner's :class:`~hptrack.interface.Observation` of a mission of
+        """The vector of a planner's `Observation` of a mission of
         ``budget`` s: the one the environment returns in the same state (to fly a learned
         policy as a planner in the simulator)."""
         covs = np.ascontiguousarray(observation.covariances, dtype=float)

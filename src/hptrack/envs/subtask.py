@@ -1,23 +1,23 @@
 """``hptrack/SubtaskTracking-v0``: the tracking problem at the paper's decision level.
 
 An action is "pursue target ``i``" (paper Sec. IV-C): inside one ``step`` the agent flies the
-coverage sub-task of :class:`~hptrack.coverage.subtask.CoverageSubtask`, the intercept of the
+coverage sub-task of `CoverageSubtask`, the intercept of the
 belief mean and then the shifting spiral, until the target is measured, ``t_cutoff`` is reached
-or the budget ends, on the simulator's step physics (:class:`hptrack.sim.step.World`). The
+or the budget ends, on the simulator's step physics (`hptrack.sim.step.World`). The
 hierarchical planner's tree search decides over the same actions, so learned agents and the
 search can be compared on the same decisions.
 
-Rules (those of the tree search's sub-task MDP, :mod:`hptrack.planning.subtask_mdp`):
+Rules (those of the tree search's sub-task MDP, `hptrack.planning.subtask_mdp`):
 
 * choosing the target that the previous sub-task just found follows it (flying at its predicted
   position every step) to the end of the budget;
 * action ``i`` is *feasible* when the agent can reach target ``i``'s belief mean before the
   budget ends (``0 <= n_i < steps left``, ``n_i`` the intercept steps) or ``i`` is the target
   just found. An infeasible action (including a padding slot ``i >= n``) hovers one step.
-  :meth:`SubtaskTrackingEnv.action_masks` and ``info["action_mask"]`` give the feasible ones.
+  `SubtaskTrackingEnv.action_masks` and ``info["action_mask"]`` give the feasible ones.
   Unlike the tree search, a target missed earlier may be chosen again.
 
-Observation: :mod:`hptrack.envs.observation`, as ``Tracking-v0``. Reward: ``-(change of U) / n``
+Observation: `hptrack.envs.observation`, as ``Tracking-v0``. Reward: ``-(change of U) / n``
 over the sub-task. ``info`` as ``Tracking-v0`` plus ``action_mask`` and ``last_found``, and after
 a step ``subtask``: ``target_index``, ``outcome`` (``"found"``; ``"missed"``: ``t_cutoff``
 reached; ``"budget"``: the budget ended first; ``"followed"``; ``"infeasible"``), ``start_step``,
@@ -42,7 +42,7 @@ from hptrack.models.motion import predicted_positions
 
 class SubtaskTrackingEnv(MissionEnv):
     """``hptrack/SubtaskTracking-v0`` (module docstring); arguments as
-    :class:`~hptrack.envs.tracking.MissionEnv`. The action space is ``Discrete(n)``, or
+    `MissionEnv`. The action space is ``Discrete(n)``, or
     ``Discrete(max_targets)`` with padding."""
 
     def __init__(self, **kwargs: Any) -> None:

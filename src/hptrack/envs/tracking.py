@@ -1,7 +1,7 @@
 """``hptrack/Tracking-v0``: the step-level tracking problem as a Gymnasium environment.
 
-One environment step is one simulator step of ``tau`` = 0.5 s (:class:`hptrack.sim.step.World`,
-the simulator's compiled step: same seed, same mission as :func:`hptrack.sim.episode.run_episode`).
+One environment step is one simulator step of ``tau`` = 0.5 s (`hptrack.sim.step.World`,
+the simulator's compiled step: same seed, same mission as `hptrack.sim.episode.run_episode`).
 The agent is holonomic. Actions:
 
 * ``action_type="discrete"`` (default): ``Discrete(13)``; action ``k < 12`` flies at full speed
@@ -9,14 +9,14 @@ The agent is holonomic. Actions:
 * ``action_type="box"``: ``Box(-1, 1, (2,))``, the velocity as a fraction of ``v_a`` per axis
   (a vector longer than 1 is flown at ``v_a`` in its direction).
 
-Observation: :mod:`hptrack.envs.observation`. Reward: ``-(U_k - U_{k-1}) / n``, so an episode's
+Observation: `hptrack.envs.observation`. Reward: ``-(U_k - U_{k-1}) / n``, so an episode's
 rewards sum to ``-(U_K - U_0) / n``. An episode is truncated when the budget is spent
 (``terminated`` is always False). ``info``: ``U``, ``per_target_logdet`` ``(n,)``,
 ``never_observed_U`` (the scenario's ``U`` if nothing is measured after the start),
 ``detected`` ``(n,)`` and ``step``.
 
-:class:`MissionEnv` holds what both environments share (scenarios, the world, the observation,
-``info``, rendering); :class:`TrackingEnv` adds the step-level actions.
+`MissionEnv` holds what both environments share (scenarios, the world, the observation,
+``info``, rendering); `TrackingEnv` adds the step-level actions.
 """
 
 from __future__ import annotations
@@ -108,7 +108,7 @@ def action_waypoint(
 
 
 class MissionEnv(gym.Env):
-    """Common base of the environments (module docstring of :mod:`hptrack.envs.tracking`).
+    """Common base of the environments (module docstring of `hptrack.envs.tracking`).
 
     Args:
         n_targets: targets of the random scenarios: an int (default 4), or an inclusive
@@ -258,7 +258,7 @@ class MissionEnv(gym.Env):
             )
 
     def episode_record(self) -> EpisodeRecord:
-        """The episode so far as an :class:`~hptrack.sim.record.EpisodeRecord` (only with
+        """The episode so far as an `EpisodeRecord` (only with
         ``render_mode="rgb_array"``, which keeps the history)."""
         if self.render_mode is None:
             raise RuntimeError("the episode history is kept only with render_mode='rgb_array'")
@@ -281,7 +281,7 @@ class MissionEnv(gym.Env):
         )
 
     def render(self) -> np.ndarray | None:
-        """The mission figure of the episode so far (:func:`hptrack.viz.mission.mission_figure`)
+        """The mission figure of the episode so far (`hptrack.viz.mission.mission_figure`)
         as an RGB array ``(640, 640, 3)`` uint8; ``None`` without ``render_mode``."""
         if self.render_mode is None:
             return None
@@ -297,7 +297,7 @@ class TrackingEnv(MissionEnv):
 
     Args:
         action_type: ``"discrete"`` (13 actions, default) or ``"box"`` (velocity fraction).
-        **kwargs: :class:`MissionEnv`'s.
+        **kwargs: `MissionEnv`'s.
     """
 
     def __init__(self, action_type: str = "discrete", **kwargs: Any) -> None:

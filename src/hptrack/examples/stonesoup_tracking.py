@@ -4,8 +4,8 @@ A Stone Soup simulation end to end: constant-velocity ground truths, a footprint
 on a ``MaxSpeedActionableMovable`` platform, one Kalman track per target (``KalmanPredictor`` +
 ``KalmanUpdater``; detections are associated by ground-truth id, as in the paper where targets
 are known by identity), and a sensor manager choosing the platform's moves every step. The same
-truths are flown twice: by :class:`~hptrack.integrations.stonesoup.HptrackSensorManager` and by
-:class:`~hptrack.integrations.stonesoup.HoverSensorManager`. The score is the mean over tracks of
+truths are flown twice: by `HptrackSensorManager` and by
+`HoverSensorManager`. The score is the mean over tracks of
 ``log det`` of the final position covariance (log m^4, lower is tighter).
 
     python3 examples/stonesoup_tracking.py                      # mcts, 300 simulations/search

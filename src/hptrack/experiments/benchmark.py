@@ -2,8 +2,8 @@
 
 For each number of targets ``n`` and each scenario seed, every planner flies the same random
 scenario once for the whole budget. Episodes run on worker processes (or any
-:class:`concurrent.futures.Executor`, e.g. a Dask cluster's) and are stored as each one finishes
-(:mod:`hptrack.experiments.store`); a re-run with the same arguments skips what is done, and two
+`concurrent.futures.Executor`, e.g. a Dask cluster's) and are stored as each one finishes
+(`hptrack.experiments.store`); a re-run with the same arguments skips what is done, and two
 runs on one database share the work. Next to every ``U`` the store keeps the scenario's *never
 observed* score: the ``U`` of a mission that measures nothing, which depends only on the priors
 and the budget.
@@ -41,7 +41,7 @@ class BenchmarkConfig:
         scenarios: scenarios per ``n`` (seeds ``first_seed .. first_seed + scenarios - 1``).
         homogeneous: the paper's setting for ARVI and A* (shared ``q`` and prior).
         first_seed: first scenario seed.
-        process_noise_form: the scenarios' per-step ``Q`` (:mod:`hptrack.models.motion`).
+        process_noise_form: the scenarios' per-step ``Q`` (`hptrack.models.motion`).
     """
 
     planners: tuple[str, ...]
@@ -144,7 +144,7 @@ def run_keys(
     on_done: Callable[[EpisodeRow, int, int], None] | None = None,
     executor: Executor | None = None,
 ) -> int:
-    """:func:`run_benchmark` on any list of episodes (in this order)."""
+    """`run_benchmark` on any list of episodes (in this order)."""
     store.release_stale_claims()
     done = store.done()
     todo = [k for k in keys if k not in done]

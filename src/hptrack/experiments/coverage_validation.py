@@ -14,14 +14,14 @@ Two variants are recorded for the write-up: the sensor switched off during the i
 start of the coverage (the estimate then adds the intercept flight).
 
 Both estimators are evaluated on the same Monte Carlo truth: the paper's
-(:func:`~hptrack.coverage.estimator.coverage_outcome`: ``P_find`` against the empirical ``P_find``,
+(`coverage_outcome`: ``P_find`` against the empirical ``P_find``,
 ``E[T_find]`` against the empirical time from the start of the coverage) and the sharp one
-(:mod:`hptrack.coverage.sharp_estimator`: ``P_find`` against the same empirical ``P_find``, its
+(`hptrack.coverage.sharp_estimator`: ``P_find`` against the same empirical ``P_find``, its
 expected duration given a find against the empirical detection time from departure). They share
 ``t_cutoff``, hence the plan and the simulation.
 
-The agent's path is the hierarchical planner's own sub-task (:class:`~hptrack.coverage.subtask.
-CoverageSubtask`), and the true motion is :func:`hptrack.models.motion.advance_true_state`, the
+The agent's path is the hierarchical planner's own sub-task
+(`CoverageSubtask`), and the true motion is `hptrack.models.motion.advance_true_state`, the
 simulator's. Sampling: no detection is checked while the agent waits, so the true state at departure
 is drawn exactly from the belief propagated ``t_d`` (Eq. (1) in closed form); from there
 trajectories are advanced step by step, all runs at once, with the process noise drawn in blocks of
@@ -285,7 +285,7 @@ def case_rows(
     """Plan, estimate and simulate every delay of one case.
 
     Returns:
-        the per-delay rows (keys :data:`CASE_FIELDS`, times in s) and, with ``keep_times``, per
+        the per-delay rows (keys `CASE_FIELDS`, times in s) and, with ``keep_times``, per
         delay the estimated CDF and the empirical coverage times of detection (s, NaN if missed).
     """
     s = config.mission
@@ -515,7 +515,7 @@ def write_reports(
     summary: dict[str, dict[str, float]], out_dir: Path, wall_time: float | None = None
 ) -> None:
     """``mape.md`` (the table), ``mape.csv`` (every summary figure per delay) and
-    ``mape-both.json`` (:func:`mape_json_both`)."""
+    ``mape-both.json`` (`mape_json_both`)."""
     (out_dir / "mape.md").write_text(table_markdown(summary, wall_time))
     (out_dir / "mape-both.json").write_text(json.dumps(mape_json_both(summary), indent=2) + "\n")
     keys = ["delay", *next(iter(summary.values())).keys()]

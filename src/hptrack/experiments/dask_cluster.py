@@ -1,8 +1,8 @@
 """Benchmark episodes on a Dask distributed cluster (``docs/dask.md``).
 
-:func:`dask_executor` connects to a running scheduler (or starts a local cluster of worker
-processes) and yields a :class:`concurrent.futures.Executor` for
-:func:`hptrack.experiments.benchmark.run_benchmark`. The run itself does not change: episodes
+`dask_executor` connects to a running scheduler (or starts a local cluster of worker
+processes) and yields a `concurrent.futures.Executor` for
+`hptrack.experiments.benchmark.run_benchmark`. The run itself does not change: episodes
 are claimed in the client's SQLite store, run on the workers and stored on the client as each
 one finishes, so resuming and sharing work are as with the local process pool. Workers import
 hptrack themselves (``run_one`` travels by reference) and use its on-disk numba cache.
@@ -35,7 +35,7 @@ class DaskPool:
     """A connected Dask cluster.
 
     Attributes:
-        executor: a :class:`concurrent.futures.Executor` running tasks on the cluster.
+        executor: a `concurrent.futures.Executor` running tasks on the cluster.
         threads: the worker threads the cluster had when connected (0 if no worker has
             joined yet).
         address: the scheduler's address.
@@ -113,7 +113,7 @@ def dask_executor(
     dashboard) and close it on exit.
 
     Raises:
-        InputError: bad options (:func:`check_dask_options`), or no scheduler at ``scheduler``
+        InputError: bad options (`check_dask_options`), or no scheduler at ``scheduler``
             answering within ``timeout_s`` seconds.
     """
     check_dask_options(scheduler, local_workers, timeout_s)

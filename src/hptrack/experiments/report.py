@@ -92,8 +92,8 @@ def paper_protocol_gaps(config: BenchmarkConfig, rows: list[EpisodeRow]) -> list
 
 def benchmark_report(config: BenchmarkConfig, rows: list[EpisodeRow]) -> str:
     """The benchmark's Markdown report: its setting and effort, the tables of
-    :func:`markdown_tables` with the planners in the order asked, and the paper's rows of the
-    setting only when the run follows the paper's protocol (:func:`paper_protocol_gaps`)."""
+    `markdown_tables` with the planners in the order asked, and the paper's rows of the
+    setting only when the run follows the paper's protocol (`paper_protocol_gaps`)."""
     efforts = "; ".join(f"{p}: {config.settings[p].effort_label()}" for p in config.planners)
     gaps = paper_protocol_gaps(config, rows)
     paper = () if gaps else PAPER_ROWS[config.homogeneous]

@@ -2,16 +2,16 @@
 nothing already done, and a re-run resumes by skipping the keys already stored.
 
 An episode's identity is its planner, number of targets, scenario seed, scenario setting and the
-planner's full canonical settings (:meth:`hptrack.settings.PlannerSettings.canonical`: every
+planner's full canonical settings (`hptrack.settings.PlannerSettings.canonical`: every
 option, stored as JSON beside its hash), so a run with another value of any option never reuses
 another's rows.
 Before running an episode a run *claims* it (a row in ``claims`` with its process id and host);
 two runs on one database therefore share the work instead of both computing everything. Claims
-of a process that no longer runs (on this host) or older than :data:`STALE_CLAIM_S` are released.
+of a process that no longer runs (on this host) or older than `STALE_CLAIM_S` are released.
 
-A database of an older layout is migrated when it is opened (:data:`MIGRATIONS`, one step per
+A database of an older layout is migrated when it is opened (`MIGRATIONS`, one step per
 version). A change of what identifies a result (a new planner option, say) is such a step: it
-bumps :data:`SCHEMA_VERSION` and rewrites the stored identities to what the code now builds for
+bumps `SCHEMA_VERSION` and rewrites the stored identities to what the code now builds for
 the same runs (the new option's value that the old rows were run with), so that stored and
 published results keep their identity without the settings carrying their history.
 """
@@ -87,7 +87,7 @@ def _with_options(options: dict[str, dict], planner: str, text: str) -> str:
 
 
 def _full_identity(planner: str, text: str) -> str:
-    """Layout 2 -> 3: the identity with every option (:data:`_LEFT_OUT_BY_LAYOUT_2`)."""
+    """Layout 2 -> 3: the identity with every option (`_LEFT_OUT_BY_LAYOUT_2`)."""
     return _with_options(_LEFT_OUT_BY_LAYOUT_2, planner, text)
 
 
@@ -158,7 +158,7 @@ class EpisodeKey:
 
     @property
     def planner_settings_hash(self) -> str:
-        """A short hash of :attr:`planner_settings` (the same as the settings' ``digest()``)."""
+        """A short hash of `planner_settings` (the same as the settings' ``digest()``)."""
         return digest_of(self.planner_settings)
 
     def _id(self) -> tuple:
@@ -179,11 +179,11 @@ class EpisodeRow:
 
 
 def check_columns(db: sqlite3.Connection, source: str) -> None:
-    """Refuse a database whose tables lack columns of :data:`SCHEMA` (a file edited by hand or
+    """Refuse a database whose tables lack columns of `SCHEMA` (a file edited by hand or
     written by another program): one line naming the table and the missing columns.
 
     Raises:
-        InputError: a table of :data:`SCHEMA` misses columns.
+        InputError: a table of `SCHEMA` misses columns.
     """
     expected = sqlite3.connect(":memory:")
     expected.executescript(SCHEMA)
@@ -202,11 +202,11 @@ def check_columns(db: sqlite3.Connection, source: str) -> None:
 
 
 class ResultStore:
-    """Episodes in an SQLite file (one row per :class:`EpisodeKey`, inserted once).
+    """Episodes in an SQLite file (one row per `EpisodeKey`, inserted once).
 
     Raises:
         InputError: the file is not an hptrack results database, or one of a layout that
-            cannot be migrated (:data:`MIGRATIONS`).
+            cannot be migrated (`MIGRATIONS`).
     """
 
     def __init__(self, path: str | Path) -> None:
@@ -239,7 +239,7 @@ class ResultStore:
         self._pid = os.getpid()
 
     def _migrate(self) -> None:
-        """Bring the database to :data:`SCHEMA_VERSION` in one transaction (a run that opens it
+        """Bring the database to `SCHEMA_VERSION` in one transaction (a run that opens it
         meanwhile waits, then finds it migrated)."""
         self._db.execute("BEGIN IMMEDIATE")
         try:

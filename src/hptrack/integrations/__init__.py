@@ -1,6 +1,6 @@
 """Bridges from hptrack's planners to other frameworks.
 
-* :mod:`hptrack.integrations.stonesoup`: a Stone Soup sensor manager that flies an actionable
+* `hptrack.integrations.stonesoup`: a Stone Soup sensor manager that flies an actionable
   platform with any hptrack planner (needs the ``stonesoup`` extra).
 
 Each bridge imports its framework itself, so importing this package needs none of them.

@@ -1,12 +1,12 @@
 """A Stone Soup sensor manager that flies an actionable platform with any hptrack planner.
 
-Stone Soup (dstl's tracking framework) keeps targets as :class:`~stonesoup.types.track.Track`\\ s
+Stone Soup (dstl's tracking framework) keeps targets as `Track`\\ s
 of Gaussian states ordered ``[x, vx, y, vy]``; hptrack's planners see beliefs ordered
-``[x, y, vx, vy]`` (paper Sec. III). :class:`HptrackSensorManager` converts the tracks in one
-place (:func:`hptrack_beliefs`, the permutation :data:`STONESOUP_TO_HPTRACK`), builds the
-planner's :class:`~hptrack.interface.MissionSpec` and :class:`~hptrack.interface.Observation`,
-and turns the planner's waypoint into a :class:`MovePositionAction` of a platform moved by a
-:class:`~stonesoup.movable.max_speed.MaxSpeedActionableMovable`.
+``[x, y, vx, vy]`` (paper Sec. III). `HptrackSensorManager` converts the tracks in one
+place (`hptrack_beliefs`, the permutation `STONESOUP_TO_HPTRACK`), builds the
+planner's `MissionSpec` and `Observation`,
+and turns the planner's waypoint into a `MovePositionAction` of a platform moved by a
+`MaxSpeedActionableMovable`.
 
 Missions: the planner is reset once per *mission* and asked for a waypoint at every call. A
 mission starts at the first call, and again whenever the set of track ids changes (a track
@@ -15,8 +15,8 @@ beliefs) or when the mission's ``budget`` runs out (missions then roll on, each 
 seconds long). Target ``i`` of a mission is the ``i``-th track in first-seen order (tracks first
 seen in the same call sorted by id); a track keeps its relative order for as long as it exists.
 
-:class:`FootprintPositionSensor` is the paper's sensor in Stone Soup terms (a position fix with
-noise ``R`` of every target within ``w/2``) and :class:`HoverSensorManager` the baseline that
+`FootprintPositionSensor` is the paper's sensor in Stone Soup terms (a position fix with
+noise ``R`` of every target within ``w/2``) and `HoverSensorManager` the baseline that
 keeps the platform where it is. Registered as the Stone Soup plugin ``hptrack``
 (``from stonesoup.plugins.hptrack import HptrackSensorManager``).
 """
@@ -174,7 +174,7 @@ def _position_generator(
 
 class HoverSensorManager(SensorManager):
     """Keeps every managed platform where it is (each position generator's default action): the
-    baseline that :class:`HptrackSensorManager` must beat."""
+    baseline that `HptrackSensorManager` must beat."""
 
     def choose_actions(
         self, tracks: Iterable[Track], timestamp: datetime.datetime, nchoose: int = 1, **kwargs
@@ -189,18 +189,18 @@ class HoverSensorManager(SensorManager):
 
 
 class HptrackSensorManager(SensorManager):
-    """Moves one :class:`~stonesoup.movable.max_speed.MaxSpeedActionableMovable` platform with
+    """Moves one `MaxSpeedActionableMovable` platform with
     an hptrack planner (module docstring: frames, missions, track identity).
 
-    Call :meth:`choose_actions` every ``time_step`` seconds of platform time with the current
+    Call `choose_actions` every ``time_step`` seconds of platform time with the current
     tracks; it returns ``[{platform: [MovePositionAction]}]`` for the platform's next
     ``time_step`` seconds. The mission's agent speed is the movable's ``max_speed``; the sensor
     footprint and ``R`` are ``sensor_diameter`` and ``measurement_noise``, or, when these are
-    not given, those of the platform's :class:`FootprintPositionSensor`.
+    not given, those of the platform's `FootprintPositionSensor`.
     """
 
     process_noise: float | Mapping[str, float] = Property(
-        doc="Target process noise ``q``, m^2/s^3 (:func:`process_noise_of` reads it from a "
+        doc="Target process noise ``q``, m^2/s^3 (`process_noise_of` reads it from a "
         "transition model): one value for every track, or a mapping of track id to ``q``."
     )
     time_step: float = Property(doc="Decision interval ``tau``, s.")

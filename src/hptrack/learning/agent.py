@@ -1,5 +1,5 @@
 """Deep ADFQ (Jeong & Lee, IJCAI 2019): a network of Gaussian Q-value beliefs trained towards
-the ADFQ posterior (:mod:`hptrack.learning.adfq`).
+the ADFQ posterior (`hptrack.learning.adfq`).
 
 * Exploration: Thompson sampling, ``Q_a ~ N(mu_a, sigma_a^2)`` from the online network, then
   the argmax.
@@ -27,7 +27,7 @@ from hptrack.learning.network import HIDDEN, INIT_MEAN, INIT_SD, GaussianQNetwor
 from hptrack.learning.replay import PrioritizedReplayBuffer, ReplayBuffer
 
 POLICY_FORMAT = "hptrack-adfq-policy-1"
-"""Tag of a policy file (:func:`save_policy`)."""
+"""Tag of a policy file (`save_policy`)."""
 
 
 @dataclass(frozen=True)
@@ -194,7 +194,7 @@ def save_policy(path: str, network: GaussianQNetwork, metadata: dict[str, Any]) 
 
 
 def load_policy(path: str) -> tuple[GaussianQNetwork, dict[str, Any]]:
-    """The network and metadata of a policy file written by :func:`save_policy`.
+    """The network and metadata of a policy file written by `save_policy`.
 
     Raises:
         ValueError: the file is not such a policy (the message names it).

@@ -1,6 +1,6 @@
-"""Training-curve figure of a learning run (``curve.json`` of :mod:`hptrack.learning.train` or
-:mod:`hptrack.learning.sb3`), titled from the run's ``config.json``, in
-:mod:`hptrack.viz.style`'s style."""
+"""Training-curve figure of a learning run (``curve.json`` of `hptrack.learning.train` or
+`hptrack.learning.sb3`), titled from the run's ``config.json``, in
+`hptrack.viz.style`'s style."""
 
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def plot_training_curve(
     policy that never re-acquires a target after the start), against environment steps: each
     training episode (dots, its own scenario) with a running mean over ``window`` episodes,
     and the mean over the fixed validation scenarios with its standard error. Returns the
-    artists by name (a legend is the caller's: :func:`save_training_curve` puts it below)."""
+    artists by name (a legend is the caller's: `save_training_curve` puts it below)."""
     episodes = [e for e in curve if e["kind"] == "episode"]
     validations = [e for e in curve if e["kind"] == "validation"]
     artists: dict[str, Any] = {
@@ -85,7 +85,7 @@ def plot_training_curve(
 
 def save_training_curve(run: Path, path: Path, title: str | None = None) -> None:
     """Write the training curve of run folder ``run`` to ``path``, titled ``title`` or
-    :func:`run_title`, with the legend below."""
+    `run_title`, with the legend below."""
     fig = new_figure(7.5, 4.8)
     ax = fig.add_subplot()
     artists = plot_training_curve(ax, load_curve(run))

@@ -53,7 +53,7 @@ class GaussianQNetwork(nn.Module):
         return mean, log_sd
 
     def config(self) -> dict[str, object]:
-        """What :meth:`from_config` needs to rebuild the architecture."""
+        """What `from_config` needs to rebuild the architecture."""
         return {"obs_dim": self.obs_dim, "n_actions": self.n_actions, "hidden": list(self.hidden)}
 
     @classmethod

@@ -1,9 +1,9 @@
 """Learned policies as hptrack planners: ``adfq`` (a Deep ADFQ network) and ``sb3`` (a
 stable-baselines3 model trained on ``hptrack/Tracking-v0``).
 
-Each step the planner encodes the :class:`~hptrack.interface.Observation` exactly as the
-environment does (:class:`hptrack.envs.observation.ObservationLayout`), asks the policy for one
-of the 13 discrete actions (:data:`hptrack.envs.tracking.HEADINGS`: 12 headings 30 degrees apart,
+Each step the planner encodes the `Observation` exactly as the
+environment does (`hptrack.envs.observation.ObservationLayout`), asks the policy for one
+of the 13 discrete actions (`hptrack.envs.tracking.HEADINGS`: 12 headings 30 degrees apart,
 then hover) and returns the waypoint one step length away on that heading (the agent's own
 position for hover), so ``run_episode`` flies the same mission as the environment.
 

@@ -2,7 +2,7 @@
 proportional prioritised replay (Schaul et al. 2016) on a sum tree as an option.
 
 A transition that ends by the time limit is stored as non-terminal (``terminal`` False): its
-next state still has a value. :meth:`ReplayBuffer.state_dict` / :meth:`load_state_dict` save
+next state still has a value. `ReplayBuffer.state_dict` / `load_state_dict` save
 and restore the filled part, so that training resumes with the same memory.
 """
 

@@ -1,6 +1,6 @@
 """PPO from stable-baselines3 on ``hptrack/Tracking-v0``: the ecosystem's standard learner as a
 reference for Deep ADFQ, trained, validated and checkpointed like it
-(:mod:`hptrack.learning.train`).
+(`hptrack.learning.train`).
 
 The policy is stable-baselines3's ``MlpPolicy`` with its default PPO hyperparameters, except one
 rollout per episode (``n_steps`` = 1800, the episode length) and mini-batches of 60 that divide
@@ -177,7 +177,7 @@ class PpoTrainer:
         return values[-1] if values else float("nan")
 
     def run(self, on_progress: Callable[[Progress], None] | None = None) -> dict[str, Any]:
-        """Train until :func:`trained_steps` (whole rollouts); returns a summary."""
+        """Train until `trained_steps` (whole rollouts); returns a summary."""
         from stable_baselines3.common.callbacks import BaseCallback
 
         trainer, cfg = self, self.config

@@ -13,7 +13,7 @@ A run lives in one folder:
   as it would have without the interruption; only the end of a run may fall inside an episode
   (extending such a run starts a fresh episode);
 * ``best.pt``: the policy with the lowest mean final ``U`` on the validation scenarios
-  (:func:`hptrack.learning.agent.save_policy`);
+  (`hptrack.learning.agent.save_policy`);
 * ``curve.json``: the training curve (one entry per episode, one per validation).
 
 Validation flies the test policy (greedy on the means, ``validation_epsilon``-random, with a

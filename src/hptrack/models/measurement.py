@@ -4,7 +4,7 @@ default, any symmetric positive definite 2x2 ``R`` allowed).
 A target inside the circular sensor footprint is measured as ``z = [x, y] + v``,
 ``v ~ N(0, R)``. The update is written out for ``H = [I 0]``: ``S = P_xy + R``,
 ``K = P H' S^-1``, ``P+ = P - K H P`` built symmetric entry by entry, ``m+ = m + K (z - H m)``.
-:func:`update_covariance` and :func:`kalman_update` are the one implementation of the update in
+`update_covariance` and `kalman_update` are the one implementation of the update in
 the project (simulator, tree search, baselines and controller call them).
 """
 
@@ -71,7 +71,7 @@ def update_covariance(cov, noise, out):
 @numba.njit(cache=True)
 def kalman_update(mean, cov, z, noise, mean_out, cov_out):
     """Kalman update of one belief with a position measurement ``z`` (2,) of noise ``R``:
-    ``mean_out = m + K (z - H m)``, ``cov_out`` as :func:`update_covariance`. The outputs may be
+    ``mean_out = m + K (z - H m)``, ``cov_out`` as `update_covariance`. The outputs may be
     the inputs (in place)."""
     g = _gain(cov, noise)
     ex = z[0] - mean[0]

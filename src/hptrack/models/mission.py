@@ -1,17 +1,17 @@
 """The mission's constants as one compiled record, and the rules on it (paper Sec. III, V-A).
 
-:class:`Mission` is what every compiled kernel takes instead of loose constants: it is built and
-validated once (:func:`mission_record`, or :attr:`hptrack.interface.MissionSpec.record`). The
+`Mission` is what every compiled kernel takes instead of loose constants: it is built and
+validated once (`mission_record`, or `hptrack.interface.MissionSpec.record`). The
 per-step process noise of Eq. (1) enters the kernels through ``q`` and
-:attr:`Mission.velocity_variance_per_q`, the lower-right (velocity) block of the per-step ``Q``
+`Mission.velocity_variance_per_q`, the lower-right (velocity) block of the per-step ``Q``
 divided by ``q``: ``tau`` for the continuous white-noise-acceleration form, ``1`` for the
-paper's printed form (:mod:`hptrack.models.motion`).
+paper's printed form (`hptrack.models.motion`).
 
-The rules, one place each: :func:`steps_left` (whole steps of a remaining budget, the same for
-the mission's budget), :func:`reachable_before_budget` (an intercept that ends strictly before
-the budget), :data:`MAX_TARGETS` (the planner's action list is an ``int64`` bitmask). The kernels
-of :mod:`hptrack.models.motion` and :mod:`hptrack.models.riccati` that need the noise form are
-offered here on the record (:func:`predict_covariance_on`, :func:`position_covariance_on`, ...),
+The rules, one place each: `steps_left` (whole steps of a remaining budget, the same for
+the mission's budget), `reachable_before_budget` (an intercept that ends strictly before
+the budget), `MAX_TARGETS` (the planner's action list is an ``int64`` bitmask). The kernels
+of `hptrack.models.motion` and `hptrack.models.riccati` that need the noise form are
+offered here on the record (`predict_covariance_on`, `position_covariance_on`, ...),
 so that no layer above the models handles it.
 """
 
@@ -74,12 +74,12 @@ def mission_record(
     process_noise: np.ndarray,
     continuous_noise: bool = True,
 ) -> Mission:
-    """The validated :class:`Mission` (``continuous_noise``: the continuous form of ``Q``, else
+    """The validated `Mission` (``continuous_noise``: the continuous form of ``Q``, else
     the paper's printed one).
 
     Raises:
         ValueError: a constant not positive and finite, ``R`` not symmetric positive definite,
-            a ``q`` negative or not finite, more than :data:`MAX_TARGETS` targets.
+            a ``q`` negative or not finite, more than `MAX_TARGETS` targets.
     """
     for name, value in (
         ("time_step", time_step),
@@ -125,13 +125,13 @@ def reachable_before_budget(intercept_steps, left):
 
 @numba.njit(cache=True, inline="always")
 def predict_covariance_on(mission, cov, q, steps, out):
-    """:func:`hptrack.models.motion.predict_covariance` with the mission's ``tau`` and ``Q``."""
+    """`hptrack.models.motion.predict_covariance` with the mission's ``tau`` and ``Q``."""
     predict_covariance(cov, q, steps, mission.time_step, mission.velocity_variance_per_q, out)
 
 
 @numba.njit(cache=True, inline="always")
 def position_covariance_on(mission, cov, q, steps):
-    """:func:`hptrack.models.motion.position_covariance_after` on the mission."""
+    """`hptrack.models.motion.position_covariance_after` on the mission."""
     return position_covariance_after(
         cov, q, steps, mission.time_step, mission.velocity_variance_per_q
     )
@@ -139,18 +139,18 @@ def position_covariance_on(mission, cov, q, steps):
 
 @numba.njit(cache=True, inline="always")
 def position_polynomials_on(mission, cov, q):
-    """:func:`hptrack.models.motion.position_polynomials` on the mission."""
+    """`hptrack.models.motion.position_polynomials` on the mission."""
     return position_polynomials(cov, q, mission.time_step, mission.velocity_variance_per_q)
 
 
 @numba.njit(cache=True, inline="always")
 def motion_noise_factors_on(mission):
-    """:func:`hptrack.models.motion.motion_noise_factors` on the mission."""
+    """`hptrack.models.motion.motion_noise_factors` on the mission."""
     return motion_noise_factors(mission.time_step, mission.velocity_variance_per_q)
 
 
 class FollowTables(NamedTuple):
-    """Every target's :func:`~hptrack.models.riccati.riccati_table` (measured at every step),
+    """Every target's `riccati_table` (measured at every step),
     stacked: ``a``, ``g``, ``h`` ``(n, L, 4, 4)`` and ``length`` ``(n,)`` valid entries."""
 
     a: np.ndarray

@@ -13,7 +13,7 @@ Two forms of ``Q`` are offered (``docs/model.md``):
 
 For any per-step blocks ``(a, b, c)`` the sum ``sum_{j<k} F^j Q F^j'`` is, per axis,
 ``q [[k a + 2 tau s1 b + tau^2 s2 c, k b + tau s1 c], [., k c]]`` with ``s1 = k(k-1)/2`` and
-``s2 = k(k-1)(2k-1)/6`` (:func:`noise_blocks`), so a prediction over any duration costs O(1).
+``s2 = k(k-1)(2k-1)/6`` (`noise_blocks`), so a prediction over any duration costs O(1).
 A duration of ``T`` seconds is ``k = T / tau`` steps; fractional ``k`` is exact for the
 continuous form and interpolates the printed one.
 
@@ -97,11 +97,11 @@ def predict_covariance(cov, q, steps, tau, c_per_step, out):
 
 @numba.njit(cache=True)
 def position_polynomials(cov, q, tau, c_per_step):
-    """:func:`position_covariance_after` as polynomials in the step count ``k``:
+    """`position_covariance_after` as polynomials in the step count ``k``:
     ``sxx = x0 + x1 k + x2 k^2 + x3 k^3``, ``syy`` likewise with ``y0, y1, y2, x3``,
     ``sxy = c0 + c1 k + c2 k^2`` (the estimator evaluates them by Horner's rule).
 
-    The position noise of :func:`noise_blocks`, ``q (k a + tau b (k^2 - k) + tau^2 c (2k^3 -
+    The position noise of `noise_blocks`, ``q (k a + tau b (k^2 - k) + tau^2 c (2k^3 -
     3k^2 + k) / 6)`` (``a = tau^3/3``, ``b = tau^2/2``, ``c = c_per_step``), expanded in ``k``.
     Returns ``(x0, x1, x2, y0, y1, y2, c0, c1, c2, x3)``.
     """
@@ -168,7 +168,7 @@ def motion_noise_factors(tau, c_per_step):
 @numba.njit(cache=True, inline="always")
 def advance_true_state(states, i, z, sqrt_q, l11, l21, l22, tau):
     """One step of the true motion of ``states[i]`` with unit normal draws ``z`` ordered
-    ``[x, y, vx, vy]``: ``x <- F x + sqrt(q) L z`` (``L`` from :func:`motion_noise_factors`)."""
+    ``[x, y, vx, vy]``: ``x <- F x + sqrt(q) L z`` (``L`` from `motion_noise_factors`)."""
     x, y, vx, vy = states[i, 0], states[i, 1], states[i, 2], states[i, 3]
     states[i, 0] = (x + tau * vx) + sqrt_q * (l11 * z[0])
     states[i, 1] = (y + tau * vy) + sqrt_q * (l11 * z[1])
@@ -271,7 +271,7 @@ class ConstantVelocityModel:
 
 def predicted_positions(means: np.ndarray, elapsed: np.ndarray | float) -> np.ndarray:
     """Open-loop positions ``p + v t`` of belief means ``(..., 4)`` after ``elapsed`` seconds
-    (broadcast), m: the numpy face of :func:`mean_position_at`."""
+    (broadcast), m: the numpy face of `mean_position_at`."""
     means = np.asarray(means, dtype=float)
     elapsed = np.asarray(elapsed, dtype=float)
     return means[..., :2] + elapsed[..., None] * means[..., 2:]

@@ -7,8 +7,8 @@ structure-preserving doubling algorithm, applied one step at a time):
 ``A_{j+1} = F M^-1 A_j``, ``G_{j+1} = G_j + A_j' S M^-1 A_j``, ``H_{j+1} = Q + F M^-1 H_j F'``
 with ``M = I + H_j S``.
 
-:func:`riccati_table` precomputes ``(A_j, G_j, H_j)`` for one target's ``q``;
-:func:`measured_covariance` applies entry ``j`` and the final update: the posterior after
+`riccati_table` precomputes ``(A_j, G_j, H_j)`` for one target's ``q``;
+`measured_covariance` applies entry ``j`` and the final update: the posterior after
 ``j + 1`` consecutive measured steps that starts from the covariance predicted to the first one.
 The tree search follows a found target with it (paper Sec. IV-C-2, "consecutive identical
 actions"), and A*'s heuristic bounds the information still reachable with it (Schlotfeldt et
@@ -28,7 +28,7 @@ CONVERGED_TOLERANCE = 1e-13
 """Relative size below which the initial covariance no longer affects ``T^j(X)``."""
 
 WORK_SLOTS = 3
-"""4x4 scratch matrices :func:`measured_covariance` needs."""
+"""4x4 scratch matrices `measured_covariance` needs."""
 
 
 @numba.njit(cache=True)
@@ -124,7 +124,7 @@ def measured_covariance(maps_a, maps_g, maps_h, length, j, predicted, noise, out
     """Posterior covariance after ``j + 1`` consecutive measured steps, starting from the
     covariance ``predicted`` to the first of them: ``update(T^j(predicted))``.
 
-    ``maps_*`` and ``length`` are one target's :func:`riccati_table`; ``j`` beyond the table is
+    ``maps_*`` and ``length`` are one target's `riccati_table`; ``j`` beyond the table is
     clamped (the map has converged). ``work`` is ``(>= 3, 4, 4)`` scratch; ``out`` must not alias
     ``predicted``.
     """

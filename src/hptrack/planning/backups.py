@@ -8,14 +8,14 @@ path_outcome, depth, ret)`` that backs the return ``ret`` of one simulation up i
 keeps a value per outcome (then the search's later visits of an action take the possible
 outcomes not yet visited: the values are combined with the known ``p``, so each is needed).
 Compiled code calls `back_up`, dispatched on the backup's class, so the search is compiled
-(and cached) once per backup class. The four backups (:data:`BACKUPS`, by their settings' names):
+(and cached) once per backup class. The four backups (`BACKUPS`, by their settings' names):
 
-* ``"sampled"``, the paper's (:class:`Sampled`): ``V(N^a)`` is the running mean of the returns
+* ``"sampled"``, the paper's (`Sampled`): ``V(N^a)`` is the running mean of the returns
   of the simulations through the action, whose outcomes were drawn from ``p``;
 * ``"expected"`` (`Expected`): each action node keeps a running mean per outcome and
   ``V(N^a) = sum_o p_o V_o`` with the known ``p`` (two outcomes: ``p V_find + (1 - p) V_miss``),
   so the outcome draws add no noise;
-* ``"max"`` (:class:`Max`): the expected combination of the outcomes' *values*, where a state's
+* ``"max"`` (`Max`): the expected combination of the outcomes' *values*, where a state's
   value is that of its best action (a Bellman backup; a state visited once is worth its
   rollout's return). Mean backups average the returns of every action tried below, which the
   random rollouts drag down; an action whose value is exact from the start (following a target
@@ -24,13 +24,13 @@ Compiled code calls `back_up`, dispatched on the backup's class, so the search i
   tree grows: with ``max_weight`` ``lambda < 1`` a state is worth ``lambda max_a V(N^a) + (1 -
   lambda)`` times the mean return of the simulations through it (the "mixmax" backup of
   Jacobsen et al., 2014);
-* ``"robust"`` (:class:`Robust`): like ``"max"``, but a state is worth its most visited action
+* ``"robust"`` (`Robust`): like ``"max"``, but a state is worth its most visited action
   (ties: the better value). At the frontier of the tree, actions are valued by one or a few
   rollouts, and the largest of several noisy values is biased upwards; UCB1 concentrates its
   visits on the best action, so the most visited one is the best without picking a lucky
   rollout.
 
-Every backup counts ``N(N^s) += 1`` and ``N(N^a) += 1`` along the path; :func:`back_up` then
+Every backup counts ``N(N^s) += 1`` and ``N(N^a) += 1`` along the path; `back_up` then
 widens the observed return range and counts the simulation.
 """
 
@@ -193,7 +193,7 @@ def _most_visited_value(tree, s):
 
 @numba.njit(cache=True)
 def back_sampled(backup, tree, path_state, path_action, path_outcome, depth, ret):
-    """:class:`Sampled`: ``V(N^a) += (ret - V(N^a)) / N(N^a)`` along the path."""
+    """`Sampled`: ``V(N^a) += (ret - V(N^a)) / N(N^a)`` along the path."""
     for d in range(depth - 1, -1, -1):
         x = path_action[d]
         _count(tree, path_state[d], x)
@@ -202,7 +202,7 @@ def back_sampled(backup, tree, path_state, path_action, path_outcome, depth, ret
 
 @numba.njit(cache=True)
 def back_expected(backup, tree, path_state, path_action, path_outcome, depth, ret):
-    """:class:`Expected`: a running mean per outcome, ``V(N^a)`` their ``p``-weighted sum."""
+    """`Expected`: a running mean per outcome, ``V(N^a)`` their ``p``-weighted sum."""
     for d in range(depth - 1, -1, -1):
         x = path_action[d]
         _count(tree, path_state[d], x)
@@ -214,7 +214,7 @@ def back_expected(backup, tree, path_state, path_action, path_outcome, depth, re
 
 @numba.njit(cache=True)
 def back_max(backup, tree, path_state, path_action, path_outcome, depth, ret):
-    """:class:`Max`: the outcome's value is the next state's (mixmax) value."""
+    """`Max`: the outcome's value is the next state's (mixmax) value."""
     value = ret
     max_weight = backup.max_weight
     for d in range(depth - 1, -1, -1):
@@ -230,7 +230,7 @@ def back_max(backup, tree, path_state, path_action, path_outcome, depth, ret):
 
 @numba.njit(cache=True)
 def back_robust(backup, tree, path_state, path_action, path_outcome, depth, ret):
-    """:class:`Robust`: the outcome's value is the next state's most visited action's."""
+    """`Robust`: the outcome's value is the next state's most visited action's."""
     value = ret
     for d in range(depth - 1, -1, -1):
         x = path_action[d]

@@ -1,7 +1,7 @@
 """The paper's hierarchical planner in the simulator (Fig. 2; Sec. IV-C-4 re-planning).
 
-1. At the start, the tree search (:func:`hptrack.planning.search.search`) picks the first target.
-2. The agent executes that sub-task (:class:`~hptrack.coverage.subtask.CoverageSubtask`:
+1. At the start, the tree search (`hptrack.planning.search.search`) picks the first target.
+2. The agent executes that sub-task (`CoverageSubtask`:
    intercept, then the shifting spiral, until the target is detected or ``t_cutoff``).
 3. As the sub-task starts, the search re-plans with the current action fixed and returns a
    conditional plan: the next target after a *find* and after a *miss* (Algorithm 1 lines 9-12).
@@ -83,7 +83,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     },
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
-improvements measured in ``docs/planner-improvements.md``."""
+improvements measured in ``docs/results/search-options.md``."""
 
 DEFAULT_PRESET = "improved"
 
@@ -102,32 +102,32 @@ class MctsSettings(PlannerSettings):
             comes first.
         exploration: UCB1 constant ``c`` on values normalised to the observed return range.
         preset: ``"paper"`` (the paper's search, Algorithm 1) or ``"improved"``; it sets the
-            options below that are not given (:data:`PRESETS`).
+            options below that are not given (`PRESETS`).
         backup: ``"sampled"`` (the paper's running mean), ``"expected"``, ``"max"`` or
-            ``"robust"`` (:mod:`hptrack.planning.tree`).
+            ``"robust"`` (`hptrack.planning.tree`).
         max_weight: with the max backup, the weight of a state's best action in its value;
             the rest is the mean return through the state (1: the pure max).
         root_split: re-planning: the current action's outcomes share the root's simulations
             ``"even"``ly (the paper's) or ``"weighted"`` by their probability
-            (:func:`hptrack.planning.search.search`).
+            (`hptrack.planning.search.search`).
         common_rollouts: the rollouts that value one state's actions and outcomes share their
             random draws (common random numbers) instead of all drawing from one stream.
         rollout: ``"uniform"`` (the paper's random policy), ``"uniform_no_follow"`` (the same
             without following the target just found), ``"uniform_no_dwell"`` (the same
             without the dwell actions), ``"nearest"``, ``"most_uncertain"`` or ``"tour"``
-            (:mod:`hptrack.planning.subtask_rollout`).
+            (`hptrack.planning.subtask_rollout`).
         rollout_epsilon: probability of a random action in a ``nearest``,
             ``most_uncertain`` or ``tour`` rollout.
         estimator: the sub-task outcome estimator of the search's expansions, ``"paper"``
-            (Sec. IV-B) or ``"sharp"`` (:mod:`hptrack.coverage.sharp_estimator`).
+            (Sec. IV-B) or ``"sharp"`` (`hptrack.coverage.sharp_estimator`).
         dwell: length of an extra action beyond the paper, s: follow the target just found
-            for this long, then choose again (:mod:`hptrack.planning.subtask_mdp`); a list of
+            for this long, then choose again (`hptrack.planning.subtask_mdp`); a list of
             lengths gives one such action each, the search choosing; 0 (the paper): none.
         miss: ``"drop"`` (the paper): a missed target leaves the action list until it is
             measured by chance; ``"keep"``: it stays, and the search may pursue it again.
         passes: ``"ignore"`` (the paper): the MDP credits a sub-task with its own target
             only; ``"credit"``: also with the other targets its flight passes over
-            (:mod:`hptrack.planning.subtask_mdp`).
+            (`hptrack.planning.subtask_mdp`).
         threads: independent trees searched in parallel and merged (root parallelism), each
             with the effort above; 1 (the paper's single tree) unless the machine has spare
             cores.
@@ -245,7 +245,7 @@ class MctsSettings(PlannerSettings):
 
 class HierarchicalPlanner:
     """Monte Carlo tree search over coverage sub-tasks (name ``"mcts"``); see the module
-    docstring and :class:`MctsSettings`."""
+    docstring and `MctsSettings`."""
 
     name = "mcts"
 

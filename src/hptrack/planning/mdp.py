@@ -1,10 +1,10 @@
-"""The interface between the tree search and an MDP (see :mod:`hptrack.planning.search`).
+"""The interface between the tree search and an MDP (see `hptrack.planning.search`).
 
 An MDP is a class of ``env`` (a ``NamedTuple`` of its constant data) registered with
-:func:`register_mdp` and its compiled kernels (:class:`MdpKernels`). Compiled code calls them as
+`register_mdp` and its compiled kernels (`MdpKernels`). Compiled code calls them as
 ``mdp_*(env, ...)``, dispatched at compile time on ``env``'s class, so that the search compiles
 one version per MDP. An MDP declares its number of actions to the search, at most
-:data:`hptrack.planning.tree.MAX_ACTIONS` (the search refuses more), and how many chance outcomes
+`hptrack.planning.tree.MAX_ACTIONS` (the search refuses more), and how many chance outcomes
 an action has (`outcome_count`): the tree sizes its per-outcome arrays from it.
 """
 

@@ -1,11 +1,11 @@
 """Rollout policies of the tree search (paper Algorithm 1, line 21: a random policy).
 
 A policy is a ``NamedTuple`` class (its fields are the policy's parameters; the paper's has none)
-registered with :func:`register_policy` and a compiled kernel
+registered with `register_policy` and a compiled kernel
 ``choose(policy, env, state, rng, candidates) -> a``: the action to take in ``state`` (``-1``
 when none is available), drawing from the search's stream ``rng``
-(:mod:`hptrack.planning.stream`); ``candidates`` is ``int64`` scratch of one entry per action.
-Compiled code calls it as :func:`choose_action`, dispatched on the policy's class (so the search
+(`hptrack.planning.stream`); ``candidates`` is ``int64`` scratch of one entry per action.
+Compiled code calls it as `choose_action`, dispatched on the policy's class (so the search
 is compiled, and cached, once per policy class).
 """
 
@@ -62,7 +62,7 @@ def available_actions(env, state, candidates):
 
 @numba.njit
 def uniform_random(policy, env, state, rng, candidates):
-    """:class:`UniformRandom`'s decision."""
+    """`UniformRandom`'s decision."""
     count = available_actions(env, state, candidates)
     if count == 0:
         return -1

@@ -17,15 +17,15 @@ An MDP declares its number of actions, at most `hptrack.planning.tree.MAX_ACTION
 refuses more), and the number of chance outcomes of an action
 (`hptrack.planning.mdp.outcome_count`; the sub-task MDP's two are the find and the miss).
 
-The search's options are one record, :class:`SearchOptions`, under the planner settings' names.
+The search's options are one record, `SearchOptions`, under the planner settings' names.
 Its rollout policy is a class of ``policy`` (a ``NamedTuple`` of its parameters, possibly empty)
-registered with :func:`hptrack.planning.rollout.register_policy` and a kernel ``choose(policy,
-env, state, rng, candidates) -> a`` (:mod:`hptrack.planning.rollout`); its backup likewise
-(:mod:`hptrack.planning.backups`). Numba compiles one version of the search per (env, policy,
+registered with `hptrack.planning.rollout.register_policy` and a kernel ``choose(policy,
+env, state, rng, candidates) -> a`` (`hptrack.planning.rollout`); its backup likewise
+(`hptrack.planning.backups`). Numba compiles one version of the search per (env, policy,
 backup) class. Passing the kernels as function arguments would make even the paper's search
 uncacheable (several seconds of compilation in every process), so an MDP that wants its search
-cached on disk passes its own compiled copy of :func:`run_simulations` (``kernel``), as the
-sub-task MDP does (:mod:`hptrack.planning.subtask_search`); another MDP's is compiled once per
+cached on disk passes its own compiled copy of `run_simulations` (``kernel``), as the
+sub-task MDP does (`hptrack.planning.subtask_search`); another MDP's is compiled once per
 process.
 
 The search is a pure function of ``(env, root, options, seed, number of simulations)``: the same
@@ -42,7 +42,7 @@ wall-clock checks.
   are the same as with an eager expansion, at a fraction of the cost;
 * otherwise UCB1 picks an action (`hptrack.planning.tree.select`), the outcome is drawn
   from ``p`` (line 25), the child state is created on first draw (lines 26-29) and values are
-  backed up by the options' backup (:mod:`hptrack.planning.backups`; the paper's running
+  backed up by the options' backup (`hptrack.planning.backups`; the paper's running
   means, lines 31-33, or another).
 
 States are not stored: the descent rebuilds the state from the root by applying the stored
@@ -135,11 +135,11 @@ ROOT_SPLITS = ("even", "weighted")
 
 class SearchOptions(NamedTuple):
     """The search's options, one compiled record under the planner settings' names
-    (:class:`hptrack.planning.hierarchical.MctsSettings`); the defaults are the paper's.
+    (`hptrack.planning.hierarchical.MctsSettings`); the defaults are the paper's.
 
     Attributes:
         exploration: UCB1 constant ``c`` on values normalised to the observed return range.
-        backup: a registered backup instance (:mod:`hptrack.planning.backups`).
+        backup: a registered backup instance (`hptrack.planning.backups`).
         root_split: re-planning: the root's simulations go to the current action's outcomes
             ``"even"``ly or ``"weighted"`` by their probability (`_root_outcome`).
         common_rollouts: a rollout from a new node draws from a stream derived from its parent
@@ -147,7 +147,7 @@ class SearchOptions(NamedTuple):
             one state take the same random decisions wherever they can, so their differences
             are less noisy. Otherwise every draw comes from the tree's single stream (the
             paper's).
-        rollout: a registered rollout policy instance (:mod:`hptrack.planning.rollout`).
+        rollout: a registered rollout policy instance (`hptrack.planning.rollout`).
     """
 
     exploration: float = DEFAULT_EXPLORATION
@@ -272,7 +272,7 @@ def run_simulations(
 ):
     """Run up to ``n_simulations`` simulations (Algorithm 1, ``Simulate`` from the root) and
     return how many ran: it stops early when the tree's arrays might not hold one more
-    simulation's nodes (:func:`~hptrack.planning.tree.grow_tree` makes room).
+    simulation's nodes (`grow_tree` makes room).
 
     ``root`` is the root state (never modified), ``state`` scratch of the same shapes, ``work``
     the MDP's scratch; ``options`` a `SearchOptions`; ``max_depth`` bounds the number
@@ -473,19 +473,19 @@ def search_mdp(
 
     Args:
         env: the MDP's constant data, an instance of a class registered with
-            :func:`hptrack.planning.mdp.register_mdp`.
+            `hptrack.planning.mdp.register_mdp`.
         root: the root state.
         n_actions: number of actions of the MDP, at most
-            :data:`~hptrack.planning.tree.MAX_ACTIONS`.
+            `MAX_ACTIONS`.
         max_depth: most transitions of one history.
         work: the MDP's scratch.
         options: the search's options (default the paper's search).
         iterations, time_limit: stop after this many simulations / this wall time (s),
             whichever comes first.
-        seed: an integer or a :class:`numpy.random.Generator` (one ``uint64`` is drawn from it).
+        seed: an integer or a `numpy.random.Generator` (one ``uint64`` is drawn from it).
         fixed: re-planning mode: the root's only action (``-1``: a first plan).
         start: a ``time.perf_counter()`` reading the time limit counts from (default now).
-        kernel: the compiled simulation loop, :func:`run_simulations` or an MDP's cached copy
+        kernel: the compiled simulation loop, `run_simulations` or an MDP's cached copy
             of it.
 
     Raises:

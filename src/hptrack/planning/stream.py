@@ -31,7 +31,7 @@ def substream(seed, k, out):
 
 
 def seed_value(seed: int | np.random.Generator) -> int:
-    """The stream's initial state from an integer seed or a :class:`numpy.random.Generator`
+    """The stream's initial state from an integer seed or a `numpy.random.Generator`
     (one ``uint64`` drawn from it)."""
     if isinstance(seed, np.random.Generator):
         return int(seed.integers(0, 2**63, dtype=np.uint64))

@@ -16,19 +16,19 @@ described by
 * the agent position (m): the estimated position of the last pursued target at step ``t``,
 * per target the covariance right after its last "find" and the step of that find
   (``base_cov``, ``base_step``; never found: the root covariance and step 0). Its covariance at
-  any later step follows in closed form (Eq. (1), :func:`hptrack.models.motion.predict_covariance`).
+  any later step follows in closed form (Eq. (1), `hptrack.models.motion.predict_covariance`).
 
 A state is the tuple of arrays ``(si, sf, base_cov, base_step)``: the integer part
 ``(t, mask, last)`` in an ``int64`` array ``si``, the agent position in a ``float64`` array
-``sf``; the kernels mutate them in place. The kernels take ``env`` (:class:`SubtaskEnv`: the
+``sf``; the kernels mutate them in place. The kernels take ``env`` (`SubtaskEnv`: the
 mission record, its Riccati tables, the root's means, the options, the memo) first, the
-interface :mod:`hptrack.planning.search` expects of an MDP.
+interface `hptrack.planning.search` expects of an MDP.
 
 **Action** "pursue target a" (node expansion). The agent flies to the belief mean in
-``n_i = ceil(t_intercept / tau)`` steps (:func:`hptrack.coverage.intercept.intercept_steps`, the
+``n_i = ceil(t_intercept / tau)`` steps (`hptrack.coverage.intercept.intercept_steps`, the
 shared whole-step convention; ``0`` when the mean is already in the footprint) and starts the
 spiral coverage from the covariance predicted to step ``t + n_i``. The coverage estimator
-(:func:`hptrack.coverage.estimator.coverage_outcome`, Sec. IV-B) gives ``t_cutoff``, ``p_max``
+(`hptrack.coverage.estimator.coverage_outcome`, Sec. IV-B) gives ``t_cutoff``, ``p_max``
 and ``E[T_find]``, truncated to the ``N - t - n_i`` steps left (budget truncation). The action
 is available only when ``n_i < N - t``. Outcomes:
 
@@ -42,11 +42,11 @@ Either way the agent ends at the target's estimated position and every other bel
 time spent. A sub-task lasts at least one step (so a history always advances in time). Choosing the
 target found by the previous sub-task again follows it to the end of the budget with its detection
 guaranteed: it is measured at every step, its covariance follows the Riccati recursion
-(:func:`hptrack.models.riccati.measured_covariance`).
+(`hptrack.models.riccati.measured_covariance`).
 
 **Dwell** (an option beyond the paper, off by default: ``dwell = 0``). With dwell lengths
 ``stay_steps`` the MDP has one more action per length, index ``n + j`` for the ``j``-th
-(:func:`dwell_action`): follow the target just found for ``stay_steps[j]`` steps only,
+(`dwell_action`): follow the target just found for ``stay_steps[j]`` steps only,
 measured at every step, then choose again with that target still the last found. A single find
 fixes a target's position but leaves much of its velocity uncertain, so its belief grows fast
 afterwards; a short dwell measures the velocity too. A dwell is available when a target was
@@ -58,7 +58,7 @@ list, its belief unmeasured (its base unchanged), so it may be pursued again.
 **Passes credited** (``passes="credit"``, beyond the paper; the paper's ``"ignore"`` credits a
 sub-task with its own target only): every sub-task is taken as the straight flight from the
 agent's position to where it ends, and each other target whose belief that flight crosses with
-probability at least :data:`PASS_CREDIT` (:func:`pass_probability`) counts as measured at the
+probability at least `PASS_CREDIT` (`pass_probability`) counts as measured at the
 closest approach, its covariance updated there, and back in the action list if it was missed.
 
 At the end of the budget, or when no action is available, the value of the state is ``-U``
@@ -106,10 +106,10 @@ OUTCOMES = ("find", "miss")
 FIND, MISS = 0, 1
 
 WORK_SLOTS = 5
-"""Number of 4x4 scratch matrices the kernels need (:func:`new_work`)."""
+"""Number of 4x4 scratch matrices the kernels need (`new_work`)."""
 
 ESTIMATORS = ("paper", "sharp")
-"""The sub-task outcome estimators, by code (:attr:`SubtaskEnv.estimator`)."""
+"""The sub-task outcome estimators, by code (`SubtaskEnv.estimator`)."""
 SHARP = ESTIMATORS.index("sharp")
 
 
@@ -118,11 +118,11 @@ class SubtaskOptions(NamedTuple):
 
     Attributes:
         estimator: ``"paper"`` (Sec. IV-B) or ``"sharp"``
-            (:mod:`hptrack.coverage.sharp_estimator`: detections on the intercept flight and the
+            (`hptrack.coverage.sharp_estimator`: detections on the intercept flight and the
             footprint's reach; the find outcome then lasts the estimated duration from
             departure, and the estimate depends on the approach, so it is not memoised).
         dwell: length of the dwell action, s (rounded to whole steps, at least one,
-            :func:`dwell_steps`), or several lengths, one dwell action each (:func:`stay_steps`);
+            `dwell_steps`), or several lengths, one dwell action each (`stay_steps`);
             0 (the paper): no dwell action.
         miss: what a miss does to the missed target: ``"drop"`` (the paper) takes it out of
             the action list; ``"keep"`` leaves it in, its belief grown by the time spent, so
@@ -155,7 +155,7 @@ class Memo(NamedTuple):
 
 
 class SubtaskEnv(NamedTuple):
-    """The sub-task MDP's ``env`` for the search (:mod:`hptrack.planning.mdp`): everything the
+    """The sub-task MDP's ``env`` for the search (`hptrack.planning.mdp`): everything the
     kernels need that does not change during a search, and the memo they write.
 
     Attributes:
@@ -163,7 +163,7 @@ class SubtaskEnv(NamedTuple):
         follow: the targets' Riccati tables (measured at every step).
         means: ``(n, 4)`` belief means at the root, m and m/s.
         n_steps: ``N``, the steps left in the budget at the root.
-        estimator: index of the estimator in :data:`ESTIMATORS`.
+        estimator: index of the estimator in `ESTIMATORS`.
         stay_steps: ``(k,)`` lengths of the dwell actions in steps (action ``n + j`` dwells
             ``stay_steps[j]``); empty: no dwell action (the paper).
         keep_missed: a miss leaves the target in the action list (``miss="keep"``).
@@ -189,18 +189,18 @@ class PlanningProblem:
     action.
 
     Attributes:
-        mission: the mission record (:attr:`hptrack.interface.MissionSpec.record`).
+        mission: the mission record (`hptrack.interface.MissionSpec.record`).
         agent_position: ``(2,)`` agent position, m.
         means: ``(n, 4)`` belief means ``[x, y, vx, vy]``, m and m/s.
         covariances: ``(n, 4, 4)`` belief covariances.
-        remaining_budget: time left, s (the search plans :func:`steps_left` steps).
+        remaining_budget: time left, s (the search plans `steps_left` steps).
         available: ``(n,)`` targets still in the action list (not missed); default all.
         last_found: the target found by the sub-task that just ended, if any (choosing it again
             follows it to the end of the budget).
         current_action: re-planning mode (Sec. IV-C-4): the target being pursued (or a
-            dwell, :func:`dwell_action` and after), fixed as the root's only action; ``None``
+            dwell, `dwell_action` and after), fixed as the root's only action; ``None``
             for a first plan.
-        follow: the mission's Riccati tables (:func:`hptrack.models.mission.follow_tables`),
+        follow: the mission's Riccati tables (`hptrack.models.mission.follow_tables`),
             built once per mission and shared; default built here.
     """
 
@@ -263,7 +263,7 @@ class PlanningProblem:
         current_action: int | None = None,
         follow: FollowTables | None = None,
     ) -> PlanningProblem:
-        """The problem seen from an :class:`~hptrack.interface.Observation` of the mission."""
+        """The problem seen from an `Observation` of the mission."""
         return cls(
             mission,
             observation.agent_position,
@@ -331,14 +331,14 @@ class PlanningProblem:
 
 
 MISS_RULES = ("drop", "keep")
-"""What a miss does to the missed target (:attr:`SubtaskOptions.miss`)."""
+"""What a miss does to the missed target (`SubtaskOptions.miss`)."""
 
 PASS_RULES = ("ignore", "credit")
 """What a sub-task's flight does to the other targets it passes over
-(:attr:`SubtaskOptions.passes`)."""
+(`SubtaskOptions.passes`)."""
 
 PASS_CREDIT = 0.5
-"""With ``passes="credit"``, the least probability of a pass (:func:`pass_probability`) that
+"""With ``passes="credit"``, the least probability of a pass (`pass_probability`) that
 counts as a measurement: the MDP's state holds one belief per target, so a pass either
 measures a target or does not."""
 
@@ -370,7 +370,7 @@ def dwell_lengths(dwell: float | tuple[float, ...]) -> tuple[float, ...]:
 
 
 def stay_steps(time_step: float, dwell: float | tuple[float, ...]) -> tuple[int, ...]:
-    """The dwell actions' lengths in whole steps (:func:`dwell_steps` of each length)."""
+    """The dwell actions' lengths in whole steps (`dwell_steps` of each length)."""
     return tuple(dwell_steps(time_step, d) for d in dwell_lengths(dwell))
 
 
@@ -394,7 +394,7 @@ def new_work() -> np.ndarray:
 
 
 def new_memo(n_targets: int, n_steps: int) -> Memo:
-    """An empty :class:`Memo` for ``n_targets`` targets and ``n_steps`` budget steps."""
+    """An empty `Memo` for ``n_targets`` targets and ``n_steps`` budget steps."""
     return Memo(
         np.full((n_targets, n_steps + 1), -1, dtype=np.int64),
         np.zeros((n_targets, n_steps + 1)),
@@ -441,7 +441,7 @@ def intercept_of(env, sf, a, t):
 
 @numba.njit(cache=True, inline="always")
 def is_dwell(env, a):
-    """Whether action ``a`` is a dwell (:func:`dwell_action` and after)."""
+    """Whether action ``a`` is a dwell (`dwell_action` and after)."""
     return a >= dwell_action(env.means.shape[0])
 
 
@@ -511,7 +511,7 @@ def expand_action(env, state, a, work):
 
 @numba.njit(cache=True)
 def _expand_sharp(env, state, a, ic, cov):
-    """:func:`expand_action` with the sharp estimator: ``p_find`` includes detections on the
+    """`expand_action` with the sharp estimator: ``p_find`` includes detections on the
     intercept flight, and a find lasts the estimated duration from departure."""
     mission = env.mission
     si, sf, base_cov, base_step = state
@@ -595,7 +595,7 @@ def apply_outcome(env, state, a, outcome, payload, work):
 def credit_passes(env, state, a, end_x, end_y, end, prior):
     """Measure every target other than ``a`` that the flight from the agent's position (at the
     state's step) to ``(end_x, end_y)`` (at step ``end``) passes over with probability at least
-    :data:`PASS_CREDIT`, at the step of the closest approach to its belief mean, and put it back
+    `PASS_CREDIT`, at the step of the closest approach to its belief mean, and put it back
     in the action list (``passes="credit"``). ``prior`` is 4x4 scratch."""
     mission = env.mission
     si, sf, base_cov, base_step = state

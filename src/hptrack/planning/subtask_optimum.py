@@ -1,7 +1,7 @@
 """The exact optimum of the sub-task MDP for a few targets, by exhaustive expectimax.
 
 The tree search (paper Algorithm 1) estimates ``max over policies of E[-U]`` in the sub-task MDP
-(:mod:`hptrack.planning.subtask_mdp`) from sampled histories. When the problem is small (two or
+(`hptrack.planning.subtask_mdp`) from sampled histories. When the problem is small (two or
 three targets, a short budget) the expectation can be computed exactly instead: the value of a
 state is ``-U`` when no action is available (Sec. III), otherwise the maximum over its available
 actions of
@@ -10,7 +10,7 @@ actions of
 
 with the transitions and ``p_find`` of the MDP's own kernels. Every history is enumerated (states
 are not merged), so the cost grows as the number of available actions to the power of the number
-of decisions; :func:`optimal_plan` refuses a problem past ``max_nodes``. It is a yardstick: what
+of decisions; `optimal_plan` refuses a problem past ``max_nodes``. It is a yardstick: what
 the MDP says is best, to tell a search that has not found the best plan from an MDP whose best
 plan is poor (``benchmarks/search_diagnostics.py optimum``).
 """
@@ -102,7 +102,7 @@ class _Expectimax:
 
 def action_values(env, state, max_nodes: int = 1_000_000) -> dict[int, float]:
     """The exact value of each available action of ``state`` in the MDP ``env``
-    (:meth:`~hptrack.planning.subtask_mdp.PlanningProblem.env`), each followed by the best
+    (`env`), each followed by the best
     policy.
 
     Raises:

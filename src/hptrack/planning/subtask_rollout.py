@@ -1,19 +1,19 @@
 """Rollout policies for the sub-task MDP (alternatives to the paper's random one).
 
-:class:`UniformNoFollow` is the paper's uniform draw without one action: following the target
+`UniformNoFollow` is the paper's uniform draw without one action: following the target
 just found, which ends the history (it keeps every other belief growing to the end of the
 budget). A uniform rollout takes it with probability ``1 / k`` after each find (``k`` available
 actions), so most random rollouts end in an early follow and value their state as if the
 mission stopped there; without it, the rollout estimates the state under random pursuit of the
 other targets. It follows only when no other action is available.
 
-:class:`MostUncertain` pursues, with probability ``1 - epsilon``, the available target whose
+`MostUncertain` pursues, with probability ``1 - epsilon``, the available target whose
 position uncertainty ``log det Sigma^xy`` is largest when the agent would reach its belief mean
-(the rule of the ``greedy`` baseline, :mod:`hptrack.baselines.greedy`, applied inside the MDP), and
+(the rule of the ``greedy`` baseline, `hptrack.baselines.greedy`, applied inside the MDP), and
 otherwise an available action drawn uniformly. It follows the target just found only when no
 other action is available, so a rollout does not end its history early by chance. Informed
 rollouts can also mislead the search (their errors are systematic); the benchmark in
-``docs/planner-improvements.md`` measures it against the random policy.
+``docs/results/search-options.md`` measures it against the random policy.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ class UniformNoFollow(NamedTuple):
 
 @numba.njit(cache=True)
 def uniform_no_follow(policy, env, state, rng, candidates):
-    """:class:`UniformNoFollow`'s decision (``-1`` when no action is available)."""
+    """`UniformNoFollow`'s decision (``-1`` when no action is available)."""
     count = available_actions(env, state, candidates)
     if count == 0:
         return -1
@@ -64,7 +64,7 @@ def epsilon_greedy(epsilon, env, state, rng, candidates, uncertainty):
 
 @numba.njit(cache=True)
 def best_other(env, state, candidates, count, uncertainty):
-    """:func:`epsilon_greedy`'s choice among the ``count`` available ``candidates``, without the
+    """`epsilon_greedy`'s choice among the ``count`` available ``candidates``, without the
     random draw."""
     mission = env.mission
     si, sf, base_cov, base_step = state
@@ -93,7 +93,7 @@ class Nearest(NamedTuple):
     """Rollouts that pursue, with probability ``1 - epsilon``, the available target other than
     the one just found that the agent reaches first (fewest intercept steps), and otherwise an
     available action drawn uniformly: a local tour, the opposite bias of
-    :class:`MostUncertain`.
+    `MostUncertain`.
 
     Attributes:
         epsilon: probability of a uniformly random available action instead, in ``[0, 1]``.
@@ -104,7 +104,7 @@ class Nearest(NamedTuple):
 
 @numba.njit(cache=True)
 def nearest(policy, env, state, rng, candidates):
-    """:class:`Nearest`'s decision (:func:`epsilon_greedy` on intercept steps)."""
+    """`Nearest`'s decision (`epsilon_greedy` on intercept steps)."""
     return epsilon_greedy(policy.epsilon, env, state, rng, candidates, False)
 
 
@@ -120,7 +120,7 @@ class MostUncertain(NamedTuple):
 
 @numba.njit(cache=True)
 def most_uncertain(policy, env, state, rng, candidates):
-    """:class:`MostUncertain`'s decision (:func:`epsilon_greedy` on the uncertainty on
+    """`MostUncertain`'s decision (`epsilon_greedy` on the uncertainty on
     arrival)."""
     return epsilon_greedy(policy.epsilon, env, state, rng, candidates, True)
 
@@ -134,7 +134,7 @@ class UniformNoDwell(NamedTuple):
 
 @numba.njit(cache=True)
 def uniform_no_dwell(policy, env, state, rng, candidates):
-    """:class:`UniformNoDwell`'s decision (``-1`` when no action is available)."""
+    """`UniformNoDwell`'s decision (``-1`` when no action is available)."""
     count = available_actions(env, state, candidates)
     targets = 0
     while targets < count and not is_dwell(env, candidates[targets]):
@@ -167,7 +167,7 @@ class Tour(NamedTuple):
 
 @numba.njit(cache=True)
 def tour(policy, env, state, rng, candidates):
-    """:class:`Tour`'s decision (``-1`` when no action is available)."""
+    """`Tour`'s decision (``-1`` when no action is available)."""
     count = available_actions(env, state, candidates)
     if count == 0:
         return -1

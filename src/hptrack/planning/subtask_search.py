@@ -1,6 +1,6 @@
-"""The tree search (:mod:`hptrack.planning.search`) on the sub-task MDP
-(:mod:`hptrack.planning.subtask_mdp`): Algorithm 1's ``TreeSearch`` from a
-:class:`~hptrack.planning.subtask_mdp.PlanningProblem`, its root parallelism, and the warm-up that
+"""The tree search (`hptrack.planning.search`) on the sub-task MDP
+(`hptrack.planning.subtask_mdp`): Algorithm 1's ``TreeSearch`` from a
+`PlanningProblem`, its root parallelism, and the warm-up that
 loads its compiled kernels.
 """
 
@@ -30,7 +30,7 @@ from hptrack.planning.stream import seed_value
 def run_subtask_simulations(
     tree, env, root, state, work, options, n_actions, max_depth, fixed, n_simulations
 ):
-    """:func:`~hptrack.planning.search.run_simulations` on the sub-task MDP, compiled once and
+    """`run_simulations` on the sub-task MDP, compiled once and
     cached on disk.
 
     The generic loop is not cached itself: its cache index would hold the signature of every
@@ -57,18 +57,18 @@ def search(
         problem: root state and model; with ``current_action`` set, re-planning mode: the root's
             only action is the current one and the result gives the best next action after
             each of its outcomes (Algorithm 1 lines 9-12).
-        options: the search's options (:class:`~hptrack.planning.search.SearchOptions`,
+        options: the search's options (`SearchOptions`,
             default the paper's search).
         subtask: the sub-task MDP's options (estimator, dwell; default the paper's MDP). With
             a dwell, ``problem.current_action`` may be the dwell.
         iterations: stop after this many simulations.
         time_limit: stop once this wall time (s) has passed, checked between chunks of
             simulations. With both limits, whichever comes first.
-        seed: an integer or a :class:`numpy.random.Generator` (one ``uint64`` is drawn from it).
+        seed: an integer or a `numpy.random.Generator` (one ``uint64`` is drawn from it).
             The same seed and number of simulations give the same tree and plan.
         threads: root parallelism: this many independent trees (each with its own stream,
             seeded from ``seed``, and the limits above), searched on as many threads and
-            merged (:func:`~hptrack.planning.tree.merge_stats`). 1 is the paper's single tree.
+            merged (`merge_stats`). 1 is the paper's single tree.
 
     Raises:
         ValueError: no limit given, a limit not positive, a bad option, or a current action

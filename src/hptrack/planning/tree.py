@@ -38,7 +38,7 @@ class Tree(NamedTuple):
 
     ``counts`` holds ``[state nodes, action nodes, simulations run]``; ``value_range`` the
     smallest and largest return seen; ``rng`` the random stream's state and the seed it started
-    from (the seed of the search's derived streams, :func:`hptrack.planning.stream.substream`).
+    from (the seed of the search's derived streams, `hptrack.planning.stream.substream`).
     """
 
     s_first: np.ndarray

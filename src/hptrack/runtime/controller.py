@@ -4,16 +4,16 @@ driven by timestamped events, with no vehicle or middleware inside.
 Inputs, all in the planner's local frame (m; ``x`` east, ``y`` north) and mission time (s from
 the mission start):
 
-* :meth:`MissionController.odometry` -- the vehicle's position;
-* :meth:`MissionController.detection` -- a position measurement of one target, with its own
+* `MissionController.odometry` -- the vehicle's position;
+* `MissionController.detection` -- a position measurement of one target, with its own
   2x2 noise covariance or the scenario's ``R``;
-* :meth:`MissionController.setpoint` -- where the vehicle should fly now; it always returns at
+* `MissionController.setpoint` -- where the vehicle should fly now; it always returns at
   once.
 
 Beliefs are predicted in closed form to each event's time whatever the gaps
-(:class:`~hptrack.runtime.beliefs.BeliefTimeline`). The planner runs on its own step clock:
+(`BeliefTimeline`). The planner runs on its own step clock:
 ticks at ``k tau``. At the first ``setpoint`` call at or after ``k tau`` the controller builds the
-:class:`~hptrack.interface.Observation` of step ``k`` (beliefs at ``k tau`` from the
+`Observation` of step ``k`` (beliefs at ``k tau`` from the
 measurements taken up to then, the latest odometry) and hands ``act`` to the planner runner (a
 worker thread in flight); the waypoint it returns becomes the setpoint when it arrives. A
 target is ``detected`` in an observation when a measurement of it taken at or before ``k tau``
@@ -22,7 +22,7 @@ the planner is busy, and a measurement that arrives late counts at the next tick
 runs, further ticks are skipped. A call that is not back within the deadline is logged as late
 and replaced at once by a fallback decision (greedy on the current beliefs), decided again at
 each tick until the planner answers; the late plan is logged, not flown. A call that fails holds
-the vehicle where it is until a later call succeeds. Each decision is flown as a :class:`Leg`
+the vehicle where it is until a later call succeeds. Each decision is flown as a `Leg`
 from the odometry of the moment it arrives, at the planned speed.
 
 Bad input changes nothing; it is counted and logged with its reason: non-finite or malformed
@@ -32,16 +32,16 @@ clock), odometry older than the last one (a newer position
 supersedes it) or at the same time, a detection older than the newest by more than the
 tolerance, a duplicate detection, a detection outside the mission's area or with a covariance
 outside R's range, odometry that jumps faster than the vehicle can fly
-(:mod:`hptrack.runtime.inputs`). Odometry older than ``stale_odometry_s`` makes ``setpoint`` hold
+(`hptrack.runtime.inputs`). Odometry older than ``stale_odometry_s`` makes ``setpoint`` hold
 position and say so.
 
 The controller is assembled from its parts, each testable alone: the input checks
-(:mod:`~hptrack.runtime.inputs`), the clock (:mod:`~hptrack.runtime.clock`), the planner worker
-and fallback (:mod:`~hptrack.runtime.worker`), the journal of records and counts
-(:mod:`~hptrack.runtime.journal`) and the mission's history for the figure
-(:mod:`~hptrack.runtime.record`).
+(`inputs`), the clock (`clock`), the planner worker
+and fallback (`worker`), the journal of records and counts
+(`journal`) and the mission's history for the figure
+(`record`).
 
-Every event and decision goes to the mission log (:mod:`hptrack.runtime.log`); records made
+Every event and decision goes to the mission log (`hptrack.runtime.log`); records made
 inside a ``setpoint`` call carry its number, so that a replay makes the same calls.
 """
 
@@ -207,7 +207,7 @@ class MissionController:
 
     @property
     def final(self) -> dict | None:
-        """The beliefs, agent and detections at the end (after :meth:`finish`)."""
+        """The beliefs, agent and detections at the end (after `finish`)."""
         return self.history.final
 
     def _ended(self) -> str | None:
@@ -463,7 +463,7 @@ class MissionController:
     def prepare(self, position: Any) -> None:
         """Before the mission starts (during take-off): the vehicle will start at
         ``position`` (2,) m; hands tick 0 to the planner (its kernels compile or load in that
-        first call). Follow with :meth:`first_plan`."""
+        first call). Follow with `first_plan`."""
         self.odometry(0.0, position)
         self.setpoint(0.0)
 
@@ -559,9 +559,9 @@ class MissionController:
             }
 
     def episode_record(self, truth: np.ndarray | None = None) -> EpisodeRecord:
-        """The mission as an :class:`~hptrack.sim.record.EpisodeRecord` (for the mission
-        figure; :meth:`~hptrack.runtime.record.MissionHistory.episode_record`); ``truth``
-        ``(K+1, n, 4)`` if known, else NaN. Call after :meth:`finish`."""
+        """The mission as an `EpisodeRecord` (for the mission
+        figure; `episode_record`); ``truth``
+        ``(K+1, n, 4)`` if known, else NaN. Call after `finish`."""
         if not self.finished:
             raise RuntimeError("episode_record() needs a finished mission")
         info = dict(self.end.get("planner_info") or {})

@@ -6,8 +6,8 @@ Checks: malformed or non-finite values; an unknown target id; an event before th
 after the end; a detection stamped ahead of the clock by more than the tolerance; odometry older
 than the last one or at the same time, or implying a speed the vehicle cannot fly; a detection
 older than the newest by more than the reorder tolerance, or a duplicate; a detection outside
-the mission's area (:func:`mission_area`); a detection's own covariance that is not a
-covariance or has eigenvalues outside :data:`NOISE_RANGE_M2`.
+the mission's area (`mission_area`); a detection's own covariance that is not a
+covariance or has eigenvalues outside `NOISE_RANGE_M2`.
 """
 
 from __future__ import annotations

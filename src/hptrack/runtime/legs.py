@@ -1,6 +1,6 @@
-"""What the controller tells the vehicle: each decision is flown as a straight :class:`Leg` from
+"""What the controller tells the vehicle: each decision is flown as a straight `Leg` from
 the odometry of the moment it arrives, at the planned speed, and every ``setpoint`` call returns
-a :class:`Setpoint` with the leg's reference point for now and its velocity (the feed-forward of
+a `Setpoint` with the leg's reference point for now and its velocity (the feed-forward of
 the vehicle's position controller), or a hold."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The network boundary of the flight adapters: UDP addresses (``udp://HOST:PORT``) and the
-detection lines that arrive there, parsed without ever raising (:func:`parse_detection_line`)."""
+detection lines that arrive there, parsed without ever raising (`parse_detection_line`)."""
 
 from __future__ import annotations
 
@@ -94,7 +94,7 @@ def _number_token(text: str) -> float:
 def parse_detection_line(line: str) -> DetectionMessage | Refusal:
     """Parse one JSON detection line (``{"id": "t1", "x": east_m, "y": north_m}`` with optional
     ``"t"`` Unix time s and ``"cov"`` 2x2 m^2) without ever raising: anything else is a
-    :class:`Refusal` (too long, not JSON, nested, a number too long to be one, a field missing
+    `Refusal` (too long, not JSON, nested, a number too long to be one, a field missing
     or of the wrong type, a non-finite number)."""
     if len(line) > MAX_DETECTION_LINE_CHARS:
         return Refusal("malformed", f"a line of {len(line)} characters")
@@ -125,7 +125,7 @@ queued, not dropped)."""
 
 
 def enlarge_receive_buffer(sock: socket.socket) -> None:
-    """Ask for a :data:`RECEIVE_BUFFER_BYTES` receive buffer (the system may give less)."""
+    """Ask for a `RECEIVE_BUFFER_BYTES` receive buffer (the system may give less)."""
     with contextlib.suppress(OSError):
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
 

@@ -1,6 +1,6 @@
 """What a mission leaves for the mission figure: the agent and the beliefs at each processed
 tick and at the end, the detections per tick, rebuilt as an
-:class:`~hptrack.sim.record.EpisodeRecord` (the simulator's record)."""
+`EpisodeRecord` (the simulator's record)."""
 
 from __future__ import annotations
 

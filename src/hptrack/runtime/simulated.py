@@ -2,16 +2,16 @@
 the faults a real flight has: odometry rate, outages and drops, detection rate, latency,
 jitter and drops, planner compute times beyond the deadline, and malformed or hostile inputs.
 
-The world is the simulator's (:mod:`hptrack.sim.step`): true initial states from
-:func:`~hptrack.sim.step.initial_true_states`, one step of true motion per ``tau`` from the
+The world is the simulator's (`hptrack.sim.step`): true initial states from
+`initial_true_states`, one step of true motion per ``tau`` from the
 scenario's motion model (linearly interpolated between steps for sensing at other rates), the
 sensor's footprint and noise, and the agent moving straight towards the controller's setpoint at
-``v_a`` (:func:`~hptrack.sim.step.move_towards`). The clock advances in physics steps of
+``v_a`` (`move_towards`). The clock advances in physics steps of
 ``1 / setpoint_rate_hz``; at each step the world senses, due events are delivered in delivery
 order, then ``setpoint`` is called and the agent moves.
 
 Randomness: ``SeedSequence(seed)`` spawns the simulator's four streams (truth, motion, sensor,
-planner: the same missions as :func:`~hptrack.sim.episode.run_episode`) and a fifth for the
+planner: the same missions as `run_episode`) and a fifth for the
 faults. Without faults, with detections every ``tau`` and no planner delay, the controller sees
 what the simulator's planner sees, step for step.
 """
@@ -128,7 +128,7 @@ def run_simulated(
     log: MissionLog | None = None,
     on_step: Callable[[float], None] | None = None,
 ) -> SimulatedRun:
-    """Fly ``planner`` through ``scenario`` with a :class:`MissionController` on a simulated
+    """Fly ``planner`` through ``scenario`` with a `MissionController` on a simulated
     clock (module docstring).
 
     Raises:

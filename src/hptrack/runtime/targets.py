@@ -3,8 +3,8 @@ true targets move from the mission's start (the vehicle's first switch to offboa
 target within the sensor footprint of the vehicle is measured with the scenario's ``R`` and sent
 as a detection datagram to ``hptrack fly``.
 
-One component, two uses: the vehicle stub (:mod:`hptrack.runtime.vehicle_sim`) feeds it its own
-position, and ``hptrack targets-sim`` (:func:`run_targets_sim`) feeds it the position an
+One component, two uses: the vehicle stub (`hptrack.runtime.vehicle_sim`) feeds it its own
+position, and ``hptrack targets-sim`` (`run_targets_sim`) feeds it the position an
 autopilot reports on its MAVLink telemetry (a second link, such as PX4's ground-station port
 14550), so that any SITL flies with synthetic targets.
 

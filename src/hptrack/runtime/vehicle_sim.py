@@ -6,7 +6,7 @@ It speaks enough of PX4's protocol for MAVSDK: a PX4 quadrotor heartbeat whose c
 shows the flight mode (offboard, hold, takeoff, return, land), ``COMMAND_ACK`` for arming, mode
 changes, takeoff, return and land, the parameter protocol (``PARAM_REQUEST_READ`` by name or
 index, ``PARAM_REQUEST_LIST``, ``PARAM_SET``, each answered by ``PARAM_VALUE``) over PX4's
-parameters that matter here (:data:`PX4_PARAMETERS`), ``AUTOPILOT_VERSION`` on request,
+parameters that matter here (`PX4_PARAMETERS`), ``AUTOPILOT_VERSION`` on request,
 ``TIMESYNC`` replies, and ``SYS_STATUS``, ``EXTENDED_SYS_STATE``, ``LOCAL_POSITION_NED``,
 ``GLOBAL_POSITION_INT`` and ``HOME_POSITION`` telemetry, to MAVSDK and optionally to a second
 link (a ground station, such as ``hptrack targets-sim``).
@@ -24,7 +24,7 @@ Flight as PX4 flies it:
   ``COM_OF_LOSS_T`` (PX4's offboard-loss failsafe, also when ``hptrack fly`` dies).
 
 Every mode change is reported through ``on_event`` (the CLI prints it). The scenario's targets
-are simulated and detected by :class:`~hptrack.runtime.targets.TargetDetector`, the component
+are simulated and detected by `TargetDetector`, the component
 ``hptrack targets-sim`` uses against a real SITL, fed here with the stub's own position.
 The vehicle starts on the ground at the scenario's agent position.
 
@@ -142,7 +142,7 @@ def _approach(error: np.ndarray, gain: float, acceleration: float) -> np.ndarray
 
 @dataclass
 class VehicleStats:
-    """What the stub saw and did (JSON-ready through :meth:`as_json`)."""
+    """What the stub saw and did (JSON-ready through `as_json`)."""
 
     setpoint_times: list[float] = field(default_factory=list)
     modes: list[tuple[float, str]] = field(default_factory=list)
@@ -206,7 +206,7 @@ class VehicleSim:
         gcs_url: a second telemetry link, ``udpout://127.0.0.1:PORT`` (PX4's ground-station
             port is 14550), or ``None``.
         airframe_speed_m_s: the airframe's top horizontal speed, m/s.
-        parameters: PX4 parameters that differ from :data:`PX4_PARAMETERS`.
+        parameters: PX4 parameters that differ from `PX4_PARAMETERS`.
         on_event: called with one line at each mode change and failsafe.
 
     Raises:
@@ -552,7 +552,7 @@ class VehicleSim:
         self, duration_s: float, stop: threading.Event | None = None, loop_hz: float = 100.0
     ) -> dict:
         """Fly for at most ``duration_s`` wall seconds or until ``stop`` is set; returns the
-        stats (:meth:`VehicleStats.as_json`)."""
+        stats (`VehicleStats.as_json`)."""
         period = 1.0 / loop_hz
         self._set_mode(self.mode)
         last = self._now()

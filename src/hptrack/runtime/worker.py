@@ -1,5 +1,5 @@
-"""The planner's side of the controller: :class:`PlannerWorker` hands the planner one
-observation at a time, tells when a call is late and delivers its outcome; :class:`Fallback` is
+"""The planner's side of the controller: `PlannerWorker` hands the planner one
+observation at a time, tells when a call is late and delivers its outcome; `Fallback` is
 the cheap decision flown while a call is late. Where the planner runs: a worker thread (real
 time), inline with a simulated compute time (the simulated runner) or on the log's say-so
 (replay).
@@ -142,7 +142,7 @@ class InlineRunner:
 
 
 class ReplayRunner:
-    """Runs a job only when the replayed log says its outcome was delivered (:meth:`release`),
+    """Runs a job only when the replayed log says its outcome was delivered (`release`),
     in the caller's thread, so that a replay makes the same decisions at the same points
     without a wall clock."""
 
@@ -334,7 +334,7 @@ class Fallback:
         self.active = False
 
     def decide(self, obs: Observation) -> np.ndarray:
-        """A waypoint ``(2,)`` m for ``obs``; the fallback is active until :meth:`stop`."""
+        """A waypoint ``(2,)`` m for ``obs``; the fallback is active until `stop`."""
         if not self.active:
             self.planner.reset(self.mission, obs, np.random.default_rng(self.seed))
         self.active = True

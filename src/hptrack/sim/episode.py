@@ -33,8 +33,8 @@ def run_episode(
 
     Args:
         scenario: the mission.
-        planner: any :class:`~hptrack.interface.Planner`; it never sees the truth unless it
-            is a :class:`~hptrack.interface.TruthReader` (a reference).
+        planner: any `Planner`; it never sees the truth unless it
+            is a `TruthReader` (a reference).
         seed: overrides ``scenario.seed``.
         belief_stride: store beliefs every this many steps (the last step is always stored).
         on_step: called as ``on_step(k, K)`` after each step (progress bars).
@@ -89,7 +89,7 @@ def run_episode(
 
 
 def record_bytes(n_targets: int, n_steps: int, belief_stride: int = 1) -> int:
-    """Memory an :class:`EpisodeRecord` of a mission needs, bytes (to refuse one that does not
+    """Memory an `EpisodeRecord` of a mission needs, bytes (to refuse one that does not
     fit before it starts)."""
     per_step = 8 * (2 + 4 * n_targets) + n_targets
     stored = n_steps // belief_stride + 2

@@ -97,7 +97,7 @@ class EpisodeRecord:
     def summary(self) -> dict:
         """JSON-ready summary: ``U``, per-target log det and detections, planner, seed, and
         the planner's metadata with its sub-tasks naming targets by id
-        (:func:`subtasks_with_ids`)."""
+        (`subtasks_with_ids`)."""
         info = dict(self.info)
         if info.get("subtasks"):
             info["subtasks"] = subtasks_with_ids(info["subtasks"], self.target_ids)
@@ -141,7 +141,7 @@ class EpisodeRecord:
 
     @classmethod
     def load(cls, path: str | Path) -> EpisodeRecord:
-        """Read a record written by :meth:`save`."""
+        """Read a record written by `save`."""
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
             arrays = {k: data[k] for k in data.files if k != "meta"}

@@ -1,18 +1,18 @@
-"""One simulator step as a compiled kernel, and :class:`World`, the simulated mission it steps.
+"""One simulator step as a compiled kernel, and `World`, the simulated mission it steps.
 
-A step ``k -> k+1`` (``tau`` seconds) is the simulator's (:mod:`hptrack.sim.episode`): the agent
+A step ``k -> k+1`` (``tau`` seconds) is the simulator's (`hptrack.sim.episode`): the agent
 moves straight towards its waypoint by at most ``v_a tau``; every true target moves with ``F`` and
 ``Q`` noise; every belief is predicted one step (Eq. (1)); every target whose true position lies
 within ``w/2`` of the agent is measured, ``z = [x, y] + L e`` (``L L' = R``), and Kalman-updated.
-Sensing also happens at step 0. The kernels call the model kernels of :mod:`hptrack.models`
+Sensing also happens at step 0. The kernels call the model kernels of `hptrack.models`
 (prediction, true motion, Kalman update, ``log det``); they re-derive none of them.
 
 Randomness is the simulator's: ``SeedSequence(seed).spawn(4)`` gives the streams of the true
 initial states, the target motion, the measurement noise and the planner. The motion stream gives
 ``n x 4`` unit normals per step and the measurement stream ``2`` per measured target, in target
-order. A Generator's normals do not depend on how the draws are split, so :class:`World` draws
-them in blocks (:class:`NormalBlock`) and the kernels consume them in the simulator's order: the
-same seed gives the same mission as :func:`hptrack.sim.episode.run_episode`.
+order. A Generator's normals do not depend on how the draws are split, so `World` draws
+them in blocks (`NormalBlock`) and the kernels consume them in the simulator's order: the
+same seed gives the same mission as `hptrack.sim.episode.run_episode`.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def move_agent(agent, waypoint, max_step):
 
 def move_towards(position: np.ndarray, waypoint: np.ndarray, max_step: float) -> np.ndarray:
     """Holonomic move: a new position straight towards ``waypoint`` by at most ``max_step`` m
-    (:func:`move_agent` on a copy)."""
+    (`move_agent` on a copy)."""
     agent = np.array(position, dtype=float)
     move_agent(agent, np.asarray(waypoint, dtype=float), float(max_step))
     return agent
@@ -100,7 +100,7 @@ def world_step(
 ):
     """One simulator step in place (module docstring): move, true motion with the unit normals
     ``z_motion`` ``(n, 4)``, predict one step, sense (``sensor``: the squared footprint radius
-    and the Cholesky factor of ``R``; ``out``: :func:`sense`'s ``seen``, ``logdets`` and
+    and the Cholesky factor of ``R``; ``out``: `sense`'s ``seen``, ``logdets`` and
     ``z``). Returns the new ``e_pos`` and ``U``."""
     move_agent(agent, waypoint, mission.step_length)
     l11, l21, l22 = motion_noise_factors_on(mission)
@@ -142,11 +142,11 @@ class NormalBlock:
 
 class World:
     """A simulated mission of ``scenario`` (true targets, agent, beliefs), advanced by
-    :meth:`step`; after construction, step 0 (the first sensing) is done.
+    `step`; after construction, step 0 (the first sensing) is done.
 
     Args:
         scenario: the mission.
-        seed: overrides ``scenario.seed`` (as :func:`hptrack.sim.episode.run_episode`).
+        seed: overrides ``scenario.seed`` (as `hptrack.sim.episode.run_episode`).
 
     Attributes (read them, do not write them):
         mission: the mission facts.

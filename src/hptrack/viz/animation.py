@@ -1,8 +1,8 @@
 """Animated mission: the agent and its recent trail, the true targets, each belief's 95 %
 ellipse, a fading ring on every detection, the current sub-task and the mission time.
 
-Frames are drawn with :class:`matplotlib.animation.FuncAnimation` on a
-:class:`matplotlib.figure.Figure` (no pyplot state) and written as a GIF with Pillow, or as an
+Frames are drawn with `matplotlib.animation.FuncAnimation` on a
+`matplotlib.figure.Figure` (no pyplot state) and written as a GIF with Pillow, or as an
 MP4 when ffmpeg is installed. One frame every ``stride`` steps, plus the last step.
 """
 
@@ -202,7 +202,7 @@ def animate_mission(
             is drawn (a GIF is encoded at the end; an MP4 as it goes, and reports nothing).
         dpi: dots per inch.
         size_in: figure width, inches; the height fits the square map, the title and the
-            legends (:func:`frame_size_in`). The frame is ``size * dpi`` pixels.
+            legends (`frame_size_in`). The frame is ``size * dpi`` pixels.
     """
     path = Path(path)
     if stride < 1:

@@ -66,7 +66,7 @@ def plot_uncertainty_boxes(
 def save_uncertainty_boxes(
     rows: list[EpisodeRow], path: str | Path, planners: Sequence[str] = (), title: str = ""
 ) -> None:
-    """One box plot of ``U`` per number of targets (:func:`plot_uncertainty_boxes`), side by
+    """One box plot of ``U`` per number of targets (`plot_uncertainty_boxes`), side by
     side with the y label on the first, written to ``path``."""
     counts = sorted({r.key.n_targets for r in rows})
     fig = new_figure(max(3.4 * len(counts), 5.0), 4.2)
@@ -85,7 +85,7 @@ def plot_trajectories(
     fig: Figure, records: list[EpisodeRecord], titles: list[str] | None = None
 ) -> None:
     """Missions side by side on ``fig`` (one panel per record, titled verbatim or by
-    :func:`~hptrack.viz.mission.mission_title`): equal axes, shared limits, one agent-time
+    `mission_title`): equal axes, shared limits, one agent-time
     colour bar beside the last panel and one legend below (from the first panel).
 
     The figure gets the compressed layout engine (do not call ``tight_layout`` on it).

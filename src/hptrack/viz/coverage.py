@@ -1,7 +1,7 @@
 """Coverage figures: the planned intercept and shifting spiral (paper Fig. 3, Fig. 5a) and the
 estimated against empirical target-finding CDF (paper Fig. 5b), with ``t_cutoff`` marked and
-``p_find`` in the titles. Functions take an Axes and return artists; :func:`save_cdf_figure`
-and :func:`save_plan_figure` write whole figures in :mod:`hptrack.viz.style`'s style.
+``p_find`` in the titles. Functions take an Axes and return artists; `save_cdf_figure`
+and `save_plan_figure` write whole figures in `hptrack.viz.style`'s style.
 """
 
 from __future__ import annotations

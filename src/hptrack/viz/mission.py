@@ -1,9 +1,9 @@
 """Mission figure in the style of the paper's Fig. 6: agent path coloured by time, true target
 paths, detections and 95 % belief ellipses at a few times (one line style per time). Drawing
-functions take an Axes and return artists; the style is :mod:`hptrack.viz.style`'s.
+functions take an Axes and return artists; the style is `hptrack.viz.style`'s.
 
 Colours: targets use the categorical ``tab10`` palette without its grey
-(:func:`target_color`); the agent's time runs through :data:`AGENT_TIME_CMAP`, light grey to
+(`target_color`); the agent's time runs through `AGENT_TIME_CMAP`, light grey to
 black, so an agent segment never looks like a target.
 """
 
@@ -83,7 +83,7 @@ def plot_mission(
     norm: Normalize | None = None,
     legend: bool = True,
 ) -> dict:
-    """Draw one mission on ``ax``, titled by :func:`mission_title`; returns the artists by role
+    """Draw one mission on ``ax``, titled by `mission_title`; returns the artists by role
     (``"agent"`` is the time-coloured path, the mappable for a colour bar).
 
     The targets' paths and markers are drawn over the agent's path, so a target the agent
@@ -94,10 +94,10 @@ def plot_mission(
         ax: target axes (equal aspect is set).
         record: the episode to draw.
         n_ellipses: how many evenly spaced stored times get 95 % belief ellipses, one line
-            style per time (:data:`ELLIPSE_LINESTYLES`, fainter for earlier times).
+            style per time (`ELLIPSE_LINESTYLES`, fainter for earlier times).
         cmap: colour map for the agent's time.
         norm: time (s) to colour; default ``0`` to the mission's end.
-        legend: draw the figure's legend below the plots (:func:`~hptrack.viz.style.legend_below`;
+        legend: draw the figure's legend below the plots (`legend_below`;
             the figure should have the constrained layout).
     """
     times = record.times
@@ -215,7 +215,7 @@ def mission_figure(
     height_in: float | None = None,
     dpi: int = DPI,
 ) -> Figure:
-    """The mission figure: :func:`plot_mission` with its legend below and the agent-time
+    """The mission figure: `plot_mission` with its legend below and the agent-time
     colour bar beside the map. Without ``height_in`` the height fits the map's aspect, the
     title and the legend."""
     fig = new_figure(width_in, height_in or width_in, dpi)
@@ -231,5 +231,5 @@ def mission_figure(
 
 
 def save_mission_figure(record: EpisodeRecord, path: str, dpi: int = DPI) -> None:
-    """Write the mission figure (:func:`mission_figure`) to ``path`` (PNG or PDF)."""
+    """Write the mission figure (`mission_figure`) to ``path`` (PNG or PDF)."""
     save_figure(mission_figure(record, dpi=dpi), path, dpi)

@@ -3,7 +3,7 @@ benchmark, learning curves): figures with matplotlib's constrained layout, legen
 plots (never over an axis label, a tick label or a colour bar), colour bars beside their plot
 and exactly as tall as it, the same fonts, grid and resolution.
 
-Figures are built without pyplot (:class:`matplotlib.figure.Figure` with an Agg canvas), so
+Figures are built without pyplot (`matplotlib.figure.Figure` with an Agg canvas), so
 library code never touches global plotting state.
 """
 
