@@ -334,3 +334,28 @@ def test_credited_passes_fly_end_to_end_and_name_themselves():
         random_scenario(6, seed=3, homogeneous=True), mcts(iterations=300, passes="credit")
     )
     assert np.isfinite(record.uncertainty) and record.info["subtasks"]
+
+
+def test_the_settings_name_exactly_the_registered_rollouts_and_estimators():
+    """A rollout policy or an estimator is chosen by name: the settings accept exactly the
+    registered names, and each name gives an instance of its registered class."""
+    from typing import get_args
+
+    from hptrack.planning.hierarchical import ROLLOUT_POLICIES, MctsSettings
+    from hptrack.planning.subtask_estimators import ESTIMATORS, estimator_of
+
+    def names(field):
+        literal = get_args(MctsSettings.model_fields[field].annotation)[0]
+        return set(get_args(literal))
+
+    assert names("rollout") == set(ROLLOUT_POLICIES)
+    assert names("estimator") == set(ESTIMATORS)
+    for name, policy in ROLLOUT_POLICIES.items():
+        settings = MctsSettings(rollout=name, rollout_epsilon=0.25)
+        instance = settings.search_options().rollout
+        assert type(instance) is policy
+        assert getattr(instance, "epsilon", 0.25) == 0.25
+    for name, estimator in ESTIMATORS.items():
+        assert type(estimator_of(name)) is estimator
+    with pytest.raises(ValueError, match="estimator must be one of \\('paper', 'sharp'\\)"):
+        estimator_of("oracle")

@@ -23,6 +23,7 @@ import numpy as np
 
 from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation
 from hptrack.models.beliefs import position_logdet
+from hptrack.models.mission import STEP_TOLERANCE
 from hptrack.settings import NoSettings
 
 STAYS = (0.0, 5.0, 10.0, 20.0, 40.0, 80.0, math.inf)
@@ -83,7 +84,7 @@ class ClairvoyantPlanner:
         ``(k, 4, 4)`` met after ``arrive`` s and measured at every step of ``stay`` s."""
         motion, sensor, tau = self._mission.motion, self._mission.sensor, self._mission.time_step
         zeros = np.zeros((covs.shape[0], 4))
-        measured = np.minimum(np.floor(stay / tau + 1e-9).astype(int) + 1, SETTLED_STEPS)
+        measured = np.minimum(np.floor(stay / tau + STEP_TOLERANCE).astype(int) + 1, SETTLED_STEPS)
         covs = motion.predict(zeros, covs, q, arrive)[1]
         for step in range(int(measured.max(initial=0))):
             on = measured > step

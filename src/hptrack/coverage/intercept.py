@@ -27,8 +27,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-CEIL_SLACK = 1e-9
-"""Relative slack in ``ceil(t / tau)`` so that a time of exactly ``n tau`` is ``n`` steps."""
+from hptrack.models.mission import STEP_TOLERANCE
 
 
 @numba.njit(cache=True)
@@ -84,7 +83,7 @@ def intercept_steps(
     t = intercept_time(agent_x, agent_y, mean_x, mean_y, vel_x, vel_y, speed)
     if math.isinf(t):
         return -1
-    return int(math.ceil(t / tau - CEIL_SLACK))
+    return int(math.ceil(t / tau - STEP_TOLERANCE))
 
 
 @numba.njit(cache=True)
@@ -174,7 +173,7 @@ def plan_intercept(
     if np.hypot(*(mean - agent)) <= 0.5 * sensor_diameter:
         return Intercept(0.0, 0, agent, time_step)
     t = intercept_time(agent[0], agent[1], mean[0], mean[1], velocity[0], velocity[1], speed)
-    steps = math.ceil(t / time_step - CEIL_SLACK)
+    steps = math.ceil(t / time_step - STEP_TOLERANCE)
     return Intercept(t, steps, mean + velocity * steps * time_step, time_step)
 
 

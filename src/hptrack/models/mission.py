@@ -36,8 +36,9 @@ MAX_TARGETS = 62
 """Most targets of a mission: the planner's action list is an ``int64`` bitmask."""
 
 STEP_TOLERANCE = 1e-9
-"""A budget within this many steps below a whole step counts as that step (rounding of
-``budget / tau``)."""
+"""The one slack of every whole-step rule, in steps: a time within this of ``k tau`` is step
+``k`` (rounding ``t / tau`` down, as `steps_left` and the controller's clock do, or up, as an
+intercept's whole steps do)."""
 
 
 class Mission(NamedTuple):

@@ -92,6 +92,17 @@ DwellLength = Annotated[float, Field(ge=0.0, le=1e6)]
 """A dwell action's length, s."""
 
 
+ROLLOUT_POLICIES: dict[str, type] = {
+    "uniform": UniformRandom,
+    "uniform_no_follow": UniformNoFollow,
+    "uniform_no_dwell": UniformNoDwell,
+    "nearest": Nearest,
+    "most_uncertain": MostUncertain,
+    "tour": Tour,
+}
+"""The rollout policy classes by their settings' names (`MctsSettings.rollout`)."""
+
+
 class MctsSettings(PlannerSettings):
     """Options of the hierarchical planner (``mcts``).
 
@@ -214,18 +225,10 @@ class MctsSettings(PlannerSettings):
         return json.dumps(values, sort_keys=True, separators=(",", ":"))
 
     def rollout_policy(self) -> tuple:
-        """The rollout policy instance the search takes."""
-        if self.rollout == "most_uncertain":
-            return MostUncertain(self.rollout_epsilon)
-        if self.rollout == "uniform_no_follow":
-            return UniformNoFollow()
-        if self.rollout == "nearest":
-            return Nearest(self.rollout_epsilon)
-        if self.rollout == "tour":
-            return Tour(self.rollout_epsilon)
-        if self.rollout == "uniform_no_dwell":
-            return UniformNoDwell()
-        return UniformRandom()
+        """The rollout policy instance the search takes (`ROLLOUT_POLICIES`; a policy with an
+        ``epsilon`` takes ``rollout_epsilon``)."""
+        policy = ROLLOUT_POLICIES[self.rollout]
+        return policy(self.rollout_epsilon) if "epsilon" in policy._fields else policy()
 
     def search_options(self) -> SearchOptions:
         """The search's options record: each of its fields is the option of the same name,

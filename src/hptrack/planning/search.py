@@ -365,6 +365,10 @@ def run_simulations(
     return n_simulations
 
 
+StoppedBy = Literal["iterations", "time_limit"]
+"""Which limit stopped a search."""
+
+
 @dataclass(frozen=True, eq=False)
 class SearchResult:
     """The outcome of a search.
@@ -389,7 +393,7 @@ class SearchResult:
     root: ActionStats
     after: tuple[ActionStats | None, ...]
     simulations: int
-    stopped_by: Literal["iterations", "time_limit"]
+    stopped_by: StoppedBy
     elapsed: float
     state_nodes: int
     action_nodes: int
@@ -440,7 +444,7 @@ def run_search(
             tree = grow_tree(tree, n_actions)
         done += ran
         if iterations is not None and done >= iterations:
-            stopped_by = "iterations"
+            stopped_by: StoppedBy = "iterations"
             break
         if time_limit is not None:
             elapsed = time.perf_counter() - start
@@ -508,6 +512,8 @@ def search_mdp(
 def merged(results: list[SearchResult], fixed: int) -> SearchResult:
     """One result from root-parallel trees: statistics merged action by action."""
     root = merge_stats([r.root for r in results])
+    if root is None:
+        raise ValueError("no search results to merge")
     outcomes = max(len(r.after) for r in results) if fixed >= 0 else 0
     after = tuple(
         merge_stats([r.after[o] if o < len(r.after) else None for r in results])
@@ -526,7 +532,7 @@ def merged(results: list[SearchResult], fixed: int) -> SearchResult:
     )
 
 
-def _result(tree: Tree, fixed: int, stopped_by: str, elapsed: float) -> SearchResult:
+def _result(tree: Tree, fixed: int, stopped_by: StoppedBy, elapsed: float) -> SearchResult:
     root = node_stats(tree, 0)
     if root is None:
         empty, n_outcomes = np.zeros(0, dtype=np.int64), tree.a_p.shape[1]

@@ -75,10 +75,8 @@ from typing import TYPE_CHECKING, NamedTuple
 import numba
 import numpy as np
 
-from hptrack.coverage.estimator import coverage_outcome
-from hptrack.coverage.intercept import approach_step, intercept_steps
+from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.passes import pass_probability
-from hptrack.coverage.sharp_estimator import sharp_coverage_outcome
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.measurement import update_covariance
 from hptrack.models.mission import (
@@ -94,6 +92,7 @@ from hptrack.models.mission import (
 from hptrack.models.motion import mean_position_at
 from hptrack.models.riccati import measured_covariance
 from hptrack.planning.mdp import MdpKernels, register_mdp
+from hptrack.planning.subtask_estimators import estimate_pursuit, estimator_of
 
 if TYPE_CHECKING:
     from hptrack.interface import Observation
@@ -107,10 +106,6 @@ FIND, MISS = 0, 1
 
 WORK_SLOTS = 5
 """Number of 4x4 scratch matrices the kernels need (`new_work`)."""
-
-ESTIMATORS = ("paper", "sharp")
-"""The sub-task outcome estimators, by code (`SubtaskEnv.estimator`)."""
-SHARP = ESTIMATORS.index("sharp")
 
 
 class SubtaskOptions(NamedTuple):
@@ -163,7 +158,8 @@ class SubtaskEnv(NamedTuple):
         follow: the targets' Riccati tables (measured at every step).
         means: ``(n, 4)`` belief means at the root, m and m/s.
         n_steps: ``N``, the steps left in the budget at the root.
-        estimator: index of the estimator in `ESTIMATORS`.
+        estimator: the outcome estimator, a registered instance
+            (`hptrack.planning.subtask_estimators`).
         stay_steps: ``(k,)`` lengths of the dwell actions in steps (action ``n + j`` dwells
             ``stay_steps[j]``); empty: no dwell action (the paper).
         keep_missed: a miss leaves the target in the action list (``miss="keep"``).
@@ -176,7 +172,7 @@ class SubtaskEnv(NamedTuple):
     follow: FollowTables
     means: np.ndarray
     n_steps: int
-    estimator: int
+    estimator: tuple
     stay_steps: np.ndarray
     keep_missed: bool
     credit_passes: bool
@@ -296,8 +292,7 @@ class PlanningProblem:
         Raises:
             ValueError: an unknown estimator or miss rule, or a negative dwell.
         """
-        if options.estimator not in ESTIMATORS:
-            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {options.estimator!r}")
+        estimator = estimator_of(options.estimator)
         if options.miss not in MISS_RULES:
             raise ValueError(f"miss must be one of {MISS_RULES}, got {options.miss!r}")
         if options.passes not in PASS_RULES:
@@ -311,7 +306,7 @@ class PlanningProblem:
             self.follow,
             np.ascontiguousarray(self.means),
             n_steps,
-            ESTIMATORS.index(options.estimator),
+            estimator,
             np.array(stays, dtype=np.int64),
             options.miss == "keep",
             options.passes == "credit",
@@ -479,8 +474,7 @@ def expand_action(env, state, a, work):
     ``p_find = 1`` and lasts to the end of the budget; the dwell has ``p_find = 1`` and lasts
     ``dwell_steps``. ``work`` is ``(>= 1, 4, 4)`` scratch.
     """
-    mission, memo = env.mission, env.memo
-    si, sf, base_cov, base_step = state
+    si, sf = state[0], state[1]
     t = si[I_STEP]
     left = env.n_steps - t
     if a == si[I_LAST]:
@@ -489,41 +483,7 @@ def expand_action(env, state, a, work):
         d = dwell_length(env, a)
         return 1.0, d, d
     ic = intercept_of(env, sf, a, t)
-    start = t + ic
-    if env.estimator == SHARP:
-        return _expand_sharp(env, state, a, ic, work[0])
-    if base_step[a] == 0 and memo.cutoff[a, start] >= 0:
-        cutoff, p, expected = memo.cutoff[a, start], memo.p_find[a, start], memo.expected[a, start]
-    else:
-        cov = work[0]
-        q = mission.process_noise[a]
-        predict_covariance_on(mission, base_cov[a], q, start - base_step[a], cov)
-        k, p, expected = coverage_outcome(mission, cov, q, left - ic)
-        cutoff = int(k)
-        if base_step[a] == 0:
-            memo.cutoff[a, start] = cutoff
-            memo.p_find[a, start] = p
-            memo.expected[a, start] = expected
-    find_steps = max(1, ic + int(math.floor(expected + 0.5)))
-    miss_steps = max(1, ic + cutoff)
-    return p, find_steps, miss_steps
-
-
-@numba.njit(cache=True)
-def _expand_sharp(env, state, a, ic, cov):
-    """`expand_action` with the sharp estimator: ``p_find`` includes detections on the
-    intercept flight, and a find lasts the estimated duration from departure."""
-    mission = env.mission
-    si, sf, base_cov, base_step = state
-    t = si[I_STEP]
-    m = env.means[a]
-    tau = mission.time_step
-    x, y = mean_position_at(m, t * tau)
-    dx, dy = approach_step(sf[0], sf[1], x, y, m[2], m[3], mission.speed, tau, ic)
-    q = mission.process_noise[a]
-    predict_covariance_on(mission, base_cov[a], q, t + ic - base_step[a], cov)
-    cutoff, p, expected = sharp_coverage_outcome(mission, cov, q, env.n_steps - t - ic, ic, dx, dy)
-    return p, max(1, int(math.floor(expected + 0.5))), max(1, ic + int(cutoff))
+    return estimate_pursuit(env.estimator, env, state, a, t, ic, work[0])
 
 
 @numba.njit(cache=True)

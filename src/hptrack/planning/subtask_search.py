@@ -109,17 +109,17 @@ def search(
 
 
 _warmed: set[tuple] = set()
-"""Compiled signatures (rollout and backup classes, estimator) this process has loaded."""
+"""Compiled signatures (rollout, backup and estimator classes) this process has loaded."""
 
 
 def warm_up(
     options: SearchOptions = PAPER_SEARCH,
     subtask: subtask_mdp.SubtaskOptions = subtask_mdp.PAPER_SUBTASK,
 ) -> None:
-    """Load (or compile) the search's kernels for ``options``' rollout and backup classes once
-    per process with a tiny search, so that the first timed search of a process gets as many
-    simulations as the later ones."""
-    key = (type(options.rollout), type(options.backup))
+    """Load (or compile) the search's kernels for ``options``' rollout and backup classes and
+    ``subtask``'s estimator once per process with a tiny search, so that the first timed search
+    of a process gets as many simulations as the later ones."""
+    key = (type(options.rollout), type(options.backup), subtask.estimator)
     if key in _warmed:
         return
     cov = np.diag([1000.0, 1000.0, 0.4, 0.4])

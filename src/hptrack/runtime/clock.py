@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import math
 
-STEP_EPS = 1e-9
-"""Slack of the step rule: a time within this of ``k tau`` is step ``k``, s."""
+from hptrack.models.mission import STEP_TOLERANCE
 
 
 def step_of(time_s: float, time_step: float) -> int:
     """The step a mission time falls in (``floor(t / tau)``, exact at whole steps)."""
-    return math.floor(time_s / time_step + STEP_EPS)
+    return math.floor(time_s / time_step + STEP_TOLERANCE)
 
 
 class MissionClock:

@@ -56,8 +56,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from hptrack.interface import CurrentPlan, Planner
 from hptrack.models.beliefs import position_logdet
+from hptrack.models.mission import STEP_TOLERANCE
 from hptrack.runtime.beliefs import BeliefTimeline
-from hptrack.runtime.clock import STEP_EPS, MissionClock
+from hptrack.runtime.clock import MissionClock
 from hptrack.runtime.inputs import InputChecks, raw, vector
 from hptrack.runtime.journal import Journal
 from hptrack.runtime.legs import Leg, Setpoint
@@ -333,7 +334,7 @@ class MissionController:
         flags = np.zeros(self.mission.n_targets, dtype=bool)
         keep = []
         for t, i in pending:
-            if t <= time_s + STEP_EPS:
+            if t <= time_s + STEP_TOLERANCE:
                 flags[i] = True
             else:
                 keep.append((t, i))

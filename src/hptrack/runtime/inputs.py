@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hptrack.models.measurement import check_noise_covariance
+from hptrack.models.mission import STEP_TOLERANCE
 from hptrack.runtime.beliefs import BeliefTimeline
-from hptrack.runtime.clock import STEP_EPS
 from hptrack.scenario.model import Scenario
 
 if TYPE_CHECKING:
@@ -111,7 +111,7 @@ class InputChecks:
             return "non-finite", f"time {t}"
         if ended is not None:
             return "after the end", f"the mission ended ({ended})"
-        if t < -STEP_EPS:
+        if t < -STEP_TOLERANCE:
             return "before the start", f"time {t:.3f} s is before the mission's start"
         if clock_source:
             return None
