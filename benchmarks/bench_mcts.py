@@ -17,11 +17,11 @@ The scenario is drawn from the paper's distributions (Sec. V-A): 900 s budget, t
     python3 benchmarks/bench_mcts.py --duration 2 --targets 6
 
 ``--compare SRC`` times another checkout's code side by side in the same run (each ``n`` of the
-two in turn, in fresh processes) and prints the ratios new / old, e.g. the code before a
-refactor::
+two in turn, in fresh processes, ``--repeats`` times interleaved) and prints the ratios new / old
+of the medians, e.g. the code before a refactor::
 
     git worktree add /tmp/hptrack-before 9dd0bbd
-    python3 benchmarks/bench_mcts.py --compare /tmp/hptrack-before/src
+    python3 benchmarks/bench_mcts.py --compare /tmp/hptrack-before/src --repeats 3
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ import argparse
 import json
 import os
 import resource
+import statistics
 import subprocess
 import sys
 import time
@@ -99,6 +100,12 @@ def main() -> None:
     parser.add_argument(
         "--compare", metavar="SRC", help="another checkout's src/ folder, timed side by side"
     )
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        help="with --compare: runs of each side per n, interleaved; ratios of the medians",
+    )
     parser.add_argument("--worker", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker is not None:
@@ -144,8 +151,14 @@ def main() -> None:
         print(" | ".join(header))
         print(" | ".join("---" for _ in header))
         for n in args.targets:
-            old = run(n, args.duration, args.compare)
-            new = run(n, args.duration)
+            runs = {"old": [], "new": []}
+            for _ in range(max(1, args.repeats)):
+                runs["old"].append(run(n, args.duration, args.compare))
+                runs["new"].append(run(n, args.duration))
+            old, new = (
+                {key: statistics.median(r[key] for r in runs[side]) for key in runs[side][0]}
+                for side in ("old", "new")
+            )
             print(
                 f"{n} | {new['fresh_2000_per_s'] / old['fresh_2000_per_s']:.3f} | "
                 f"{new['long_per_s'] / old['long_per_s']:.3f} | "
