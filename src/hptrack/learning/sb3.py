@@ -23,9 +23,10 @@ import zipfile
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, NonNegativeInt, ValidationError
 
 from hptrack.interface import InputError, shown
 from hptrack.learning.agent import set_torch_threads
@@ -165,6 +166,36 @@ def _policy(model) -> Callable[[np.ndarray], np.ndarray]:
     return policy
 
 
+class PpoState(BaseModel):
+    """``state.json`` of a PPO run folder, validated before anything it names is read."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    step: NonNegativeInt
+    episodes: NonNegativeInt
+    last_checkpoint: NonNegativeInt
+    curve: list[dict[str, Any]]
+    best_u: float
+    best_step: int
+    checkpoint: Annotated[str, Field(pattern=r"^checkpoint-\d+\.zip$")] | None
+
+
+def read_state(path: Path) -> dict[str, Any]:
+    """The validated ``state.json`` at ``path`` (:class:`PpoState`), as a dict.
+
+    Raises:
+        InputError: it is not JSON or not such a state (one line naming the file).
+    """
+    try:
+        return PpoState.model_validate_json(path.read_bytes()).model_dump()
+    except ValidationError as err:
+        first = err.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "the file"
+        raise InputError(
+            f"{path}: not a state of hptrack learn sb3-ppo ({where}: {first['msg']})"
+        ) from None
+
+
 def trained_steps(steps: int, rollout_steps: int) -> int:
     """The steps a PPO run of ``steps`` trains: whole rollouts of ``rollout_steps``
     (``n_steps``), so ``steps`` rounded up to a multiple of it (a resumed run restarts from a
@@ -197,7 +228,7 @@ class PpoTrainer:
             "checkpoint": None,
         }
         if (self.out / "state.json").exists():
-            self.state = json.loads((self.out / "state.json").read_text())
+            self.state = read_state(self.out / "state.json")
 
     def _make_model(self):
         from stable_baselines3 import PPO
@@ -336,4 +367,6 @@ class PpoTrainer:
             "best_step": state["best_step"],
             "last_validation_U": self._last_validation(),
             "best_model": str(self.out / "best.zip"),
+            # validated before the first update (which follows the first rollout)
+            "best_untrained": state["best_step"] <= cfg.n_steps,
         }
