@@ -60,7 +60,13 @@ def test_sb3_never_unpickles_the_zip_data(cli, tmp_path, marker):
         data = json.loads(archive.read("data"))
     data["policy_class"][":serialized:"] = base64.b64encode(payload_pickle(marker)).decode()
     model = ppo_zip_with(tmp_path / "evil.zip", source, {"data": json.dumps(data).encode()})
-    result = cli(*SIMULATE, "--planner", "sb3", "-o", f"model={model}", )
+    result = cli(
+        *SIMULATE,
+        "--planner",
+        "sb3",
+        "-o",
+        f"model={model}",
+    )
     assert result.code == 0, result.err
 
 
@@ -123,9 +129,7 @@ def test_replay_flies_the_logged_decisions_never_the_logged_model(cli, tmp_path,
     run = run_simulated(scenario, make_planner("adfq", {"model": str(model)}), seed=1, log=log)
     log.close()
     model.write_bytes(payload_pickle(marker))  # the named model is now a payload
-    result = cli(
-        "replay", log_path, "--plot", tmp_path / "r.png", "--json", tmp_path / "r.json"
-    )
+    result = cli("replay", log_path, "--plot", tmp_path / "r.png", "--json", tmp_path / "r.json")
     assert result.code == 0, result.err
     summary = json.loads((tmp_path / "r.json").read_text())
     assert summary["decisions"] == "logged" and summary["mismatches"] == 0
