@@ -134,6 +134,7 @@ def test_replay_flies_the_logged_decisions_never_the_logged_model(cli, tmp_path,
     summary = json.loads((tmp_path / "r.json").read_text())
     assert summary["decisions"] == "logged" and summary["mismatches"] == 0
     assert summary["U"] == run.uncertainty and summary["plans"] > 30
+    assert "decisions taken from the log" in " ".join(result.out.split())
 
 
 def test_a_sb3_model_given_to_adfq_and_back_name_the_planner_to_use(cli, tmp_path):
