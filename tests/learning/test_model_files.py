@@ -109,6 +109,8 @@ def test_an_adfq_resume_refuses_a_pickle_in_its_checkpoint(cli, tmp_path, marker
     (out / "checkpoint.pt").write_bytes(payload_pickle(marker))
     args = ["learn", "adfq", "--targets", 2, "--steps", 20_000, "--validation-scenarios", 1]
     refused_in_one_line(cli(*args, "--out", out), f"--out {out}", "checkpoint.pt", "refused")
+    torch.save({"replay_file": "replay-0.npz", "agent": {}}, out / "checkpoint.pt")
+    refused_in_one_line(cli(*args, "--out", out), "checkpoint.pt does not fit this run")
 
 
 def _hover_model(path, n_targets=2):

@@ -336,11 +336,18 @@ class Trainer:
         replay_file = data.get("replay_file") if isinstance(data, dict) else None
         if not isinstance(replay_file, str) or not re.fullmatch(r"replay-\d+\.npz", replay_file):
             raise InputError(f"--out {self.out}: {path.name} is not a checkpoint of hptrack learn")
-        self.agent.load_state_dict(data["agent"])
-        with np.load(self.out / replay_file) as replay:
-            self.agent.replay.load_state_dict(dict(replay))
-        self.rng.bit_generator.state = data["rng"]
-        self.state = _State(**data["state"])
+        try:
+            self.agent.load_state_dict(data["agent"])
+            with np.load(self.out / replay_file) as replay:
+                self.agent.replay.load_state_dict(dict(replay))
+            self.rng.bit_generator.state = data["rng"]
+            self.state = _State(**data["state"])
+        except (KeyError, TypeError, ValueError, RuntimeError, OSError) as err:
+            reason = str(err).splitlines()[0][:120] if str(err) else type(err).__name__
+            raise InputError(
+                f"--out {self.out}: {path.name} does not fit this run (damaged or from another "
+                f"version: {reason}); give another --out to start a fresh run"
+            ) from None
 
     def save_checkpoint(self) -> None:
         """Replay file first, then the checkpoint that names it (an atomic switch)."""
