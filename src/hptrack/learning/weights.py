@@ -24,7 +24,10 @@ MAX_MEMBER_BYTES = 2**28
 
 def describe(path: str | Path) -> str:
     """What ``path`` is, as far as its container tells: ``"a stable-baselines3 model"``, ``"a
-    torch file"``, ``"a zip file"`` or ``"not a torch or stable-baselines3 file"``."""
+    torch file"``, ``"a zip file"``, ``"not a torch or stable-baselines3 file"`` or ``"no such
+    file"``."""
+    if not Path(path).is_file():
+        return "no such file"
     if not zipfile.is_zipfile(path):
         return "not a torch or stable-baselines3 file"
     with zipfile.ZipFile(path) as archive:
