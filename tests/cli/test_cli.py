@@ -195,6 +195,9 @@ def test_effort_flags_only_set_planners_that_have_them(cli, tmp_path):
     )
     assert result.code == 0, result.err
     assert json.loads((tmp_path / "g.json").read_text())["info"]["settings"] == {}
+    assert result.error_lines == [
+        "warning: planner 'greedy' has no iterations effort: --iterations 5 is ignored for it"
+    ]
 
 
 def test_missing_input_is_refused(cli):
@@ -374,6 +377,16 @@ def test_benchmark_refuses_a_file_that_is_not_a_database(cli, tmp_path):
         "--db",
         "notes.txt",
         "not an hptrack results database",
+    )
+
+
+def test_a_bare_option_suggests_only_planners_that_have_it(cli, tmp_path):
+    args = ["benchmark", "--scenarios", 1, "--db", tmp_path / "b.db", "--out", tmp_path / "o"]
+    line = cli(*args, "--planners", "mcts,greedy", "-o", "iterations=500").error_lines[0]
+    assert line.endswith("say which planner, mcts.iterations=500") and "greedy." not in line
+    one_line_refusal(
+        cli(*args, "--planners", "stationary,greedy", "-o", "iterations=500"),
+        "none of the running planners (stationary, greedy) has an option iterations",
     )
 
 

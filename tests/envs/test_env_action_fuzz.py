@@ -64,6 +64,17 @@ def test_a_huge_box_action_flies_at_full_speed(box):
             box.step(bad)
 
 
+@pytest.mark.parametrize(
+    "action", [["1", "0"], np.array(["1", "0"]), [True, False], np.array([True, False]), [1, True]]
+)
+def test_text_and_boolean_box_actions_are_refused(box, action):
+    """numpy would turn them into numbers; a Box action is numbers only."""
+    box.reset(seed=0)
+    with pytest.raises(ValueError, match="action must be 2 finite numbers"):
+        box.step(action)
+    box.step([1, 0.5])  # plain numbers still fly
+
+
 @pytest.mark.parametrize("seed", [1.5, -1, 2**63, True, "3"])
 def test_reset_seeds_are_non_negative_integers(discrete, seed):
     with pytest.raises(ValueError, match="reset seed must be an integer") as err:

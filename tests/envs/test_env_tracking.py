@@ -217,6 +217,12 @@ def test_scenario_option_uses_its_seed_unless_overridden():
         ({"n_targets": 0}, "n_targets"),
         ({"n_targets": (2, 4)}, "max_targets"),
         ({"n_targets": 4, "max_targets": 3}, "max_targets"),
+        ({"n_targets": 63}, "n_targets must be between 1 and 62"),
+        ({"n_targets": (2, 70), "max_targets": 70}, "n_targets must be between 1 and 62"),
+        (
+            {"n_targets": 2, "max_targets": 10**9},
+            "max_targets must be an int from n_targets 2 to 62",
+        ),
         ({"setting": "mixed"}, "setting"),
         ({"action_type": "polar"}, "action_type"),
         ({"render_mode": "human"}, "render_mode"),

@@ -1,5 +1,9 @@
 """A tiny Gymnasium problem for the learner's tests, and one torch thread."""
 
+import os
+import pickle
+import zipfile
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -45,3 +49,38 @@ if CHAIN_ID not in gym.registry:
 @pytest.fixture(autouse=True)
 def _one_thread():
     torch.set_num_threads(1)
+
+
+class Payload:
+    """A pickled object whose unpickling creates the folder ``marker`` (a stand-in for any code a
+    model file from somebody else could run when it is unpickled)."""
+
+    def __init__(self, marker) -> None:
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (os.mkdir, (self.marker,))
+
+
+def payload_pickle(marker) -> bytes:
+    """A pickle of a dict holding a :class:`Payload` (protocol 2, as ``torch.save`` writes)."""
+    return pickle.dumps({"format": Payload(marker)}, protocol=2)
+
+
+def ppo_zip_with(path, source, replace: dict[str, bytes]):
+    """A copy of the stable-baselines3 zip ``source`` at ``path`` with members replaced."""
+    with zipfile.ZipFile(source) as old, zipfile.ZipFile(path, "w") as new:
+        for name in old.namelist():
+            new.writestr(name, replace.get(name, old.read(name)))
+    return path
+
+
+def refused_in_one_line(result, *needles) -> str:
+    """Assert an exit code 2 with one error line holding ``needles`` and no traceback or
+    warning; return the line."""
+    assert result.code == 2, (result.code, result.out, result.err)
+    lines = result.error_lines
+    assert len(lines) == 1 and "Traceback" not in result.err, result.err
+    for needle in needles:
+        assert needle in lines[0], (needle, lines[0])
+    return lines[0]

@@ -4,13 +4,13 @@ import json
 
 import pytest
 import typer
-from conftest import CHAIN_ID
+from conftest import CHAIN_ID, refused_in_one_line
 from typer.testing import CliRunner
 
 from hptrack.cli.learn import register
 from hptrack.interface import InputError
 from hptrack.learning.sb3 import PpoConfig, PpoTrainer
-from hptrack.learning.train import Task
+from hptrack.learning.train import Task, TrainConfig, Trainer, tracking_task
 
 
 @pytest.fixture
@@ -87,7 +87,7 @@ def test_learn_adfq_trains_resumes_and_plots(app, tmp_path):
     assert [e["step"] for e in curve if e["kind"] == "validation"] == [0, 300]
     other = CliRunner().invoke(app, [*args[:-2], "--homogeneous", "--out", str(out)])
     assert isinstance(other.exception, InputError)
-    assert "setting='heterogeneous'" in str(other.exception)
+    assert "setting 'heterogeneous' (given: 'homogeneous')" in str(other.exception)
     plot = CliRunner().invoke(app, ["learn", "plot", str(out), "-o", str(tmp_path / "c.png")])
     assert plot.exit_code == 0 and (tmp_path / "c.png").stat().st_size > 0
 
@@ -157,3 +157,62 @@ def test_ppo_says_when_it_rounds_the_steps_up(app, tmp_path, monkeypatch):
     assert seen == {"total": 3600}
     result = CliRunner().invoke(app, [*args, "--steps", "3600"])
     assert result.exit_code == 0 and "rollouts" not in result.output
+
+
+def test_a_restart_with_changed_options_names_them_in_one_line(cli, tmp_path):
+    out = tmp_path / "run"
+    Trainer(tracking_task(2, False, 1), TrainConfig(steps=20_000), out)  # writes config.json
+    args = ["learn", "adfq", "--targets", 2, "--steps", 20_000, "--validation-scenarios", 1]
+    line = refused_in_one_line(
+        cli(*args, "--warmup", 5000, "--seed", 3, "--out", out),
+        f"--out {out}: this run was started with --seed 0 (given: 3), --warmup 10000 (given: "
+        "5000); give the same options to resume it, or another --out to start a fresh run",
+    )
+    assert "{" not in line  # no config dicts
+
+
+def test_a_refused_learn_leaves_no_folder(cli, tmp_path):
+    out = tmp_path / "new" / "run"
+    refused_in_one_line(
+        cli("learn", "adfq", "--targets", 2, "--steps", 3000, "--out", out), "warm-up"
+    )
+    assert not (tmp_path / "new").exists()
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    refused_in_one_line(cli("learn", "adfq", "--targets", 2, "--steps", 3000, "--out", kept))
+    assert kept.is_dir()  # a folder the command did not make stays
+
+
+@pytest.mark.parametrize("command", ["adfq", "sb3-ppo"])
+def test_validation_scenarios_are_bounded_before_any_work(cli, tmp_path, command):
+    args = ["learn", command, "--targets", 2, "--steps", 20_000, "--out", tmp_path / "r"]
+    refused_in_one_line(
+        cli(*args, "--validation-scenarios", 1_000_000_000),
+        "--validation-scenarios must be at most 10,000, got 1000000000",
+    )
+    assert not (tmp_path / "r").exists()
+
+
+def test_an_untrained_best_model_is_said_plainly(cli, tmp_path):
+    """--allow-untrained keeps the network of step 0 (no gradient step): the summary says so
+    and a warning line ends the output."""
+    out = tmp_path / "run"
+    result = cli(
+        "learn", "adfq", "--targets", 2, "--steps", 300, "--warmup", 300, "--allow-untrained",
+        "--validation-scenarios", 1, "--validation-interval", 300, "--out", out,
+    )  # fmt: skip
+    assert result.code == 0, result.err
+    assert "at step 0 (untrained)" in " ".join(result.out.split())
+    assert result.error_lines == [
+        f"warning: no validation of the trained policy beat the untrained one (best at step 0, "
+        f"before any learning): {out / 'best.pt'} is the untrained policy; train longer (a "
+        "larger --steps resumes this run)"
+    ]
+
+
+def test_ppo_reports_a_best_model_from_before_the_first_update(tmp_path):
+    task = Task(CHAIN_ID, {}, tuple({"seed": i} for i in range(2)), {"env": CHAIN_ID})
+    config = PpoConfig(steps=40, seed=1, validation_interval=40, n_steps=40, batch_size=20)
+    summary = PpoTrainer(task, config, tmp_path / "a").run()
+    # validations at steps 0 and 40, both before the first update (after the first rollout)
+    assert summary["best_step"] in (0, 40) and summary["best_untrained"]

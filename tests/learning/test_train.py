@@ -83,7 +83,7 @@ def test_best_model_is_the_lowest_validation_u(tmp_path):
 
 def test_a_restart_with_other_options_is_refused(tmp_path):
     Trainer(TASK, _config(60), tmp_path).run()
-    with pytest.raises(InputError, match="seed=3, not 4"):
+    with pytest.raises(InputError, match=r"started with --seed 3 \(given: 4\);"):
         Trainer(
             TASK,
             TrainConfig(

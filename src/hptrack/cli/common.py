@@ -150,7 +150,13 @@ def planner_options(pairs: list[str] | None, planners: tuple[str, ...]) -> dict[
         elif len(planners) == 1:
             out[planners[0]][key] = parse_value(value)
         else:
-            choices = " or ".join(f"{p}.{key}={value}" for p in planners)
+            having = [p for p in planners if key in planner_entry(p).settings_type.model_fields]
+            if not having:
+                raise InputError(
+                    f"--option {pair!r}: none of the running planners "
+                    f"({', '.join(planners)}) has an option {key}"
+                )
+            choices = " or ".join(f"{p}.{key}={value}" for p in having)
             raise InputError(f"--option {pair!r}: say which planner, {choices}")
     return out
 
@@ -162,7 +168,8 @@ def planner_settings_for(
     time_limit: float | None,
 ) -> dict[str, PlannerSettings]:
     """Validated settings of each planner from ``-o`` options and the effort flags (which only
-    set the planners that have such a notion; an explicit ``-o`` wins)."""
+    set the planners that have such a notion, with a warning line for each planner that has
+    none; an explicit ``-o`` wins)."""
     if iterations is not None and not 1 <= iterations <= MAX_ITERATIONS:
         raise InputError(
             f"--iterations must be a positive integer of at most {MAX_ITERATIONS:g}, "
@@ -177,6 +184,18 @@ def planner_settings_for(
     out = {}
     for name in planners:
         entry = planner_entry(name)
+        for flag, value in (("--iterations", iterations), ("--time-limit", time_limit)):
+            if (
+                value is not None
+                and flag[2:].replace("-", "_") not in entry.settings_type.effort_fields
+            ):
+                error_console.print(
+                    f"warning: planner {name!r} has no {flag[2:]} effort: {flag} {value} is "
+                    "ignored for it",
+                    highlight=False,
+                    markup=False,
+                    soft_wrap=True,
+                )
         merged = {**entry.settings_type.effort_options(iterations, time_limit), **options[name]}
         out[name] = entry.settings_type.from_options(name, merged)
     return out

@@ -545,6 +545,11 @@ def replay(
             f"{summary['ended_by']} at {summary['time']:.1f} s; logged U "
             f"{'-' if logged is None else format(logged, '.3f')}; "
             f"{summary['mismatches']} mismatches"
+            + (
+                "; decisions taken from the log (it names a model file, which a replay never loads)"
+                if summary["decisions"] == "logged"
+                else ""
+            )
         ),
         highlight=False,
     )

@@ -4,6 +4,8 @@ resumable (the same command continues a killed run), and draw a run's training c
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -23,9 +25,11 @@ from hptrack.cli.common import (
     check_output_dir,
     check_seed,
     console,
+    error_console,
     progress_display,
 )
 from hptrack.interface import InputError
+from hptrack.models.mission import MAX_TARGETS
 
 learn_app = typer.Typer(
     help="Train learning baselines on hptrack/Tracking-v0 (resumable).", no_args_is_help=True
@@ -33,6 +37,8 @@ learn_app = typer.Typer(
 
 MAX_TRAINING_STEPS = 10**10
 """Most environment steps of one training run (about a year at 300 steps per second)."""
+MAX_VALIDATION_SCENARIOS = 10_000
+"""Most validation scenarios (at about 2 s per 50, a validation of 10,000 takes 7 min)."""
 PROGRESS_EVERY = 250
 """Steps between progress-bar refreshes."""
 
@@ -82,8 +88,8 @@ def _check_common(
     validation_interval: int,
     checkpoint_interval: int,
 ) -> None:
-    if not 1 <= targets <= 62:
-        raise InputError(f"--targets must be between 1 and 62, got {targets}")
+    if not 1 <= targets <= MAX_TARGETS:
+        raise InputError(f"--targets must be between 1 and {MAX_TARGETS}, got {targets}")
     if not 1 <= steps <= MAX_TRAINING_STEPS:
         raise InputError(f"--steps must be between 1 and {MAX_TRAINING_STEPS:g}, got {steps}")
     check_seed(seed)
@@ -94,7 +100,30 @@ def _check_common(
     ):
         if value < 1:
             raise InputError(f"{option} must be at least 1, got {value}")
+    if validation_scenarios > MAX_VALIDATION_SCENARIOS:
+        raise InputError(
+            f"--validation-scenarios must be at most {MAX_VALIDATION_SCENARIOS:,}, "
+            f"got {validation_scenarios}"
+        )
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: is a file, not a folder")
+
+
+@contextmanager
+def _run_folder(out: Path) -> Iterator[None]:
+    """Create the run folder ``out`` (one line if it cannot be), and remove the folders this
+    made again when the command is refused before writing anything into them."""
+    made = [p for p in (out, *out.parents) if not p.exists()]
     check_output_dir(out, "--out")
+    try:
+        yield
+    except InputError:
+        for folder in made:  # deepest first; only empty ones
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
 
 
 def _train(trainer: Any, name: str, out: Path, total: int) -> dict[str, Any]:
@@ -126,9 +155,19 @@ def _train(trainer: Any, name: str, out: Path, total: int) -> dict[str, Any]:
     console.print(
         f"{name}: {summary['steps']} steps, {summary['episodes']} episodes, "
         f"{time.perf_counter() - start:.0f} s this session; best validation U "
-        f"{summary['best_U']:.3f} at step {summary['best_step']}; last "
+        f"{summary['best_U']:.3f} at step {summary['best_step']}"
+        f"{' (untrained)' if summary['best_untrained'] else ''}; last "
         f"{summary['last_validation_U']:.3f}; model {escape(summary['best_model'])}"
     )
+    if summary["best_untrained"]:
+        error_console.print(
+            f"warning: no validation of the trained policy beat the untrained one (best at step "
+            f"{summary['best_step']}, before any learning): {summary['best_model']} is the "
+            "untrained policy; train longer (a larger --steps resumes this run)",
+            highlight=False,
+            markup=False,
+            soft_wrap=True,
+        )
     _write_figure(out, out / "curve.png")
     return summary
 
@@ -177,7 +216,6 @@ def learn_adfq(
     from hptrack.learning.agent import AdfqConfig
     from hptrack.learning.train import TrainConfig, Trainer, tracking_task
 
-    task = tracking_task(targets, homogeneous, validation_scenarios)
     config = TrainConfig(
         steps=steps,
         seed=seed,
@@ -185,7 +223,11 @@ def learn_adfq(
         checkpoint_interval=checkpoint_interval,
         agent=AdfqConfig(warmup_steps=warmup, buffer_size=buffer, prioritized=prioritized),
     )
-    _train(Trainer(task, config, out, allow_untrained), f"adfq n={targets}", out, steps)
+    with _run_folder(out):
+        trainer = Trainer(
+            tracking_task(targets, homogeneous, validation_scenarios), config, out, allow_untrained
+        )
+    _train(trainer, f"adfq n={targets}", out, steps)
 
 
 @learn_app.command("sb3-ppo")
@@ -214,14 +256,14 @@ def learn_sb3_ppo(
     from hptrack.learning.sb3 import PpoConfig, PpoTrainer, trained_steps
     from hptrack.learning.train import tracking_task
 
-    task = tracking_task(targets, homogeneous, validation_scenarios)
     config = PpoConfig(
         steps=steps,
         seed=seed,
         validation_interval=validation_interval,
         checkpoint_interval=checkpoint_interval,
     )
-    trainer = PpoTrainer(task, config, out)
+    with _run_folder(out):
+        trainer = PpoTrainer(tracking_task(targets, homogeneous, validation_scenarios), config, out)
     rounded = trained_steps(steps, config.n_steps)
     if rounded != steps:
         console.print(

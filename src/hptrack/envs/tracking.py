@@ -30,6 +30,7 @@ from gymnasium import spaces
 
 from hptrack.envs.observation import ObservationLayout
 from hptrack.interface import InputError, shown
+from hptrack.models.mission import MAX_TARGETS
 from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
 from hptrack.sim.record import EpisodeRecord
@@ -58,8 +59,10 @@ def _target_range(n_targets: int | tuple[int, int]) -> tuple[int, int]:
         lo, hi = int(n_targets[0]), int(n_targets[1])
     else:
         raise InputError(f"n_targets must be an int or a (min, max) pair, got {n_targets!r}")
-    if not 1 <= lo <= hi:
-        raise InputError(f"n_targets must be at least 1 (min <= max), got {n_targets!r}")
+    if not 1 <= lo <= hi <= MAX_TARGETS:
+        raise InputError(
+            f"n_targets must be between 1 and {MAX_TARGETS} (min <= max), got {n_targets!r}"
+        )
     return lo, hi
 
 
@@ -97,7 +100,13 @@ def action_waypoint(
         ux, uy = HEADINGS[discrete_action(action, len(HEADINGS))]
     else:
         try:
-            a = np.asarray(action, dtype=float)
+            raw = np.asarray(action)
+            # numbers only: a text or a boolean would otherwise be converted to one
+            numeric = raw.dtype.kind in "iuf" and not (
+                isinstance(action, list | tuple)
+                and any(isinstance(v, bool | np.bool_ | str | bytes) for v in action)
+            )
+            a = raw.astype(float) if numeric else np.full(1, np.nan)
         except (TypeError, ValueError, OverflowError):
             a = np.full(1, np.nan)
         if a.shape != (2,) or not np.all(np.isfinite(a)):
@@ -135,10 +144,11 @@ class MissionEnv(gym.Env):
         if max_targets is not None and (
             isinstance(max_targets, bool)
             or not isinstance(max_targets, int | np.integer)
-            or max_targets < self._n_range[1]
+            or not self._n_range[1] <= max_targets <= MAX_TARGETS
         ):
             raise InputError(
-                f"max_targets must be an int >= n_targets {n_targets!r}, got {max_targets!r}"
+                f"max_targets must be an int from n_targets {n_targets!r} to {MAX_TARGETS}, "
+                f"got {shown(max_targets)}"
             )
         if self._n_range[0] != self._n_range[1] and max_targets is None:
             raise InputError(f"n_targets={n_targets!r} varies per episode: give max_targets")

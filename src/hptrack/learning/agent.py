@@ -14,7 +14,6 @@ the ADFQ posterior (`hptrack.learning.adfq`).
 from __future__ import annotations
 
 import copy
-import pickle
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -25,6 +24,7 @@ from torch import nn
 from hptrack.learning.adfq import adfq_posterior
 from hptrack.learning.network import HIDDEN, INIT_MEAN, INIT_SD, GaussianQNetwork
 from hptrack.learning.replay import PrioritizedReplayBuffer, ReplayBuffer
+from hptrack.learning.weights import describe, load_weights
 
 POLICY_FORMAT = "hptrack-adfq-policy-1"
 """Tag of a policy file (`save_policy`)."""
@@ -194,21 +194,30 @@ def save_policy(path: str, network: GaussianQNetwork, metadata: dict[str, Any]) 
 
 
 def load_policy(path: str) -> tuple[GaussianQNetwork, dict[str, Any]]:
-    """The network and metadata of a policy file written by `save_policy`.
+    """The network and metadata of a policy file written by `save_policy`, read as weights only
+    (`hptrack.learning.weights.load_weights`).
 
     Raises:
-        ValueError: the file is not such a policy (the message names it).
+        ValueError: the file is not such a policy, or its tensors do not fit its network
+            (one line that names the file).
     """
-    try:
-        data = torch.load(path, map_location="cpu", weights_only=True)
-    except (OSError, RuntimeError, EOFError, pickle.UnpicklingError) as err:
-        raise ValueError(f"ADFQ model {path}: cannot be read ({err})") from None
+    label = f"ADFQ model {path}"
+    if describe(path) == "a stable-baselines3 model":
+        raise ValueError(f"{label}: is a stable-baselines3 model: fly it with --planner sb3")
+    data = load_weights(path, label)
     if not isinstance(data, dict) or data.get("format") != POLICY_FORMAT:
-        raise ValueError(f"ADFQ model {path}: not an hptrack ADFQ policy file")
-    network = GaussianQNetwork.from_config(data["network"])
-    network.load_state_dict(data["state_dict"])
+        raise ValueError(
+            f"{label}: not an hptrack ADFQ policy file (best.pt of hptrack learn adfq)"
+        )
+    try:
+        network = GaussianQNetwork.from_config(data["network"], data["state_dict"])
+        network.load_state_dict(data["state_dict"])
+    except (KeyError, TypeError, ValueError, RuntimeError):
+        raise ValueError(
+            f"{label}: its network description and tensors do not fit (a damaged or edited file)"
+        ) from None
     network.eval()
-    return network, data["metadata"]
+    return network, data.get("metadata", {})
 
 
 def set_torch_threads() -> None:

@@ -57,9 +57,24 @@ class GaussianQNetwork(nn.Module):
         return {"obs_dim": self.obs_dim, "n_actions": self.n_actions, "hidden": list(self.hidden)}
 
     @classmethod
-    def from_config(cls, config: dict) -> GaussianQNetwork:
-        return cls(
-            int(config["obs_dim"]),
-            int(config["n_actions"]),
-            tuple(int(h) for h in config["hidden"]),
-        )
+    def from_config(cls, config: dict, state_dict: dict | None = None) -> GaussianQNetwork:
+        """The network ``config`` describes (`config`).
+
+        Raises:
+            ValueError: ``state_dict`` is given and its tensor shapes are not those of the
+                described network (checked before anything is allocated).
+        """
+        obs_dim, n_actions = int(config["obs_dim"]), int(config["n_actions"])
+        hidden = tuple(int(h) for h in config["hidden"])
+        if state_dict is not None:
+            widths = (obs_dim, *hidden)
+            expected = {
+                f"body.{2 * i}.weight": (h, w)
+                for i, (w, h) in enumerate(zip(widths[:-1], hidden, strict=True))
+            }
+            expected |= {f"body.{2 * i}.bias": (h,) for i, h in enumerate(hidden)}
+            expected |= {"head.weight": (2 * n_actions, widths[-1]), "head.bias": (2 * n_actions,)}
+            shapes = {k: tuple(getattr(v, "shape", ())) for k, v in state_dict.items()}
+            if shapes != expected:
+                raise ValueError(f"tensor shapes {shapes} are not those of the network {config}")
+        return cls(obs_dim, n_actions, hidden)

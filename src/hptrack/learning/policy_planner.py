@@ -61,7 +61,7 @@ class AdfqSettings(PlannerSettings):
 
 
 class Sb3Settings(PlannerSettings):
-    """A stable-baselines3 policy."""
+    """A stable-baselines3 PPO policy."""
 
     model: str | None = None
     """Model file (``best.zip`` of ``hptrack learn sb3-ppo``); default: the shipped model."""
@@ -164,7 +164,8 @@ class AdfqPlanner(_DiscretePolicyPlanner):
 
 
 class Sb3Planner(_DiscretePolicyPlanner):
-    """Flies a stable-baselines3 model (PPO or DQN, found from the file)."""
+    """Flies the actor of a stable-baselines3 PPO model, read as weights only
+    (`hptrack.learning.sb3.load_actor`)."""
 
     name = "sb3"
 
@@ -172,25 +173,19 @@ class Sb3Planner(_DiscretePolicyPlanner):
         self.settings = settings or Sb3Settings()
 
     def _load(self, path: Path) -> None:
-        import torch
-
         from hptrack.learning.agent import set_torch_threads
-        from hptrack.learning.sb3 import load_model
+        from hptrack.learning.sb3 import load_actor
 
         set_torch_threads()
-        self._torch = torch
         try:
-            self._model = load_model(path)
+            self._actor = load_actor(path)
         except ValueError as err:
             raise InputError(f"planner 'sb3': {err}") from None
-        self._check_sizes(
-            int(np.prod(self._model.observation_space.shape)), int(self._model.action_space.n)
-        )
+        self._check_sizes(self._actor.obs_dim, self._actor.n_actions)
 
     def _choose(self, vector: np.ndarray) -> int:
+        distribution = self._actor.distribution(vector)
         if self.settings.deterministic:
-            return int(self._model.predict(vector, deterministic=True)[0])
-        with self._torch.no_grad():
-            obs, _ = self._model.policy.obs_to_tensor(vector)
-            probs = self._model.policy.get_distribution(obs).distribution.probs[0].numpy()
+            return int(distribution.mode[0])
+        probs = distribution.probs[0].numpy()
         return int(self._rng.choice(len(probs), p=probs / probs.sum()))

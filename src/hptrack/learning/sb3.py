@@ -19,14 +19,16 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, NonNegativeInt, ValidationError
 
-from hptrack.interface import InputError
+from hptrack.interface import InputError, shown
 from hptrack.learning.agent import set_torch_threads
 from hptrack.learning.train import (
     Progress,
@@ -36,6 +38,7 @@ from hptrack.learning.train import (
     run_validation,
     validation_entry,
 )
+from hptrack.learning.weights import SB3_POLICY_MEMBER, describe, load_weights, read_zip_member
 
 
 @dataclass(frozen=True)
@@ -60,18 +63,100 @@ class PpoConfig:
         return out
 
 
-def load_model(path: str | Path):
-    """A PPO model saved by stable-baselines3 (on the CPU).
+PPO_POLICY_PREFIXES = (
+    "mlp_extractor.policy_net.",
+    "mlp_extractor.value_net.",
+    "action_net.",
+    "value_net.",
+)
+"""Tensor name prefixes of the ``MlpPolicy`` (``ActorCriticPolicy``) that PPO trains."""
+
+
+def read_ppo_tensors(path: str | Path) -> dict[str, Any]:
+    """The tensors of a stable-baselines3 zip (``policy.pth`` and, for a checkpoint,
+    ``policy.optimizer.pth``) read as weights only; the zip's pickled ``data`` is never
+    unpickled. Returns ``{"policy": state_dict}``, with ``"policy.optimizer"`` when the zip
+    holds the optimiser (a checkpoint).
 
     Raises:
-        ValueError: the file is not such a model (the message names it).
+        ValueError: the file is not such a model, or holds pickled objects (one line naming it).
     """
-    from stable_baselines3 import PPO
-
+    label = f"PPO model {path}"
+    what = describe(path)
+    if what != "a stable-baselines3 model":
+        hint = ": fly it with --planner adfq" if what == "a torch file" else ""
+        raise ValueError(f"{label}: not a stable-baselines3 model ({what}{hint})")
     try:
-        return PPO.load(str(path), device="cpu")
-    except (OSError, ValueError, KeyError, RuntimeError) as err:
-        raise ValueError(f"PPO model {path}: cannot be read ({err})") from None
+        data = json.loads(read_zip_member(path, "data", label))
+    except (ValueError, UnicodeDecodeError):
+        raise ValueError(f"{label}: its data entry is not JSON") from None
+    if not isinstance(data, dict) or data.get("policy_kwargs", {}) != {}:
+        raise ValueError(
+            f"{label}: not the default MlpPolicy of hptrack learn sb3-ppo (policy_kwargs "
+            f"{shown(data.get('policy_kwargs') if isinstance(data, dict) else data)})"
+        )
+    policy = load_weights(read_zip_member(path, SB3_POLICY_MEMBER, label), label)
+    if not isinstance(policy, dict) or not all(
+        isinstance(k, str) and k.startswith(PPO_POLICY_PREFIXES) for k in policy
+    ):
+        raise ValueError(f"{label}: not the tensors of a PPO MlpPolicy")
+    with zipfile.ZipFile(path) as archive:
+        has_optimizer = "policy.optimizer.pth" in archive.namelist()
+    if not has_optimizer:
+        return {"policy": policy}
+    optimizer = load_weights(read_zip_member(path, "policy.optimizer.pth", label), label)
+    return {"policy": policy, "policy.optimizer": optimizer}
+
+
+class PpoActor:
+    """The actor of a PPO ``MlpPolicy`` rebuilt from its tensors: linear layers with tanh
+    between them (the policy's default), then the action logits; it computes what
+    ``PPO.predict`` computes, without stable-baselines3 or any unpickling.
+
+    Raises:
+        ValueError: the tensors do not chain into such a network (``label`` names the file).
+    """
+
+    def __init__(self, tensors: dict[str, Any], label: str) -> None:
+        import torch
+        from torch import nn
+
+        prefix = "mlp_extractor.policy_net."
+        indices = sorted(
+            {int(k[len(prefix) :].split(".")[0]) for k in tensors if k.startswith(prefix)}
+        )
+        names = [f"{prefix}{i}" for i in indices] + ["action_net"]
+        layers: list[nn.Module] = []
+        width = None
+        for name in names:
+            weight, bias = tensors.get(f"{name}.weight"), tensors.get(f"{name}.bias")
+            if (
+                not isinstance(weight, torch.Tensor)
+                or not isinstance(bias, torch.Tensor)
+                or weight.ndim != 2
+                or bias.shape != weight.shape[:1]
+                or (width is not None and weight.shape[1] != width)
+            ):
+                raise ValueError(f"{label}: its layer {name} does not fit the network")
+            linear = nn.Linear(weight.shape[1], weight.shape[0])
+            linear.load_state_dict({"weight": weight, "bias": bias})
+            layers += [linear, nn.Tanh()]
+            width = weight.shape[0]
+        self.network = nn.Sequential(*layers[:-1]).eval()
+        self.obs_dim = int(layers[0].in_features)
+        self.n_actions = int(width)
+        self._torch = torch
+
+    def distribution(self, obs: np.ndarray):
+        """The categorical action distribution of one observation vector (``d``,)."""
+        with self._torch.no_grad():
+            logits = self.network(self._torch.as_tensor(obs, dtype=self._torch.float32)[None])
+        return self._torch.distributions.Categorical(logits=logits)
+
+
+def load_actor(path: str | Path) -> PpoActor:
+    """The actor of a PPO model file (`read_ppo_tensors`, `PpoActor`)."""
+    return PpoActor(read_ppo_tensors(path)["policy"], f"PPO model {path}")
 
 
 def _policy(model) -> Callable[[np.ndarray], np.ndarray]:
@@ -79,6 +164,36 @@ def _policy(model) -> Callable[[np.ndarray], np.ndarray]:
         return model.predict(obs, deterministic=True)[0]
 
     return policy
+
+
+class PpoState(BaseModel):
+    """``state.json`` of a PPO run folder, validated before anything it names is read."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    step: NonNegativeInt
+    episodes: NonNegativeInt
+    last_checkpoint: NonNegativeInt
+    curve: list[dict[str, Any]]
+    best_u: float
+    best_step: int
+    checkpoint: Annotated[str, Field(pattern=r"^checkpoint-\d+\.zip$")] | None
+
+
+def read_state(path: Path) -> dict[str, Any]:
+    """The validated ``state.json`` at ``path`` (`PpoState`), as a dict.
+
+    Raises:
+        InputError: it is not JSON or not such a state (one line naming the file).
+    """
+    try:
+        return PpoState.model_validate_json(path.read_bytes()).model_dump()
+    except ValidationError as err:
+        first = err.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "the file"
+        raise InputError(
+            f"{path}: not a state of hptrack learn sb3-ppo ({where}: {first['msg']})"
+        ) from None
 
 
 def trained_steps(steps: int, rollout_steps: int) -> int:
@@ -113,7 +228,7 @@ class PpoTrainer:
             "checkpoint": None,
         }
         if (self.out / "state.json").exists():
-            self.state = json.loads((self.out / "state.json").read_text())
+            self.state = read_state(self.out / "state.json")
 
     def _make_model(self):
         from stable_baselines3 import PPO
@@ -122,13 +237,7 @@ class PpoTrainer:
 
         cfg = self.config
         env = DummyVecEnv([lambda: Monitor(self.task.make_env())])
-        if self.state["checkpoint"] is not None:
-            model = PPO.load(str(self.out / self.state["checkpoint"]), env=env, device="cpu")
-            model.set_random_seed(
-                int(np.random.SeedSequence([cfg.seed, self.state["step"]]).generate_state(1)[0])
-            )
-            return model
-        return PPO(
+        model = PPO(
             "MlpPolicy",
             env,
             learning_rate=cfg.learning_rate,
@@ -142,6 +251,25 @@ class PpoTrainer:
             device="cpu",
             verbose=0,
         )
+        if self.state["checkpoint"] is not None:
+            # weights only: the checkpoint's pickled data is never loaded; the step count
+            # comes from state.json
+            try:
+                tensors = read_ppo_tensors(self.out / self.state["checkpoint"])
+            except ValueError as err:
+                raise InputError(f"--out {self.out}: {err}") from None
+            try:
+                model.set_parameters(tensors, exact_match=True, device="cpu")
+            except (ValueError, RuntimeError, KeyError) as err:
+                raise InputError(
+                    f"--out {self.out}: checkpoint {self.state['checkpoint']} does not fit this "
+                    f"run's network ({str(err).splitlines()[0][:120]})"
+                ) from None
+            model.num_timesteps = int(self.state["step"])
+            model.set_random_seed(
+                int(np.random.SeedSequence([cfg.seed, self.state["step"]]).generate_state(1)[0])
+            )
+        return model
 
     def save_checkpoint(self, model) -> None:
         """The model first, then the state that names it."""
@@ -239,4 +367,6 @@ class PpoTrainer:
             "best_step": state["best_step"],
             "last_validation_U": self._last_validation(),
             "best_model": str(self.out / "best.zip"),
+            # validated before the first update (which follows the first rollout)
+            "best_untrained": state["best_step"] <= cfg.n_steps,
         }

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -34,7 +35,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from hptrack.interface import InputError
+from hptrack.interface import InputError, shown
 from hptrack.learning.agent import (
     AdfqAgent,
     AdfqConfig,
@@ -43,6 +44,7 @@ from hptrack.learning.agent import (
     set_torch_threads,
 )
 from hptrack.learning.network import GaussianQNetwork
+from hptrack.learning.weights import load_weights
 
 VALIDATION_FIRST_SEED = 1_000_000_000
 """Scenario seed of the first validation scenario (benchmarks use small seeds)."""
@@ -225,23 +227,57 @@ def atomic_write(text: str, path: Path) -> None:
     os.replace(tmp, path)
 
 
+OPTION_NAMES = {
+    "n_targets": "--targets",
+    "validation_scenarios": "--validation-scenarios",
+    "seed": "--seed",
+    "validation_interval": "--validation-interval",
+    "checkpoint_interval": "--checkpoint-interval",
+    "warmup_steps": "--warmup",
+    "buffer_size": "--buffer",
+    "prioritized": "--prioritized",
+}
+"""The ``hptrack learn`` option of a field of ``config.json`` (others are shown by name)."""
+
+
+def _flat(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in config.items():
+        if isinstance(value, dict):
+            out |= _flat(value, f"{prefix}{key}.")
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
 def check_run_config(out: Path, config: dict[str, Any]) -> None:
-    """Create ``out/config.json``, or refuse (one line) a restart whose task or training
-    options differ from the saved ones."""
+    """Create ``out/config.json``, or refuse (one line naming every option that differs, with
+    the run's value and the given one) a restart whose task or training options differ from
+    the saved ones."""
     path = out / "config.json"
     if not path.exists():
         out.mkdir(parents=True, exist_ok=True)
         atomic_write(json.dumps(config, indent=2) + "\n", path)
         return
-    saved = json.loads(path.read_text())
-    for section in ("task", "train"):
-        for key in sorted(set(saved.get(section, {})) | set(config[section])):
-            old, new = saved.get(section, {}).get(key), config[section].get(key)
-            if old != new:
-                raise InputError(
-                    f"--out {out}: this run was started with {key}={old!r}, not "
-                    f"{new!r}; use the same options or another folder"
-                )
+    try:
+        saved = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise InputError(f"--out {out}: {path.name} cannot be read as JSON ({err})") from None
+    if not isinstance(saved, dict):
+        raise InputError(f"--out {out}: {path.name} is not a run configuration")
+    old = _flat({s: saved.get(s) if isinstance(saved.get(s), dict) else {} for s in config})
+    new = _flat(config)
+    differences = []
+    for key in [*new, *(k for k in old if k not in new)]:
+        if old.get(key) != new.get(key):
+            name = key.rsplit(".", 1)[-1]
+            option = OPTION_NAMES.get(name, name)
+            differences.append(f"{option} {shown(old.get(key))} (given: {shown(new.get(key))})")
+    if differences:
+        raise InputError(
+            f"--out {out}: this run was started with " + ", ".join(differences) + "; give the "
+            "same options to resume it, or another --out to start a fresh run"
+        )
 
 
 class Trainer:
@@ -290,12 +326,28 @@ class Trainer:
 
     # --- checkpoints -------------------------------------------------------------------------
     def _load(self) -> None:
-        data = torch.load(self.out / "checkpoint.pt", map_location="cpu", weights_only=True)
-        self.agent.load_state_dict(data["agent"])
-        with np.load(self.out / data["replay_file"]) as replay:
-            self.agent.replay.load_state_dict(dict(replay))
-        self.rng.bit_generator.state = data["rng"]
-        self.state = _State(**data["state"])
+        """Resume from ``checkpoint.pt``, read as weights only; a damaged or foreign checkpoint
+        is one line naming the run folder."""
+        path = self.out / "checkpoint.pt"
+        try:
+            data = load_weights(path, f"--out {self.out}: checkpoint {path.name}")
+        except ValueError as err:
+            raise InputError(str(err)) from None
+        replay_file = data.get("replay_file") if isinstance(data, dict) else None
+        if not isinstance(replay_file, str) or not re.fullmatch(r"replay-\d+\.npz", replay_file):
+            raise InputError(f"--out {self.out}: {path.name} is not a checkpoint of hptrack learn")
+        try:
+            self.agent.load_state_dict(data["agent"])
+            with np.load(self.out / replay_file) as replay:
+                self.agent.replay.load_state_dict(dict(replay))
+            self.rng.bit_generator.state = data["rng"]
+            self.state = _State(**data["state"])
+        except (KeyError, TypeError, ValueError, RuntimeError, OSError) as err:
+            reason = str(err).splitlines()[0][:120] if str(err) else type(err).__name__
+            raise InputError(
+                f"--out {self.out}: {path.name} does not fit this run (damaged or from another "
+                f"version: {reason}); give another --out to start a fresh run"
+            ) from None
 
     def save_checkpoint(self) -> None:
         """Replay file first, then the checkpoint that names it (an atomic switch)."""
@@ -418,4 +470,6 @@ class Trainer:
             "best_step": s.best_step,
             "last_validation_U": self._last_validation(),
             "best_model": str(self.out / "best.pt"),
+            # no gradient step before the best validation: best.pt is the initial network
+            "best_untrained": s.best_step <= acfg.warmup_steps,
         }

@@ -9,6 +9,11 @@ involved: the beliefs, the ticks, the observations, the planner's decisions and 
 modes are reproduced, and every difference from the log is reported. A planner whose effort is
 wall time (``mcts`` with a time limit) may decide differently on replay; one with an iteration
 budget decides the same.
+
+A log whose planner flies a model file it names (``-o model=PATH`` of ``adfq``, ``sb3``) is
+replayed with the log's own decisions (`LoggedDecisions`): a replay never loads a model
+a log names, since a log may come from anybody; flying that model again is an explicit
+``hptrack simulate``.
 """
 
 from __future__ import annotations
@@ -21,8 +26,8 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from hptrack.interface import InputError
-from hptrack.registry import make_planner
+from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation, Planner
+from hptrack.registry import make_planner, planner_settings
 from hptrack.runtime.controller import ControllerSettings, MissionController
 from hptrack.runtime.log import MissionLog, check_record, log_array, log_float, read_log
 from hptrack.runtime.worker import ReplayRunner
@@ -85,6 +90,41 @@ def _differences(logged: list[dict], replayed: list[dict]) -> list[str]:
     return out
 
 
+class LoggedDecisions:
+    """Stands in for a planner that flies a model file named in the log: each tick's decision
+    is the waypoint of the log's plan record of that tick (a logged planner error is raised
+    again), so the model is never loaded."""
+
+    def __init__(self, name: str, settings: Any, plans: dict[int, dict]) -> None:
+        self.name, self.settings, self._plans = name, settings, plans
+
+    def reset(
+        self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
+    ) -> None:
+        """Nothing to prepare: the decisions are the log's."""
+
+    def act(self, observation: Observation) -> np.ndarray:
+        plan = self._plans.get(observation.step)
+        if plan is None or plan.get("error"):
+            raise RuntimeError(plan["error"] if plan else "the log has no decision of this tick")
+        return log_array(plan["waypoint"])
+
+    def current_plan(self) -> CurrentPlan:
+        return CurrentPlan()
+
+    def episode_info(self) -> dict[str, Any]:
+        return {"settings": self.settings.as_json(), "decisions": "logged"}
+
+
+def _planner(header: dict[str, Any], records: list[dict]) -> Planner:
+    """The header's planner, or `LoggedDecisions` when its settings name a model file."""
+    settings = planner_settings(header["planner"], header.get("planner_settings") or {})
+    if getattr(settings, "model", None) is None:
+        return make_planner(header["planner"], settings)
+    plans = {int(r["k"]): r for r in records if r.get("kind") == "plan" and "k" in r}
+    return LoggedDecisions(header["planner"], settings, plans)
+
+
 def replay_log(path: str | Path) -> ReplayResult:
     """Replay the mission log at ``path`` (module docstring).
 
@@ -97,7 +137,7 @@ def replay_log(path: str | Path) -> ReplayResult:
     try:
         scenario = parse_scenario(header["scenario"], f"{path}: header scenario")
         settings = ControllerSettings(**header["controller"])
-        planner = make_planner(header["planner"], header.get("planner_settings") or {})
+        planner = _planner(header, contents.records)
         seed = int(header["seed"])
     except KeyError as err:
         raise InputError(f"{path}: the header has no {err.args[0]!r}") from None
@@ -189,6 +229,7 @@ def replay_log(path: str | Path) -> ReplayResult:
         "log": str(path),
         "source": header.get("source"),
         "planner": header["planner"],
+        "decisions": "logged" if isinstance(planner, LoggedDecisions) else "planned again",
         "seed": seed,
         "truncated": contents.truncated,
         "records": len(records) + 1,
