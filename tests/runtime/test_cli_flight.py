@@ -11,17 +11,6 @@ from hptrack.runtime.log import MissionLog
 from hptrack.runtime.simulated import SimulatedFaults, run_simulated
 
 
-@pytest.fixture
-def flight_cli(cli):
-    """The ``cli`` fixture with the flight commands registered."""
-    from hptrack.cli import app as app_module
-    from hptrack.cli.flight import register
-
-    if "fly" not in {command.name for command in app_module.app.registered_commands}:
-        register(app_module.app)
-    return cli
-
-
 def test_replay_writes_the_figure_and_the_summary(flight_cli, flight_scenario, tmp_path):
     path = tmp_path / "m.jsonl"
     log = MissionLog(path)

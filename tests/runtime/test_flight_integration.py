@@ -3,7 +3,9 @@ MAVLink through MAVSDK on loopback, a real-time mission with its first plan befo
 the planned speed flown, its safe ends, the replay of its log, and ``hptrack targets-sim`` fed by
 the stub's second telemetry link."""
 
+import errno
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -337,3 +339,131 @@ def test_targets_sim_feeds_fly_from_the_vehicles_own_telemetry(tmp_path, example
     truth = {"p1": (30.5, 9.5, 3.0, 0.1), "p2": (29.5, -10.5, 3.0, -0.1)}[first["target"]]
     expected = np.array(truth[:2]) + first["t"] * np.array(truth[2:])
     assert np.hypot(*(np.asarray(first["position"]) - expected)) < 8.0  # 1 s offset + noise
+
+
+def _flood(port, duration_s):
+    """Send a bounded flood of detection lines to ``port`` on loopback for ``duration_s``:
+    malformed lines (datagrams of 5), plausible detections one per datagram, datagrams of
+    1,000 lines, and one of 1,700 lines; returns the lines sent."""
+    plausible = [
+        json.dumps({"id": "p1", "x": 30.0 + 0.01 * i, "y": 10.0}).encode() for i in range(50)
+    ]
+    malformed = b"\n".join([b'{"id": "p1", "x": oops}', b"garbage", b"[1, 2", b"{}", b"null"])
+    big = b"\n".join(plausible[i % 50] for i in range(1000))
+    huge = b"\n".join(b"not json at all %d" % i for i in range(1700))
+    sent = 0
+    rounds = int(duration_s / 0.01)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+        address = ("127.0.0.1", port)
+        start = time.monotonic()
+        for k in range(rounds):
+            for _ in range(4):  # 400 malformed datagrams (2,000 lines) per second
+                sender.sendto(malformed, address)
+                sent += 5
+            for i in range(10):  # 1,000 plausible lines per second, one per datagram
+                sender.sendto(plausible[(k + i) % 50], address)
+                sent += 1
+            if k % 20 == 0:  # 5 datagrams of 1,000 lines per second
+                sender.sendto(big, address)
+                sent += 1000
+            if k == rounds // 2:
+                sender.sendto(huge, address)
+                sent += 1700
+            time.sleep(max(0.0, start + (k + 1) * 0.01 - time.monotonic()))
+    return sent
+
+
+def test_a_detection_flood_does_not_slow_the_setpoint_stream_and_every_line_is_counted(
+    dry_run,
+):
+    """About 9,000 lines per second for 8 s of a 15 s mission: ``fly`` streams its own
+    setpoints at its rate without a stall, and every line received is logged or counted as
+    dropped."""
+    log = dry_run["log"]
+    fly = subprocess.Popen(
+        [*dry_run["fly"], "--log", str(log), "--planner", "greedy"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        _wait_for_offboard(log)
+        sent = _flood(dry_run["detections_port"], 8.0)
+        out, err = fly.communicate(timeout=60)
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+            fly.wait()
+    assert fly.returncode == 0, out + err
+    records = read_log(log).records
+    end = _records(log, "end")[0]
+    assert end["reason"] == "budget" and end["time"] == BUDGET_S
+    setpoints = next(r for r in records if r["kind"] == "status" and "setpoints" in r)
+    assert setpoints["setpoints"] / setpoints["mission_time_s"] >= 18.0, setpoints
+    assert setpoints["max_gap_s"] < 0.2, setpoints
+    lines = next(r for r in records if r["kind"] == "status" and "detection_lines" in r)
+    counts = lines["detection_lines"]
+    detections = sum(r["kind"] == "detection" for r in records)
+    assert counts["handled"] == detections
+    assert counts["received"] == counts["handled"] + sum(counts["dropped"].values())
+    assert sent * 0.5 < counts["received"] <= sent + 1000  # plus the stub's own detections
+    assert counts["dropped"]["datagram over its line limit"] >= 1600 + 5 * 900
+    assert "dropped" in out  # said on the console because lines were dropped
+
+
+class _FillingDisk:
+    """A log file on a disk that fills up: every write from the ``after``-th one after the
+    ``offboard started`` line fails with ENOSPC."""
+
+    def __init__(self, file, after):
+        self.file, self.after, self.left = file, after, None
+
+    def write(self, text):
+        if self.left is None and "offboard started" in text:
+            self.left = self.after
+        elif self.left is not None:
+            if self.left == 0:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            self.left -= 1
+        return self.file.write(text)
+
+    def flush(self):
+        self.file.flush()
+
+    def close(self):
+        self.file.close()
+
+
+@pytest.mark.parametrize("rule", ["continue", "hold"])
+def test_a_full_disk_stops_the_log_and_the_flight_flies_on_or_holds_as_asked(
+    dry_run, flight_cli, monkeypatch, rule
+):
+    """The log writer's writes fail (ENOSPC) a few seconds into the mission: ``fly`` says once
+    that logging stopped, naming --log and the file, and either flies to its budget or holds at
+    once (--on-log-failure hold); both end in HOLD."""
+    import hptrack.runtime.log as log_module
+
+    monkeypatch.setattr(
+        log_module,
+        "open",
+        lambda *args, **kwargs: _FillingDisk(open(*args, **kwargs), 60),
+        raising=False,
+    )
+    log = dry_run["log"]
+    result = flight_cli(
+        *dry_run["fly"][len(CLI) :], "--log", log, "--planner", "greedy", "--on-log-failure", rule
+    )
+    out = " ".join(result.out.split())
+    assert f"logging stopped: --log {log}: the write failed (No space left on device)" in out
+    assert "vehicle in HOLD (confirmed)" in out
+    assert _stop_stub(dry_run)["final_mode"] == "hold"
+    contents = read_log(log)  # what was written before the disk filled reads back
+    assert any(r.get("message", "").startswith("offboard started") for r in contents.records)
+    assert not any(r["kind"] == "end" for r in contents.records)
+    if rule == "continue":
+        assert result.code == 0, result.out + result.err
+        assert "ended by budget" in out
+        assert "logging stopped: the write failed" in out  # repeated in the summary
+    else:
+        assert result.code == 3, result.out + result.err
+        assert "ended by log failure" in out and "--on-log-failure hold" in out

@@ -4,7 +4,10 @@ the flight loop and bounded, so that no input load can starve the setpoint strea
 A thread of its own (:class:`DetectionIntake`) reads the UDP socket, splits each datagram into
 lines (a line is the text between newlines, blank ones are skipped) and hands at most
 ``lines_per_s`` lines per second to a handler (the flight's parser and the controller, which
-log each one), in slices of ``slice_s``. The flight loop itself never touches a detection.
+log each one), in slices of ``slice_s``. It stops handling for the rest of a slice once it has
+spent ``busy_fraction`` of it, an overrun being paid in the next slices, so that costly lines
+(late detections that refilter a long history) take no more of the processor. The flight loop
+itself never touches a detection.
 Lines beyond the bounds are dropped and counted by reason:
 
 * :data:`OVER_DATAGRAM`: the lines of a datagram after its first ``lines_per_datagram``;
@@ -51,12 +54,14 @@ class IntakeLimits:
         queue_lines: lines waiting at most (one second of handling by default).
         slice_s: the handling budget is spent in slices of this length, s (the setpoint
             period in flight).
+        busy_fraction: the share of each slice the handling may take.
     """
 
     lines_per_s: int = 1000
     lines_per_datagram: int = 100
     queue_lines: int = 1000
     slice_s: float = 0.05
+    busy_fraction: float = 0.3
 
 
 class DetectionIntake:
@@ -147,13 +152,15 @@ class DetectionIntake:
     def _run(self) -> None:
         limits = self.limits
         per_slice = max(1, round(limits.lines_per_s * limits.slice_s))
-        slice_end, budget = time.monotonic() + limits.slice_s, per_slice
+        busy_s = limits.busy_fraction * limits.slice_s
+        slice_end, budget, busy = time.monotonic() + limits.slice_s, per_slice, 0.0
         while not self._stop.is_set():
             now = time.monotonic()
-            if now >= slice_end:
-                slice_end, budget = now + limits.slice_s, per_slice
+            if now >= slice_end:  # a slice's overrun is paid in the next ones
+                slice_end, budget, busy = now + limits.slice_s, per_slice, max(0.0, busy - busy_s)
             self._read()
-            if budget > 0 and self._queue:
+            ready = budget > 0 and busy < busy_s
+            if ready and self._queue:
                 line, received_s = self._queue.popleft()
                 try:
                     self.handle(line, received_s)
@@ -162,11 +169,11 @@ class DetectionIntake:
                     return
                 finally:
                     self.handled += 1
+                busy += time.monotonic() - now
                 budget -= 1
                 continue
-            wait = slice_end - now if budget == 0 else limits.slice_s
             with contextlib.suppress(OSError, ValueError):
-                if budget == 0:
-                    time.sleep(max(0.0, wait))
+                if ready:  # nothing waits: until a datagram comes, or the slice ends
+                    select.select([self.sock], [], [], limits.slice_s)
                 else:
-                    select.select([self.sock], [], [], wait)
+                    time.sleep(max(0.0, slice_end - now))

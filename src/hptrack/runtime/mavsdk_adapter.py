@@ -654,6 +654,15 @@ async def fly_mission(
             except Exception:  # noqa: BLE001 - end safely first, report after
                 flight.error = traceback.format_exc()
                 reason, detail = "controller error", flight.error.strip().splitlines()[-1]
+            flown_s = flight.mission_time()
+            flight.say(
+                f"{flight.sent} setpoints sent in {flown_s:.1f} s, largest gap "
+                f"{flight.max_gap_s:.3f} s",
+                show=False,
+                setpoints=flight.sent,
+                mission_time_s=flown_s,
+                max_gap_s=flight.max_gap_s,
+            )
             intake.stop()
             _say_intake(flight, intake, drops_before, kernel_drops(sock))
             action, confirmed = await flight.safe_end(system, reason, detail)
