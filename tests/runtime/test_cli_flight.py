@@ -70,10 +70,13 @@ def test_bad_input_is_one_line_and_exit_code_2(flight_cli, example_path, tmp_pat
     assert len(result.error_lines) == 1 and message in result.err, result.err
 
 
-def test_fly_without_a_vehicle_gives_up_with_exit_code_3(flight_cli, example_path, tmp_path):
+def test_fly_without_a_vehicle_says_what_it_waits_for_then_gives_a_hint_and_no_log(
+    flight_cli, example_path, tmp_path
+):
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
+    log = tmp_path / "l.jsonl"
     result = flight_cli(
         "fly",
         example_path,
@@ -82,13 +85,20 @@ def test_fly_without_a_vehicle_gives_up_with_exit_code_3(flight_cli, example_pat
         "--detections",
         f"udp://127.0.0.1:{port}",
         "--connect-timeout",
-        "1",
+        "2",
         "--log",
-        tmp_path / "l.jsonl",
+        log,
         "--no-live",
     )
     assert result.code == 3, result.out + result.err
-    assert "no autopilot found" in result.err
+    out = " ".join(result.out.split())
+    waiting = f"waiting for an autopilot on udpin://127.0.0.1:{port} (at most 2 s; Ctrl-C stops)"
+    assert out.startswith(waiting)  # said at once, before anything else
+    assert "still waiting for an autopilot" in out
+    err = " ".join(result.err.split())
+    assert f"no autopilot found on udpin://127.0.0.1:{port} within 2 s" in err
+    assert "hptrack vehicle-sim SCENARIO" in err and "PX4 SITL" in err
+    assert not log.exists()  # no empty log left behind
 
 
 def test_the_planned_speed_is_the_vehicles_limit_only_when_asked():

@@ -121,7 +121,8 @@ class FlightOptions:
 LOG_FAILURES = ("continue", "hold")
 """What a flight does when its mission log stops growing."""
 WAIT_PROGRESS_S = 5.0
-"""How often ``fly`` says it is still waiting for the autopilot, s."""
+"""How often ``fly`` says it is still waiting for the autopilot, s (at least twice in a shorter
+wait)."""
 
 
 @dataclass(frozen=True)
@@ -699,12 +700,13 @@ async def _first_autopilot(mavsdk: Mavsdk, flight: _Flight) -> Any:
     where, then every :data:`WAIT_PROGRESS_S`; a hint on what to start if none comes."""
     options = flight.options
     url, timeout = options.connection, options.connect_timeout_s
+    every_s = min(WAIT_PROGRESS_S, timeout / 2)
     flight.say(f"waiting for an autopilot on {url} (at most {timeout:g} s; Ctrl-C stops)")
     started = time.monotonic()
     search = asyncio.ensure_future(mavsdk.first_autopilot(timeout_s=timeout))
     try:
         while not search.done():
-            await asyncio.wait({search}, timeout=WAIT_PROGRESS_S)
+            await asyncio.wait({search}, timeout=every_s)
             if flight.stop.is_set():
                 raise FlightError("interrupted while waiting for the autopilot")
             if not search.done():
@@ -717,9 +719,9 @@ async def _first_autopilot(mavsdk: Mavsdk, flight: _Flight) -> Any:
     system = search.result()
     if system is None:
         raise FlightError(
-            f"no autopilot found on {url} within {timeout:g} s: start the vehicle first "
-            "(for a dry run, hptrack vehicle-sim SCENARIO in another terminal; or PX4 SITL, "
-            "which sends to udp port 14540 on 127.0.0.1) or give its address with --connection"
+            f"no autopilot found on {url} within {timeout:g} s: start the vehicle first (for "
+            "a dry run, hptrack vehicle-sim SCENARIO in another terminal; or PX4 SITL, which "
+            "sends to 127.0.0.1:14540), or give the vehicle's address with --connection"
         )
     return system
 
