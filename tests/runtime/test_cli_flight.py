@@ -55,6 +55,8 @@ def test_replay_writes_the_figure_and_the_summary(flight_cli, flight_scenario, t
         (["fly", "{scenario}", "--detections", "udp://{busy}"], "the port is in use"),
         (["fly", "{scenario}", "--detections", "udp://10.254.254.1:5005"], "cannot receive"),
         (["fly", "{scenario}", "--first-plan-timeout", "0"], "--first-plan-timeout"),
+        (["fly", "{scenario}", "--on-log-failure", "panic"], "--on-log-failure 'panic'"),
+        (["fly", "{scenario}", "--log-max-mb", "0"], "--log-max-mb"),
         (["vehicle-sim", "{scenario}", "--param", "NOPE=1"], "--param 'NOPE=1'"),
         (["vehicle-sim", "{scenario}", "--gcs", "udpout://10.1.2.3:14550"], "loopback"),
         (["targets-sim", "{scenario}", "--mavlink", "udpin://{busy}"], "the port is in use"),
@@ -130,3 +132,26 @@ def test_plain_errors_say_what_happened_what_the_vehicle_does_and_what_to_do():
         "failsafe."
     )
     assert "\n" not in text and "origin" not in text
+
+
+def test_the_live_view_shows_dropped_detection_lines():
+    from rich.console import Console
+
+    from hptrack.cli.flight import _live_view
+
+    status = {
+        "t": 12.0,
+        "budget": 60.0,
+        "plan": None,
+        "target_ids": ("p1",),
+        "rejected": {"detection: malformed": 3},
+        "dropped_lines": 4200,
+        "logdet": {"p1": 1.5},
+    }
+    console = Console(width=200, record=True)
+    console.print(_live_view(status))
+    text = console.export_text()
+    assert "detection: malformed 3; 4200 detection lines dropped" in text
+    console = Console(width=200, record=True)
+    console.print(_live_view({**status, "dropped_lines": 0}))
+    assert "dropped" not in console.export_text()

@@ -100,9 +100,10 @@ def _live_view(status: dict) -> Group:
         f"{status.get('altitude_m', 0):.0f} m altitude",
     )
     rejected = status.get("rejected") or {}
-    head.add_row(
-        "refused inputs", escape(", ".join(f"{k} {v}" for k, v in rejected.items()) or "none")
-    )
+    refused = ", ".join(f"{k} {v}" for k, v in rejected.items()) or "none"
+    if status.get("dropped_lines"):
+        refused += f"; {status['dropped_lines']} detection lines dropped"
+    head.add_row("refused inputs", escape(refused))
     targets = Table(show_edge=False)
     targets.add_column("target")
     targets.add_column("log det Σxy", justify="right")

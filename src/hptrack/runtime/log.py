@@ -6,7 +6,8 @@ Every record is a JSON object with ``kind`` (``header`` first, then ``odometry``
 s) when it was written, and ``seq`` its line number from 0. Non-finite numbers of rejected
 inputs are written as the strings ``"nan"``, ``"inf"``, ``"-inf"`` so that every line is strict
 JSON. :func:`read_log` reads a log back; a last line cut short by a crash or a kill is dropped
-and reported, so a log always replays up to where it ends.
+and reported, so a log always replays up to where it ends. A file log never raises on a write:
+a failed write or its size limit stops it (:class:`MissionLog`), and it replays up to there.
 """
 
 from __future__ import annotations
