@@ -153,23 +153,6 @@ class TestDetectionFloods:
     LIMITS = IntakeLimits(lines_per_s=2000, lines_per_datagram=50, queue_lines=300, slice_s=0.02)
 
     @staticmethod
-    def _intake(limits, handle=None):
-        receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        receiver.bind(("127.0.0.1", 0))
-        enlarge_receive_buffer(receiver)
-        seen = []
-        lock = threading.Lock()
-
-        def keep(line, received_s):
-            with lock:
-                seen.append((time.monotonic(), line))
-            if handle is not None:
-                handle(line)
-
-        intake = DetectionIntake(receiver, keep, lambda: 1.0, limits)
-        return receiver, intake, seen
-
-    @staticmethod
     def _settle(intake, expected=None, timeout_s=10.0):
         """Wait until ``expected`` lines (else no more) were received and none waits."""
         end = time.monotonic() + timeout_s
@@ -182,21 +165,42 @@ class TestDetectionFloods:
                 return
             last = now
 
-    def test_lines_are_handed_on_at_the_limit_and_the_rest_is_counted(self):
-        receiver, intake, seen = self._intake(self.LIMITS)
+    @classmethod
+    def _flood(cls, limits, datagrams, wait=None, handle=None, pause_s=0.0):
+        """Send ``datagrams`` on loopback to a fresh intake (``pause_s`` after each), then
+        ``wait(intake)`` (default: until it settles) and stop it; returns the intake, the
+        ``(time, line)`` pairs handed on, and when the flood started."""
+        receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        datagram = b"\n".join(b"line %d" % i for i in range(40))
+        seen = []
+        lock = threading.Lock()
+
+        def keep(line, received_s):
+            with lock:
+                seen.append((time.monotonic(), line))
+            if handle is not None:
+                handle(line)
+
         try:
+            receiver.bind(("127.0.0.1", 0))
+            enlarge_receive_buffer(receiver)
+            intake = DetectionIntake(receiver, keep, lambda: 1.0, limits)
             intake.start()
             start = time.monotonic()
-            for _ in range(500):  # 20,000 lines in about 0.5 s
+            for datagram in datagrams:
                 sender.sendto(datagram, receiver.getsockname())
-                time.sleep(0.001)
-            self._settle(intake)
+                time.sleep(pause_s)
+            (wait or cls._settle)(intake)
             intake.stop()
         finally:
             sender.close()
             receiver.close()
+        return intake, seen, start
+
+    def test_lines_are_handed_on_at_the_limit_and_the_rest_is_counted(self):
+        datagram = b"\n".join(b"line %d" % i for i in range(40))
+        # 20,000 lines in about 0.5 s
+        intake, seen, start = self._flood(self.LIMITS, [datagram] * 500, pause_s=0.001)
         counts = intake.counts()
         assert counts["received"] % 40 == 0 and counts["received"] > 0
         assert counts["received"] == counts["handled"] + sum(counts["dropped"].values())
@@ -207,17 +211,9 @@ class TestDetectionFloods:
         assert first_second <= self.LIMITS.lines_per_s + per_slice
 
     def test_a_datagram_gives_at_most_its_line_limit(self):
-        receiver, intake, seen = self._intake(self.LIMITS)
-        sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            intake.start()
-            sender.sendto(b"\n".join(b"x%d" % i for i in range(1700)), receiver.getsockname())
-            sender.sendto(b"\n\n  \r\n", receiver.getsockname())  # blank lines are no lines
-            self._settle(intake)
-            intake.stop()
-        finally:
-            sender.close()
-            receiver.close()
+        huge = b"\n".join(b"x%d" % i for i in range(1700))
+        blank = b"\n\n  \r\n"  # blank lines are no lines
+        intake, seen, _ = self._flood(self.LIMITS, [huge, blank])
         assert intake.counts() == {
             "received": 1700,
             "handled": 50,
@@ -227,16 +223,8 @@ class TestDetectionFloods:
 
     def test_lines_still_queued_at_the_stop_are_counted(self):
         slow = IntakeLimits(lines_per_s=10, lines_per_datagram=100, queue_lines=100, slice_s=0.1)
-        receiver, intake, seen = self._intake(slow)
-        sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            intake.start()
-            sender.sendto(b"\n".join(b"y%d" % i for i in range(80)), receiver.getsockname())
-            time.sleep(0.3)
-            intake.stop()
-        finally:
-            sender.close()
-            receiver.close()
+        datagram = b"\n".join(b"y%d" % i for i in range(80))
+        intake, _, _ = self._flood(slow, [datagram], wait=lambda intake: time.sleep(0.3))
         counts = intake.counts()
         assert counts["received"] == 80 and counts["dropped"][LEFT_AT_END] > 50
         assert counts["handled"] + counts["dropped"][LEFT_AT_END] == 80
@@ -245,16 +233,12 @@ class TestDetectionFloods:
         limits = IntakeLimits(
             lines_per_s=1000, lines_per_datagram=100, queue_lines=100, slice_s=0.05
         )
-        receiver, intake, seen = self._intake(limits, handle=lambda line: time.sleep(0.02))
-        sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            intake.start()
-            sender.sendto(b"\n".join(b"z%d" % i for i in range(100)), receiver.getsockname())
-            time.sleep(1.0)
-            intake.stop()
-        finally:
-            sender.close()
-            receiver.close()
+        intake, _, _ = self._flood(
+            limits,
+            [b"\n".join(b"z%d" % i for i in range(100))],
+            wait=lambda intake: time.sleep(1.0),
+            handle=lambda line: time.sleep(0.02),
+        )
         # 0.3 of each slice: about 15 lines of 20 ms in a second, not 50
         assert 5 <= intake.handled <= 25, intake.counts()
 
@@ -267,20 +251,12 @@ class TestDetectionFloods:
         )
     )
     def test_fuzz_floods_keep_every_line_counted(self, datagrams):
-        receiver, intake, seen = self._intake(self.LIMITS)
-        sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        expected = 0
-        try:
-            intake.start()
-            for n, tail in datagrams:
-                lines = [b"d%d" % i for i in range(n)]
-                sender.sendto(b"\n".join(lines) + tail, receiver.getsockname())
-                expected += n
-            self._settle(intake, expected)
-            intake.stop()
-        finally:
-            sender.close()
-            receiver.close()
+        expected = sum(n for n, _ in datagrams)
+        intake, seen, _ = self._flood(
+            self.LIMITS,
+            [b"\n".join(b"d%d" % i for i in range(n)) + tail for n, tail in datagrams],
+            wait=lambda intake: self._settle(intake, expected),
+        )
         counts = intake.counts()
         assert counts["received"] == expected  # a few datagrams: the kernel keeps them all
         assert counts["received"] == counts["handled"] + sum(counts["dropped"].values())

@@ -27,6 +27,8 @@ pytestmark = pytest.mark.slow
 BUDGET_S = 15.0
 LONG_BUDGET_S = 30.0
 """Long enough for straight legs at full speed (a first plan that stalled would show)."""
+SHORT_BUDGET_S = 8.0
+"""The shortest mission that still shows a flood or a full disk in flight."""
 CLI = [sys.executable, "-m", "hptrack.cli.flight"]
 
 
@@ -104,6 +106,14 @@ def _end(process):
 def dry_run(tmp_path, example_path):
     """A short copy of the paper-flight example, free ports, and the vehicle stub running."""
     run = _start_dry_run(tmp_path, example_path, BUDGET_S)
+    yield run
+    _end(run["stub"])
+
+
+@pytest.fixture
+def short_dry_run(tmp_path, example_path):
+    """The same with the shortest budget."""
+    run = _start_dry_run(tmp_path, example_path, SHORT_BUDGET_S)
     yield run
     _end(run["stub"])
 
@@ -374,11 +384,12 @@ def _flood(port, duration_s):
 
 
 def test_a_detection_flood_does_not_slow_the_setpoint_stream_and_every_line_is_counted(
-    dry_run,
+    short_dry_run,
 ):
-    """About 9,000 lines per second for 8 s of a 15 s mission: ``fly`` streams its own
+    """About 9,000 lines per second for 5 s of an 8 s mission: ``fly`` streams its own
     setpoints at its rate without a stall, and every line received is logged or counted as
     dropped."""
+    dry_run = short_dry_run
     log = dry_run["log"]
     fly = subprocess.Popen(
         [*dry_run["fly"], "--log", str(log), "--planner", "greedy"],
@@ -388,7 +399,7 @@ def test_a_detection_flood_does_not_slow_the_setpoint_stream_and_every_line_is_c
     )
     try:
         _wait_for_offboard(log)
-        sent = _flood(dry_run["detections_port"], 8.0)
+        sent = _flood(dry_run["detections_port"], 5.0)
         out, err = fly.communicate(timeout=60)
     finally:
         if fly.poll() is None:
@@ -397,7 +408,7 @@ def test_a_detection_flood_does_not_slow_the_setpoint_stream_and_every_line_is_c
     assert fly.returncode == 0, out + err
     records = read_log(log).records
     end = _records(log, "end")[0]
-    assert end["reason"] == "budget" and end["time"] == BUDGET_S
+    assert end["reason"] == "budget" and end["time"] == SHORT_BUDGET_S
     setpoints = next(r for r in records if r["kind"] == "status" and "setpoints" in r)
     assert setpoints["setpoints"] / setpoints["mission_time_s"] >= 18.0, setpoints
     assert setpoints["max_gap_s"] < 0.2, setpoints
@@ -436,7 +447,7 @@ class _FillingDisk:
 
 @pytest.mark.parametrize("rule", ["continue", "hold"])
 def test_a_full_disk_stops_the_log_and_the_flight_flies_on_or_holds_as_asked(
-    dry_run, flight_cli, monkeypatch, rule
+    short_dry_run, flight_cli, monkeypatch, rule
 ):
     """The log writer's writes fail (ENOSPC) a few seconds into the mission: ``fly`` says once
     that logging stopped, naming --log and the file, and either flies to its budget or holds at
@@ -446,9 +457,10 @@ def test_a_full_disk_stops_the_log_and_the_flight_flies_on_or_holds_as_asked(
     monkeypatch.setattr(
         log_module,
         "open",
-        lambda *args, **kwargs: _FillingDisk(open(*args, **kwargs), 60),
+        lambda *args, **kwargs: _FillingDisk(open(*args, **kwargs), 40),
         raising=False,
     )
+    dry_run = short_dry_run
     log = dry_run["log"]
     result = flight_cli(
         *dry_run["fly"][len(CLI) :], "--log", log, "--planner", "greedy", "--on-log-failure", rule

@@ -704,9 +704,12 @@ async def _first_autopilot(mavsdk: Mavsdk, flight: _Flight) -> Any:
     flight.say(f"waiting for an autopilot on {url} (at most {timeout:g} s; Ctrl-C stops)")
     started = time.monotonic()
     search = asyncio.ensure_future(mavsdk.first_autopilot(timeout_s=timeout))
+    stopping = asyncio.ensure_future(flight.stop.wait())
     try:
         while not search.done():
-            await asyncio.wait({search}, timeout=every_s)
+            await asyncio.wait(
+                {search, stopping}, timeout=every_s, return_when=asyncio.FIRST_COMPLETED
+            )
             if flight.stop.is_set():
                 raise FlightError("interrupted while waiting for the autopilot")
             if not search.done():
@@ -716,6 +719,7 @@ async def _first_autopilot(mavsdk: Mavsdk, flight: _Flight) -> Any:
                 )
     finally:
         search.cancel()
+        stopping.cancel()
     system = search.result()
     if system is None:
         raise FlightError(
