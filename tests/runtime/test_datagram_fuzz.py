@@ -242,6 +242,18 @@ class TestDetectionFloods:
         # 0.3 of each slice: about 15 lines of 20 ms in a second, not 50
         assert 5 <= intake.handled <= 25, intake.counts()
 
+    def test_a_failing_handler_stops_the_intake_and_is_kept(self):
+        def fail(line):
+            if line == b"bad":
+                raise RuntimeError("a bug in the handler")
+
+        intake, seen, _ = self._flood(
+            self.LIMITS, [b"ok\nbad\nnever"], wait=lambda intake: time.sleep(0.3), handle=fail
+        )
+        assert "RuntimeError: a bug in the handler" in intake.error
+        assert [line for _, line in seen] == [b"ok", b"bad"]
+        assert intake.counts() == {"received": 3, "handled": 2, "dropped": {LEFT_AT_END: 1}}
+
     @FUZZ
     @given(
         datagrams=st.lists(
