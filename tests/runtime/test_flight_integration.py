@@ -325,12 +325,14 @@ def test_a_detection_flood_does_not_slow_the_setpoint_stream_and_every_line_is_c
 
 class _FillingDisk:
     """A log file on a disk that fills up: every write from the ``after``-th one after the
-    ``offboard started`` line fails with ENOSPC."""
+    ``offboard started`` line fails with ENOSPC (``after`` ``None``: every write)."""
 
     def __init__(self, file, after):
         self.file, self.after, self.left = file, after, None
 
     def write(self, text):
+        if self.after is None:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         if self.left is None and "offboard started" in text:
             self.left = self.after
         elif self.left is not None:
@@ -346,6 +348,18 @@ class _FillingDisk:
         self.file.close()
 
 
+def _fill_disk(monkeypatch, after):
+    """The log writer's files on a :class:`_FillingDisk`."""
+    import hptrack.runtime.log as log_module
+
+    monkeypatch.setattr(
+        log_module,
+        "open",
+        lambda *args, **kwargs: _FillingDisk(open(*args, **kwargs), after),
+        raising=False,
+    )
+
+
 @pytest.mark.parametrize("rule", ["continue", "hold"])
 def test_a_full_disk_stops_the_log_and_the_flight_flies_on_or_holds_as_asked(
     short_dry_run, flight_cli, monkeypatch, rule
@@ -353,14 +367,7 @@ def test_a_full_disk_stops_the_log_and_the_flight_flies_on_or_holds_as_asked(
     """The log writer's writes fail (ENOSPC) a few seconds into the mission: ``fly`` says once
     that logging stopped, naming --log and the file, and either flies to its budget or holds at
     once (--on-log-failure hold); both end in HOLD."""
-    import hptrack.runtime.log as log_module
-
-    monkeypatch.setattr(
-        log_module,
-        "open",
-        lambda *args, **kwargs: _FillingDisk(open(*args, **kwargs), 40),
-        raising=False,
-    )
+    _fill_disk(monkeypatch, 40)
     dry_run = short_dry_run
     log = dry_run["log"]
     result = flight_cli(
@@ -380,3 +387,17 @@ def test_a_full_disk_stops_the_log_and_the_flight_flies_on_or_holds_as_asked(
     else:
         assert result.code == 3, result.out + result.err
         assert "ended by log failure" in out and "--on-log-failure hold" in out
+
+
+def test_a_log_that_cannot_be_written_at_all_stops_a_hold_rule_flight_before_arming(
+    short_dry_run, flight_cli, monkeypatch
+):
+    _fill_disk(monkeypatch, None)
+    log = short_dry_run["log"]
+    result = flight_cli(*short_dry_run["fly"][len(CLI) :], "--log", log, "--on-log-failure", "hold")
+    assert result.code == 3, result.out + result.err
+    assert f"logging stopped: --log {log}" in " ".join(result.out.split())
+    assert "the mission log cannot be written" in result.err and "nothing was flown" in result.err
+    assert "arming" not in result.out
+    assert not log.exists()  # no empty file left behind
+    assert "takeoff" not in [m["mode"] for m in _stop_stub(short_dry_run)["modes"]]

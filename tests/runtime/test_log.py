@@ -114,3 +114,25 @@ def test_a_failed_write_stops_the_log_without_raising(tmp_path, monkeypatch):
     assert log.stopped == "the write failed (No space left on device)"
     assert log.unwritten == 7
     log.close()
+
+
+def test_a_log_whose_first_write_fails_leaves_no_empty_file(tmp_path, monkeypatch):
+    import errno
+
+    import hptrack.runtime.log as log_module
+
+    class Full:
+        def __init__(self, file):
+            self.file = file
+
+        def write(self, text):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def close(self):
+            self.file.close()
+
+    monkeypatch.setattr(log_module, "open", lambda *a, **k: Full(open(*a, **k)), raising=False)
+    path = tmp_path / "m.jsonl"
+    log = MissionLog(path)
+    log.write({"kind": "header", "version": LOG_VERSION})
+    assert log.stopped is not None and not path.exists()

@@ -174,6 +174,9 @@ class MissionLog:
             with contextlib.suppress(OSError):  # a full disk refuses the buffered rest too
                 self._file.close()
             self._file = None
+            if self.bytes_written == 0:  # not a single line: leave no empty file behind
+                with contextlib.suppress(OSError):
+                    self.path.unlink()
 
     def close(self) -> None:
         """Close the file (records stay in memory)."""

@@ -593,6 +593,10 @@ async def fly_mission(
             limits = await read_limits(system)
             controller = build(limits)
             flight.attach(controller)
+            if flight.log_failed():
+                raise FlightError(
+                    f"the mission log cannot be written ({log.stopped}); nothing was flown"
+                )
             sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             try:
                 sock.bind((host, port))
