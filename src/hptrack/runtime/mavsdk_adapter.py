@@ -408,7 +408,8 @@ class _Flight:
             return "offboard error", plain_error(
                 err, "switching to offboard", f"the vehicle stays in {self.mode_name()}"
             )
-        self.mono0, self.unix0 = time.monotonic(), time.time()
+        self.unix0 = time.time()  # first: the intake's thread stamps lines once mono0 is set
+        self.mono0 = time.monotonic()
         self.say(
             "offboard started: mission time 0",
             unix_time=self.unix0,
