@@ -146,7 +146,7 @@ def test_fuzz_datagrams_never_raise_and_are_all_counted(controller, lines):
 
 
 class TestDetectionFloods:
-    """Floods through :class:`DetectionIntake` on loopback: the handled rate stays at its
+    """Floods through `DetectionIntake` on loopback: the handled rate stays at its
     limit, a datagram gives at most its line limit, the queue stays bounded, and
     ``received == handled + dropped`` whatever arrives."""
 

@@ -349,7 +349,7 @@ class _FillingDisk:
 
 
 def _fill_disk(monkeypatch, after):
-    """The log writer's files on a :class:`_FillingDisk`."""
+    """The log writer's files on a `_FillingDisk`."""
     import hptrack.runtime.log as log_module
 
     monkeypatch.setattr(

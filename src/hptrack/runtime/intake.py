@@ -1,7 +1,7 @@
 """The detection intake of a flight: datagrams from the detection port to the controller, off
 the flight loop and bounded, so that no input load can starve the setpoint stream.
 
-A thread of its own (:class:`DetectionIntake`) reads the UDP socket, splits each datagram into
+A thread of its own (`DetectionIntake`) reads the UDP socket, splits each datagram into
 lines (a line is the text between newlines, blank ones are skipped) and hands at most
 ``lines_per_s`` lines per second to a handler (the flight's parser and the controller, which
 log each one), in slices of ``slice_s``. It stops handling for the rest of a slice once it has
@@ -10,15 +10,15 @@ spent ``busy_fraction`` of it, an overrun being paid in the next slices, so that
 itself never touches a detection.
 Lines beyond the bounds are dropped and counted by reason:
 
-* :data:`OVER_DATAGRAM`: the lines of a datagram after its first ``lines_per_datagram``;
-* :data:`QUEUE_FULL`: lines arriving while ``queue_lines`` lines wait (at most about a second of
+* `OVER_DATAGRAM`: the lines of a datagram after its first ``lines_per_datagram``;
+* `QUEUE_FULL`: lines arriving while ``queue_lines`` lines wait (at most about a second of
   handling, so that a queued line's time of arrival is still close to its age);
-* :data:`LEFT_AT_END`: lines still waiting when the intake stops.
+* `LEFT_AT_END`: lines still waiting when the intake stops.
 
 Every line received is either handed on or counted as dropped:
 ``received == handled + sum(dropped.values())``. Datagrams the system dropped before they were
 received (its receive buffer full) are counted apart, by
-:func:`~hptrack.runtime.network.kernel_drops`.
+`kernel_drops`.
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ class DetectionIntake:
     Args:
         sock: a bound UDP socket (the intake reads it, the caller closes it).
         handle: called with each line (bytes, stripped) and the clock's time at its arrival;
-            it must not raise (an exception stops the intake and is kept in :attr:`error`).
+            it must not raise (an exception stops the intake and is kept in `error`).
         clock: the time of arrival given to ``handle`` (mission time, or ``None`` before it).
         limits: the bounds.
     """
@@ -106,7 +106,7 @@ class DetectionIntake:
 
     def stop(self, timeout_s: float = 2.0) -> None:
         """Stop reading (the line being handled is finished); what still waits is dropped and
-        counted (:data:`LEFT_AT_END`)."""
+        counted (`LEFT_AT_END`)."""
         self._stop.set()
         self._thread.join(timeout_s)
         if not self._thread.is_alive():

@@ -6,8 +6,7 @@ Every record is a JSON object with ``kind`` (``header`` first, then ``odometry``
 s) when it was written, and ``seq`` its line number from 0. Non-finite numbers of rejected
 inputs are written as the strings ``"nan"``, ``"inf"``, ``"-inf"`` so that every line is strict
 JSON. :func:`read_log` reads a log back; a last line cut short by a crash or a kill is dropped
-and reported, so a log always replays up to where it ends. A file log never raises on a write:
-a failed write or its size limit stops it (:class:`MissionLog`), and it replays up to there.
+and reported, so a log always replays up to where it ends.
 """
 
 from __future__ import annotations
@@ -92,7 +91,7 @@ class MissionLog:
     The file is created at the first record, so a run that writes nothing leaves no file. A
     file log never raises on a write: when a write fails (a full disk) or the next line would
     take the file beyond ``max_bytes`` (then a last ``log stopped`` line says so), the file
-    stops growing, :attr:`stopped` says why and :attr:`unwritten` counts the records not in
+    stops growing, `stopped` says why and `unwritten` counts the records not in
     the file.
 
     Args:
@@ -100,7 +99,7 @@ class MissionLog:
             records in memory only.
         clock: wall clock for each record's ``wall`` field, s.
         max_bytes: size limit of the file, bytes (``None``: no limit).
-        keep_records: also keep every record in :attr:`records` (off for a long flight, whose
+        keep_records: also keep every record in `records` (off for a long flight, whose
             memory then stays bounded).
     """
 
@@ -294,7 +293,7 @@ def _depth(value: Any) -> int:
 def check_record(record: dict, where: str, header: bool = False) -> None:
     """Refuse a record whose fields replay cannot use: the fields of its kind missing or of
     the wrong type (text for a number), numbers out of range, or nested deeper than
-    :data:`MAX_LOG_DEPTH`. Other fields are compared, not used, and may hold anything.
+    `MAX_LOG_DEPTH`. Other fields are compared, not used, and may hold anything.
 
     Raises:
         InputError: one line naming the place, the field and the shortened value.
@@ -334,7 +333,7 @@ class LogContents:
 
 
 def read_log(path: str | Path) -> LogContents:
-    """Read a mission log written by :class:`MissionLog`.
+    """Read a mission log written by `MissionLog`.
 
     Raises:
         InputError: the file cannot be read, has no header, or has a malformed line other

@@ -8,23 +8,23 @@ its first tick (it compiles or loads its kernels then) and, meanwhile, arm and t
 mission altitude if asked (else the vehicle must already be armed and in the air); wait for the
 first plan; send a first setpoint (where the vehicle is, at the mission altitude) and start
 offboard mode. Mission time 0 is that moment. Then, until the budget's end: telemetry
-(``position_velocity_ned``) feeds :meth:`~hptrack.runtime.controller.MissionController.odometry`,
+(``position_velocity_ned``) feeds `odometry`,
 detections arriving as JSON lines on a UDP port feed ``detection``, and the controller's
 reference position and planned velocity are streamed at ``setpoint_rate_hz`` as offboard
 position setpoints with velocity feed-forward (converted to NED by
-:func:`~hptrack.runtime.frames.enu_to_ned`), so that PX4 flies the planned speed.
+`enu_to_ned`), so that PX4 flies the planned speed.
 
 Safe ends: the budget's end, Ctrl-C (or SIGTERM), a lost link (no telemetry for
 ``lost_link_s``), a setpoint beyond ``max_distance_m`` from home (the vehicle's position at the
 mission's start), an offboard error, or a controller error each stop the stream and switch the
 vehicle to hold (offboard stop) or to return-to-launch, wait for the flight mode to confirm it,
-and log and report why. Every MAVSDK error is told as one plain sentence (:func:`plain_error`):
+and log and report why. Every MAVSDK error is told as one plain sentence (`plain_error`):
 what happened, what the vehicle is doing now, what to do.
 
 Detection lines: ``{"id": "t1", "x": east_m, "y": north_m}`` with optional ``"t"`` (Unix time
 of the measurement, s; default the time of arrival) and ``"cov"`` (2x2 noise covariance, m^2).
 They are read and parsed in a thread of their own, within the bounds of
-:class:`~hptrack.runtime.intake.IntakeLimits` (:mod:`hptrack.runtime.intake`), so that no input
+`IntakeLimits` (`intake`), so that no input
 load slows the setpoint stream. A mission log that stops growing (a full disk, its size limit)
 is said once; the flight goes on, or holds if ``log_failure`` is ``"hold"``.
 """
@@ -702,7 +702,7 @@ async def fly_mission(
 
 async def _first_autopilot(mavsdk: Mavsdk, flight: _Flight) -> Any:
     """Wait for the first autopilot on the connection, saying at once what is awaited and
-    where, then every :data:`WAIT_PROGRESS_S`; a hint on what to start if none comes."""
+    where, then every `WAIT_PROGRESS_S`; a hint on what to start if none comes."""
     options = flight.options
     url, timeout = options.connection, options.connect_timeout_s
     every_s = min(WAIT_PROGRESS_S, timeout / 2)
@@ -794,7 +794,7 @@ def run_flight(
     on_status: Callable[[dict], None] = lambda status: None,
     on_message: Callable[[str], None] = lambda text: None,
 ) -> FlightResult:
-    """:func:`fly_mission` in its own event loop; Ctrl-C and SIGTERM end the mission safely
+    """`fly_mission` in its own event loop; Ctrl-C and SIGTERM end the mission safely
     (hold or return) instead of killing the program."""
 
     async def main() -> FlightResult:
