@@ -93,6 +93,8 @@ class DetectionIntake:
         """Lines handed on."""
         self.dropped: Counter[str] = Counter()
         """Lines dropped, by reason."""
+        self.dropped_total = 0
+        """Lines dropped, all reasons (read by other threads while the intake runs)."""
         self.error: str | None = None
         """The handler's traceback if it raised."""
         self._queue: deque[tuple[bytes, float | None]] = deque()
@@ -113,11 +115,6 @@ class DetectionIntake:
             self._drop(LEFT_AT_END, len(self._queue))
             self._queue.clear()
 
-    @property
-    def dropped_total(self) -> int:
-        """Lines dropped, all reasons."""
-        return sum(self.dropped.values())
-
     def counts(self) -> dict:
         """The counts as JSON data: ``received``, ``handled``, ``dropped`` by reason."""
         return {"received": self.received, "handled": self.handled, "dropped": dict(self.dropped)}
@@ -125,6 +122,7 @@ class DetectionIntake:
     def _drop(self, reason: str, lines: int) -> None:
         if lines > 0:
             self.dropped[reason] += lines
+            self.dropped_total += lines
 
     def receive(self, data: bytes, received_s: float | None) -> None:
         """Queue the lines of one datagram (what does not fit is dropped and counted)."""
