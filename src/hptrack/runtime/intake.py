@@ -8,6 +8,7 @@ log each one), in slices of ``slice_s``. It stops handling for the rest of a sli
 spent ``busy_fraction`` of it, an overrun being paid in the next slices, so that costly lines
 (late detections that refilter a long history) take no more of the processor. The flight loop
 itself never touches a detection.
+
 Lines beyond the bounds are dropped and counted by reason:
 
 * `OVER_DATAGRAM`: the lines of a datagram after its first ``lines_per_datagram``;
@@ -17,8 +18,7 @@ Lines beyond the bounds are dropped and counted by reason:
 
 Every line received is either handed on or counted as dropped:
 ``received == handled + sum(dropped.values())``. Datagrams the system dropped before they were
-received (its receive buffer full) are counted apart, by
-`kernel_drops`.
+received (its receive buffer full) are counted apart, by `network.kernel_drops`.
 """
 
 from __future__ import annotations
