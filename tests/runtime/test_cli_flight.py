@@ -155,3 +155,40 @@ def test_the_live_view_shows_dropped_detection_lines():
     console = Console(width=200, record=True)
     console.print(_live_view({**status, "dropped_lines": 0}))
     assert "dropped" not in console.export_text()
+
+
+@pytest.mark.slow  # a process of its own: its imports take most of its 10-20 s
+def test_ctrl_c_ends_the_wait_for_the_autopilot_at_once(example_path, tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    fly = subprocess.Popen(
+        [
+            *(sys.executable, "-m", "hptrack.cli.flight", "fly", str(example_path)),
+            *("--connection", f"udpin://127.0.0.1:{port}", "--detections"),
+            *(f"udp://127.0.0.1:{port}", "--connect-timeout", "120", "--no-live"),
+            *("--log", str(tmp_path / "l.jsonl")),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        first = fly.stdout.readline()  # said before any wait
+        assert first.startswith(f"waiting for an autopilot on udpin://127.0.0.1:{port}")
+        asked = time.monotonic()
+        fly.send_signal(signal.SIGINT)
+        out, err = fly.communicate(timeout=30)
+        stopped_after_s = time.monotonic() - asked
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+            fly.wait()
+    assert fly.returncode == 3, out + err
+    assert "interrupted while waiting for the autopilot" in err
+    assert stopped_after_s < 4.0  # not the 5 s between progress lines, nor the 120 s timeout
