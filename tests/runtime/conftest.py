@@ -19,3 +19,14 @@ def flight_scenario():
 def example_path():
     """Path of the paper-flight example."""
     return EXAMPLE
+
+
+@pytest.fixture
+def flight_cli(cli):
+    """The ``cli`` fixture with the flight commands registered."""
+    from hptrack.cli import app as app_module
+    from hptrack.cli.flight import register
+
+    if "fly" not in {command.name for command in app_module.app.registered_commands}:
+        register(app_module.app)
+    return cli

@@ -11,17 +11,6 @@ from hptrack.runtime.log import MissionLog
 from hptrack.runtime.simulated import SimulatedFaults, run_simulated
 
 
-@pytest.fixture
-def flight_cli(cli):
-    """The ``cli`` fixture with the flight commands registered."""
-    from hptrack.cli import app as app_module
-    from hptrack.cli.flight import register
-
-    if "fly" not in {command.name for command in app_module.app.registered_commands}:
-        register(app_module.app)
-    return cli
-
-
 def test_replay_writes_the_figure_and_the_summary(flight_cli, flight_scenario, tmp_path):
     path = tmp_path / "m.jsonl"
     log = MissionLog(path)
@@ -66,6 +55,8 @@ def test_replay_writes_the_figure_and_the_summary(flight_cli, flight_scenario, t
         (["fly", "{scenario}", "--detections", "udp://{busy}"], "the port is in use"),
         (["fly", "{scenario}", "--detections", "udp://10.254.254.1:5005"], "cannot receive"),
         (["fly", "{scenario}", "--first-plan-timeout", "0"], "--first-plan-timeout"),
+        (["fly", "{scenario}", "--on-log-failure", "panic"], "--on-log-failure 'panic'"),
+        (["fly", "{scenario}", "--log-max-mb", "0"], "--log-max-mb"),
         (["vehicle-sim", "{scenario}", "--param", "NOPE=1"], "--param 'NOPE=1'"),
         (["vehicle-sim", "{scenario}", "--gcs", "udpout://10.1.2.3:14550"], "loopback"),
         (["targets-sim", "{scenario}", "--mavlink", "udpin://{busy}"], "the port is in use"),
@@ -81,10 +72,13 @@ def test_bad_input_is_one_line_and_exit_code_2(flight_cli, example_path, tmp_pat
     assert len(result.error_lines) == 1 and message in result.err, result.err
 
 
-def test_fly_without_a_vehicle_gives_up_with_exit_code_3(flight_cli, example_path, tmp_path):
+def test_fly_without_a_vehicle_says_what_it_waits_for_then_gives_a_hint_and_no_log(
+    flight_cli, example_path, tmp_path
+):
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
+    log = tmp_path / "l.jsonl"
     result = flight_cli(
         "fly",
         example_path,
@@ -93,13 +87,20 @@ def test_fly_without_a_vehicle_gives_up_with_exit_code_3(flight_cli, example_pat
         "--detections",
         f"udp://127.0.0.1:{port}",
         "--connect-timeout",
-        "1",
+        "2",
         "--log",
-        tmp_path / "l.jsonl",
+        log,
         "--no-live",
     )
     assert result.code == 3, result.out + result.err
-    assert "no autopilot found" in result.err
+    out = " ".join(result.out.split())
+    waiting = f"waiting for an autopilot on udpin://127.0.0.1:{port} (at most 2 s; Ctrl-C stops)"
+    assert out.startswith(waiting)  # said at once, before anything else
+    assert "still waiting for an autopilot" in out
+    err = " ".join(result.err.split())
+    assert f"no autopilot found on udpin://127.0.0.1:{port} within 2 s" in err
+    assert "hptrack vehicle-sim SCENARIO" in err and "PX4 SITL" in err
+    assert not log.exists()  # no empty log left behind
 
 
 def test_the_planned_speed_is_the_vehicles_limit_only_when_asked():
@@ -131,3 +132,63 @@ def test_plain_errors_say_what_happened_what_the_vehicle_does_and_what_to_do():
         "failsafe."
     )
     assert "\n" not in text and "origin" not in text
+
+
+def test_the_live_view_shows_dropped_detection_lines():
+    from rich.console import Console
+
+    from hptrack.cli.flight import _live_view
+
+    status = {
+        "t": 12.0,
+        "budget": 60.0,
+        "plan": None,
+        "target_ids": ("p1",),
+        "rejected": {"detection: malformed": 3},
+        "dropped_lines": 4200,
+        "logdet": {"p1": 1.5},
+    }
+    console = Console(width=200, record=True)
+    console.print(_live_view(status))
+    text = console.export_text()
+    assert "detection: malformed 3; 4200 detection lines dropped" in text
+    console = Console(width=200, record=True)
+    console.print(_live_view({**status, "dropped_lines": 0}))
+    assert "dropped" not in console.export_text()
+
+
+@pytest.mark.slow  # a process of its own: its imports take most of its 10-20 s
+def test_ctrl_c_ends_the_wait_for_the_autopilot_at_once(example_path, tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    fly = subprocess.Popen(
+        [
+            *(sys.executable, "-m", "hptrack.cli.flight", "fly", str(example_path)),
+            *("--connection", f"udpin://127.0.0.1:{port}", "--detections"),
+            *(f"udp://127.0.0.1:{port}", "--connect-timeout", "120", "--no-live"),
+            *("--log", str(tmp_path / "l.jsonl")),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        first = fly.stdout.readline()  # said before any wait
+        assert first.startswith(f"waiting for an autopilot on udpin://127.0.0.1:{port}")
+        asked = time.monotonic()
+        fly.send_signal(signal.SIGINT)
+        out, err = fly.communicate(timeout=30)
+        stopped_after_s = time.monotonic() - asked
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+            fly.wait()
+    assert fly.returncode == 3, out + err
+    assert "interrupted while waiting for the autopilot" in err
+    assert stopped_after_s < 4.0  # not the 5 s between progress lines, nor the 120 s timeout

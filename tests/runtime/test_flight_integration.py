@@ -3,16 +3,17 @@ MAVLink through MAVSDK on loopback, a real-time mission with its first plan befo
 the planned speed flown, its safe ends, the replay of its log, and ``hptrack targets-sim`` fed by
 the stub's second telemetry link."""
 
+import errno
+import importlib.util
 import json
+import os
 import signal
-import socket
 import subprocess
-import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 pytest.importorskip("mavsdk")
 pytest.importorskip("pymavlink")
@@ -25,83 +26,39 @@ pytestmark = pytest.mark.slow
 BUDGET_S = 15.0
 LONG_BUDGET_S = 30.0
 """Long enough for straight legs at full speed (a first plan that stalled would show)."""
-CLI = [sys.executable, "-m", "hptrack.cli.flight"]
+SHORT_BUDGET_S = 8.0
+"""The shortest mission that still shows a flood or a full disk in flight."""
 
 
-def _free_udp_port():
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+def _benchmark(name):
+    """A script of ``benchmarks/``, as a module."""
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
-def _start_dry_run(tmp_path, example_path, budget, stub_args=()):
-    """A copy of the paper-flight example with ``budget``, free ports, and the vehicle stub
-    running."""
-    data = yaml.safe_load(example_path.read_text())
-    data["budget"] = budget
-    scenario = tmp_path / "flight.yaml"
-    scenario.write_text(yaml.safe_dump(data))
-    mav, det = _free_udp_port(), _free_udp_port()
-    stats = tmp_path / "vehicle.json"
-    stub = subprocess.Popen(
-        [
-            *CLI,
-            "vehicle-sim",
-            str(scenario),
-            "--mavlink",
-            f"udpout://127.0.0.1:{mav}",
-            "--detections",
-            f"udp://127.0.0.1:{det}",
-            "--duration",
-            "150",
-            "--stats",
-            str(stats),
-            *stub_args,
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    fly = [
-        *CLI,
-        "fly",
-        str(scenario),
-        "--connection",
-        f"udpin://127.0.0.1:{mav}",
-        "--detections",
-        f"udp://127.0.0.1:{det}",
-        "--altitude",
-        "5",
-        "--takeoff",
-        "--no-live",
-        "--connect-timeout",
-        "20",
-    ]
-    return {
-        "scenario": scenario,
-        "fly": fly,
-        "stub": stub,
-        "stats": stats,
-        "log": tmp_path / "flight.jsonl",
-        "detections_port": det,
-    }
-
-
-def _end(process):
-    """Stop ``process`` if it runs and close its pipes."""
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-    try:
-        process.communicate(timeout=10)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.communicate()
+_FLOOD = _benchmark("flight_flood")
+_free_udp_port = _FLOOD.free_udp_port
+_start_dry_run = _FLOOD.start_dry_run
+_end = _FLOOD.end_process
+_wait_for_offboard = _FLOOD.wait_for_offboard
+CLI = _FLOOD.CLI
 
 
 @pytest.fixture
 def dry_run(tmp_path, example_path):
     """A short copy of the paper-flight example, free ports, and the vehicle stub running."""
     run = _start_dry_run(tmp_path, example_path, BUDGET_S)
+    yield run
+    _end(run["stub"])
+
+
+@pytest.fixture
+def short_dry_run(tmp_path, example_path):
+    """The same with the shortest budget."""
+    run = _start_dry_run(tmp_path, example_path, SHORT_BUDGET_S)
     yield run
     _end(run["stub"])
 
@@ -167,6 +124,7 @@ def test_a_dry_run_plans_before_offboard_flies_the_planned_speed_ends_in_hold_an
     assert "ended by budget" in fly.stdout
     assert "first plan ready before offboard" in fly.stdout
     assert "planning with 8 m/s" in fly.stdout
+    assert "dropped" not in fly.stdout  # nothing was dropped, so no line says "0 dropped"
     stats = _stop_stub(long_dry_run)
     log = long_dry_run["log"]
 
@@ -228,15 +186,6 @@ def test_a_dry_run_plans_before_offboard_flies_the_planned_speed_ends_in_hold_an
     assert summary["mismatches"] == 0, summary["first_mismatches"]
     assert summary["U"] == end["U"] and summary["ended_by"] == "budget"
     assert figure.read_bytes()[:4] == b"\x89PNG"
-
-
-def _wait_for_offboard(path, timeout_s=90.0):
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if path.exists() and "offboard started" in path.read_text():
-            return
-        time.sleep(0.1)
-    raise AssertionError("offboard never started")
 
 
 @pytest.mark.parametrize("end", ["interrupt", "geofence", "lost link"])
@@ -337,3 +286,118 @@ def test_targets_sim_feeds_fly_from_the_vehicles_own_telemetry(tmp_path, example
     truth = {"p1": (30.5, 9.5, 3.0, 0.1), "p2": (29.5, -10.5, 3.0, -0.1)}[first["target"]]
     expected = np.array(truth[:2]) + first["t"] * np.array(truth[2:])
     assert np.hypot(*(np.asarray(first["position"]) - expected)) < 8.0  # 1 s offset + noise
+
+
+def test_a_detection_flood_does_not_slow_the_setpoint_stream_and_every_line_is_counted(
+    short_dry_run,
+):
+    """About 8,000 lines per second for 5 s of an 8 s mission, and one datagram of 1,700
+    lines: ``fly`` streams its own setpoints at its rate without a stall, and every line
+    received is logged or counted as dropped."""
+    dry_run = short_dry_run
+    log = dry_run["log"]
+    fly = subprocess.Popen(
+        [*dry_run["fly"], "--log", str(log), "--planner", "greedy"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        _wait_for_offboard(log)
+        sent = _FLOOD.flood(dry_run["detections_port"], 5.0, huge_at_s=2.5)
+        out, err = fly.communicate(timeout=60)
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+            fly.wait()
+    assert fly.returncode == 0, out + err
+    figures = _FLOOD.figures(log)
+    assert figures["ended_by"] == "budget" and figures["end_time_s"] == SHORT_BUDGET_S
+    assert figures["setpoint_rate_hz"] >= 18.0, figures
+    assert figures["max_setpoint_gap_s"] < 0.2, figures
+    counts = figures["detection_lines"]
+    assert counts["handled"] == figures["detection_records"]
+    assert counts["received"] == counts["handled"] + sum(counts["dropped"].values())
+    assert sent * 0.5 < counts["received"] <= sent + 1000  # plus the stub's own detections
+    assert counts["dropped"]["datagram over its line limit"] >= 1600 + 5 * 900
+    assert "dropped" in out  # said on the console because lines were dropped
+
+
+class _FillingDisk:
+    """A log file on a disk that fills up: every write from the ``after``-th one after the
+    ``offboard started`` line fails with ENOSPC (``after`` ``None``: every write)."""
+
+    def __init__(self, file, after):
+        self.file, self.after, self.left = file, after, None
+
+    def write(self, text):
+        if self.after is None:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        if self.left is None and "offboard started" in text:
+            self.left = self.after
+        elif self.left is not None:
+            if self.left == 0:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            self.left -= 1
+        return self.file.write(text)
+
+    def flush(self):
+        self.file.flush()
+
+    def close(self):
+        self.file.close()
+
+
+def _fill_disk(monkeypatch, after):
+    """The log writer's files on a `_FillingDisk`."""
+    import hptrack.runtime.log as log_module
+
+    monkeypatch.setattr(
+        log_module,
+        "open",
+        lambda *args, **kwargs: _FillingDisk(open(*args, **kwargs), after),
+        raising=False,
+    )
+
+
+@pytest.mark.parametrize("rule", ["continue", "hold"])
+def test_a_full_disk_stops_the_log_and_the_flight_flies_on_or_holds_as_asked(
+    short_dry_run, flight_cli, monkeypatch, rule
+):
+    """The log writer's writes fail (ENOSPC) a few seconds into the mission: ``fly`` says once
+    that logging stopped, naming --log and the file, and either flies to its budget or holds at
+    once (--on-log-failure hold); both end in HOLD."""
+    _fill_disk(monkeypatch, 40)
+    dry_run = short_dry_run
+    log = dry_run["log"]
+    result = flight_cli(
+        *dry_run["fly"][len(CLI) :], "--log", log, "--planner", "greedy", "--on-log-failure", rule
+    )
+    out = " ".join(result.out.split())
+    assert f"logging stopped: --log {log}: the write failed (No space left on device)" in out
+    assert "vehicle in HOLD (confirmed)" in out
+    assert _stop_stub(dry_run)["final_mode"] == "hold"
+    contents = read_log(log)  # what was written before the disk filled reads back
+    assert any(r.get("message", "").startswith("offboard started") for r in contents.records)
+    assert not any(r["kind"] == "end" for r in contents.records)
+    if rule == "continue":
+        assert result.code == 0, result.out + result.err
+        assert "ended by budget" in out
+        assert "logging stopped: the write failed" in out  # repeated in the summary
+    else:
+        assert result.code == 3, result.out + result.err
+        assert "ended by log failure" in out and "--on-log-failure hold" in out
+
+
+def test_a_log_that_cannot_be_written_at_all_stops_a_hold_rule_flight_before_arming(
+    short_dry_run, flight_cli, monkeypatch
+):
+    _fill_disk(monkeypatch, None)
+    log = short_dry_run["log"]
+    result = flight_cli(*short_dry_run["fly"][len(CLI) :], "--log", log, "--on-log-failure", "hold")
+    assert result.code == 3, result.out + result.err
+    assert f"logging stopped: --log {log}" in " ".join(result.out.split())
+    assert "the mission log cannot be written" in result.err and "nothing was flown" in result.err
+    assert "arming" not in result.out
+    assert not log.exists()  # no empty file left behind
+    assert "takeoff" not in [m["mode"] for m in _stop_stub(short_dry_run)["modes"]]

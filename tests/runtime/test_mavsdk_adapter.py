@@ -1,7 +1,9 @@
-"""The MAVSDK adapter's detection input: JSON lines over UDP into the controller."""
+"""The MAVSDK adapter's detection input: JSON lines over UDP, through the detection intake,
+into the controller."""
 
 import asyncio
 import json
+import socket
 import time
 
 import pytest
@@ -9,27 +11,53 @@ import pytest
 pytest.importorskip("mavsdk")
 from hptrack.interface import CurrentPlan  # noqa: E402
 from hptrack.runtime.controller import MissionController  # noqa: E402
+from hptrack.runtime.intake import DetectionIntake  # noqa: E402
 from hptrack.runtime.mavsdk_adapter import FlightOptions, _Flight  # noqa: E402
 from hptrack.runtime.worker import InlineRunner  # noqa: E402
 from hptrack.settings import NoSettings  # noqa: E402
 
 
+def _wait(condition, timeout_s=10.0):
+    end = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < end, "timed out"
+        time.sleep(0.01)
+
+
 def test_detection_datagrams_feed_the_controller_and_bad_lines_are_refused(flight_scenario):
     ctrl = MissionController(flight_scenario, _Still(), runner=InlineRunner())
     flight = _Flight(ctrl, FlightOptions(), lambda s: None, lambda m: None, asyncio.Event())
-    flight.on_datagram(b'{"id": "p1", "x": 30.0, "y": 10.0}')  # before offboard started
-    flight.mono0, flight.unix0 = time.monotonic() - 2.0, time.time() - 2.0
-    ctrl.odometry(2.0, [0.0, 0.0])
-    good = json.dumps(
-        {"id": "p1", "x": 36.0, "y": 10.0, "t": flight.unix0 + 1.5, "cov": [[2.0, 0.0], [0.0, 2.0]]}
-    )
-    flight.on_datagram(
-        "\n".join(
-            [good, "not json", '{"x": 1, "y": 2}', '{"id": "p2", "x": 30, "y": -10}']
-        ).encode()
-    )
-    flight.on_datagram(b"\xff\xfe")
-    assert flight.error is None
+    with (
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender,
+    ):
+        receiver.bind(("127.0.0.1", 0))
+        intake = DetectionIntake(receiver, flight.detection_line, flight.mission_time)
+        intake.start()
+        address = receiver.getsockname()
+        sender.sendto(b'{"id": "p1", "x": 30.0, "y": 10.0}', address)  # before offboard
+        _wait(lambda: intake.handled == 1)
+        flight.mono0, flight.unix0 = time.monotonic() - 2.0, time.time() - 2.0
+        ctrl.odometry(2.0, [0.0, 0.0])
+        good = json.dumps(
+            {
+                "id": "p1",
+                "x": 36.0,
+                "y": 10.0,
+                "t": flight.unix0 + 1.5,
+                "cov": [[2.0, 0.0], [0.0, 2.0]],
+            }
+        )
+        lines = [good, "not json", '{"x": 1, "y": 2}', "", '{"id": "p2", "x": 30, "y": -10}']
+        sender.sendto("\n".join(lines).encode(), address)
+        sender.sendto(b"\xff\xfe", address)
+        _wait(lambda: intake.handled == 6)
+        intake.stop()
+    assert intake.error is None and intake.counts() == {
+        "received": 6,
+        "handled": 6,
+        "dropped": {},
+    }
     assert ctrl.accepted["detection"] == 2
     assert dict(ctrl.rejected) == {"detection: before the start": 1, "detection: malformed": 3}
     stamps = {

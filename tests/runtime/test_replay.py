@@ -114,3 +114,18 @@ def test_a_threaded_real_time_run_replays_exactly(flight_scenario, tmp_path):
     summary = replay_log(path).summary
     assert summary["mismatches"] == 0, summary["first_mismatches"]
     assert summary["U"] == ctrl.end["U"] and summary["plans"] >= 5
+
+
+@pytest.mark.parametrize("limit_bytes", [60_000, 150_000])
+def test_a_log_stopped_at_its_size_limit_replays_up_to_there(
+    flight_scenario, tmp_path, limit_bytes
+):
+    path = tmp_path / "m.jsonl"
+    log = MissionLog(path, max_bytes=limit_bytes)
+    run_simulated(flight_scenario, make_planner("greedy"), seed=1, log=log)
+    log.close()
+    assert log.stopped is not None and path.stat().st_size <= limit_bytes
+    summary = replay_log(path).summary
+    assert summary["mismatches"] == 0, summary["first_mismatches"]
+    assert summary["ended_by"] == "log ended" and not summary["truncated"]
+    assert 0 < summary["ticks"] < flight_scenario.mission_spec().n_steps

@@ -100,9 +100,10 @@ def _live_view(status: dict) -> Group:
         f"{status.get('altitude_m', 0):.0f} m altitude",
     )
     rejected = status.get("rejected") or {}
-    head.add_row(
-        "refused inputs", escape(", ".join(f"{k} {v}" for k, v in rejected.items()) or "none")
-    )
+    refused = ", ".join(f"{k} {v}" for k, v in rejected.items()) or "none"
+    if status.get("dropped_lines"):
+        refused += f"; {status['dropped_lines']} detection lines dropped"
+    head.add_row("refused inputs", escape(refused))
     targets = Table(show_edge=False)
     targets.add_column("target")
     targets.add_column("log det Σxy", justify="right")
@@ -113,9 +114,13 @@ def _live_view(status: dict) -> Group:
 
 def fly(
     scenario_path: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario YAML file.")],
-    connection: Annotated[str, typer.Option(help="MAVSDK connection URL of the vehicle.")] = (
-        "udpin://0.0.0.0:14540"
-    ),
+    connection: Annotated[
+        str,
+        typer.Option(
+            help="MAVSDK connection URL of the vehicle (the default listens on loopback; "
+            "udpin://0.0.0.0:14540 listens on every interface)."
+        ),
+    ] = "udpin://127.0.0.1:14540",
     detections: Annotated[
         str, typer.Option(help="UDP address where detections arrive as JSON lines.")
     ] = "udp://127.0.0.1:5005",
@@ -138,6 +143,16 @@ def fly(
         Path | None,
         typer.Option("--log", help="Mission log (JSON lines); default hptrack-flight-TIME.jsonl."),
     ] = None,
+    log_max_mb: Annotated[
+        float, typer.Option(help="The mission log stops growing at this size, MB.")
+    ] = 1000.0,
+    on_log_failure: Annotated[
+        str,
+        typer.Option(
+            help="When the mission log stops growing (a full disk, --log-max-mb): continue "
+            "(say so and fly on) or hold (end the mission in hold)."
+        ),
+    ] = "continue",
     max_distance: Annotated[
         float, typer.Option(help="A setpoint farther than this from home ends the mission, m.")
     ] = 1000.0,
@@ -195,6 +210,7 @@ def fly(
     _positive(lost_link, "--lost-link", 0.0, 600.0)
     _positive(connect_timeout, "--connect-timeout", 0.0, 3600.0)
     _positive(first_plan_timeout, "--first-plan-timeout", 0.0, 86400.0)
+    _positive(log_max_mb, "--log-max-mb", 0.01, 1e7)
     settings = _controller_settings(deadline, stale_after)
     if planner_entry(planner).reads_truth:
         raise InputError(
@@ -213,6 +229,7 @@ def fly(
     from hptrack.runtime.links import bind_check, check_connection
     from hptrack.runtime.log import MissionLog
     from hptrack.runtime.mavsdk_adapter import (
+        LOG_FAILURES,
         FlightError,
         FlightOptions,
         VehicleLimits,
@@ -220,6 +237,10 @@ def fly(
     )
     from hptrack.runtime.network import udp_address
 
+    if on_log_failure not in LOG_FAILURES:
+        raise InputError(
+            f"--on-log-failure {on_log_failure[:40]!r}: expected {' or '.join(LOG_FAILURES)}"
+        )
     check_connection(connection)
     bind_check(*udp_address(detections, "--detections"), "--detections", detections)
     options = FlightOptions(
@@ -233,6 +254,7 @@ def fly(
         lost_link_s=lost_link,
         connect_timeout_s=connect_timeout,
         first_plan_timeout_s=first_plan_timeout,
+        log_failure=on_log_failure,
     )
     use_live = console.is_terminal if live is None else live
     view = Live(console=console, refresh_per_second=4, transient=False) if use_live else None
@@ -253,6 +275,7 @@ def fly(
         data = scenario.model_dump(mode="json")
         data["agent"]["speed"] = speed
         flown = parse_scenario(data, f"{scenario_path} with the vehicle's speed")
+        on_message(f"mission log: {log_path}")
         return MissionController(
             flown,
             make_planner(planner, planner_settings),
@@ -261,14 +284,14 @@ def fly(
             log=log,
             header={
                 "source": "fly",
-                "flight": options.__dict__,
+                "flight": options.as_json(),
                 "vehicle_limits": limits.__dict__,
                 "scenario_agent_speed": scenario.agent.speed,
             },
         )
 
-    log = MissionLog(log_path)
-    console.print(f"mission log: {escape(str(log_path))}")
+    # the file is created at the header, once the vehicle is connected
+    log = MissionLog(log_path, max_bytes=round(log_max_mb * 1e6), keep_records=False)
     try:
         if view is not None:
             view.start()
@@ -286,7 +309,8 @@ def fly(
             f"ended by {result.reason} ({result.detail}); vehicle {result.action}: "
             f"{result.confirmed or 'not confirmed'}; U = {end.get('U', math.nan):.3f} at "
             f"{end.get('time', 0.0):.1f} s; {result.setpoints_sent} setpoints "
-            f"({result.setpoint_rate_hz:.1f} Hz)"
+            f"({result.setpoint_rate_hz:.1f} Hz, largest gap {result.max_setpoint_gap_s:.2f} s)"
+            + (f"; logging stopped: {result.log_stopped}" if result.log_stopped else "")
         ),
         highlight=False,
     )

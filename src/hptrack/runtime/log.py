@@ -11,6 +11,7 @@ and reported, so a log always replays up to where it ends.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import threading
@@ -78,41 +79,112 @@ def log_array(value: Any) -> np.ndarray:
     return np.array(log_float(value))
 
 
+LOG_STOPPED = "log stopped"
+"""Kind of the last line a file log writes when it stops at its size limit."""
+_STOP_LINE_RESERVE_BYTES = 1024
+"""Room kept under the size limit for the ``log stopped`` line."""
+
+
 class MissionLog:
     """Writes records as JSON lines (flushed per line) and keeps them in memory.
 
+    The file is created at the first record, so a run that writes nothing leaves no file. A
+    file log never raises on a write: when a write fails (a full disk) or the next line would
+    take the file beyond ``max_bytes`` (then a last ``log stopped`` line says so), the file
+    stops growing, `stopped` says why and `unwritten` counts the records not in
+    the file.
+
     Args:
-        path: the file to write (created or truncated); ``None`` keeps the records in memory
-            only.
+        path: the file to write (created or truncated at the first record); ``None`` keeps the
+            records in memory only.
         clock: wall clock for each record's ``wall`` field, s.
+        max_bytes: size limit of the file, bytes (``None``: no limit).
+        keep_records: also keep every record in `records` (off for a long flight, whose
+            memory then stays bounded).
     """
 
     def __init__(
-        self, path: str | Path | None = None, clock: Callable[[], float] = time.time
+        self,
+        path: str | Path | None = None,
+        clock: Callable[[], float] = time.time,
+        max_bytes: int | None = None,
+        keep_records: bool = True,
     ) -> None:
         self.path = None if path is None else Path(path)
         self._clock = clock
         self._lock = threading.Lock()
+        self.max_bytes = max_bytes
+        self.keep_records = keep_records
         self.records: list[dict] = []
+        self.seq = 0
+        """Records written so far (the next one's ``seq``)."""
+        self.bytes_written = 0
+        self.stopped: str | None = None
+        """Why the file stopped growing (``None`` while it grows)."""
+        self.unwritten = 0
+        """Records not in the file because it stopped."""
         self._file: IO[str] | None = None
-        if self.path is not None:
-            self._file = open(self.path, "w", encoding="utf-8", buffering=1)  # noqa: SIM115
 
     def write(self, record: dict) -> dict:
         """Append ``record`` (``wall`` and ``seq`` are added) and flush it to the file."""
         with self._lock:
-            full = {**json_ready(record), "wall": self._clock(), "seq": len(self.records)}
-            if self._file is not None:
-                self._file.write(json.dumps(full, allow_nan=False) + "\n")
-                self._file.flush()
-            self.records.append(full)
+            full = {**json_ready(record), "wall": self._clock(), "seq": self.seq}
+            self.seq += 1
+            if self.path is not None:
+                self._write_line(full)
+            if self.keep_records:
+                self.records.append(full)
             return full
+
+    def _write_line(self, full: dict) -> None:
+        if self.stopped is not None:
+            self.unwritten += 1
+            return
+        line = json.dumps(full, allow_nan=False) + "\n"
+        size = len(line.encode("utf-8"))
+        try:
+            if self._file is None:
+                self._file = open(self.path, "w", encoding="utf-8")  # noqa: SIM115
+            if self.max_bytes is not None and (
+                self.bytes_written + size > self.max_bytes - _STOP_LINE_RESERVE_BYTES
+            ):
+                reason = f"it reached its size limit of {self.max_bytes} bytes"
+                stop = {
+                    "kind": LOG_STOPPED,
+                    "t": full.get("t"),
+                    "reason": reason,
+                    "wall": full["wall"],
+                    "seq": full["seq"],
+                }
+                self._file.write(json.dumps(stop) + "\n")
+                self._file.flush()
+                self._stop(reason)
+                return
+            self._file.write(line)
+            self._file.flush()
+            self.bytes_written += size
+        except OSError as err:
+            self._stop(f"the write failed ({err.strerror or err})")
+
+    def _stop(self, reason: str) -> None:
+        self.stopped = reason
+        self.unwritten += 1
+        if self._file is not None:
+            with contextlib.suppress(OSError):  # a full disk refuses the buffered rest too
+                self._file.close()
+            self._file = None
+            if self.bytes_written == 0:  # not a single line: leave no empty file behind
+                with contextlib.suppress(OSError):
+                    self.path.unlink()
 
     def close(self) -> None:
         """Close the file (records stay in memory)."""
         with self._lock:
             if self._file is not None:
-                self._file.close()
+                try:
+                    self._file.close()
+                except OSError as err:
+                    self.stopped = self.stopped or f"the write failed ({err.strerror or err})"
                 self._file = None
 
     def __enter__(self) -> MissionLog:

@@ -23,20 +23,26 @@ what happened, what the vehicle is doing now, what to do.
 
 Detection lines: ``{"id": "t1", "x": east_m, "y": north_m}`` with optional ``"t"`` (Unix time
 of the measurement, s; default the time of arrival) and ``"cov"`` (2x2 noise covariance, m^2).
+They are read and parsed in a thread of their own, within the bounds of
+`IntakeLimits` (`intake`), so that no input
+load slows the setpoint stream. A mission log that stops growing (a full disk, its size limit)
+is said once; the flight goes on, or holds if ``log_failure`` is ``"hold"``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import math
 import signal
+import socket
 import time
 import traceback
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -56,6 +62,7 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
 from hptrack.interface import InputError
 from hptrack.runtime.controller import MissionController
 from hptrack.runtime.frames import enu_to_ned, ned_to_enu
+from hptrack.runtime.intake import DetectionIntake, IntakeLimits
 from hptrack.runtime.links import connection_problem
 from hptrack.runtime.log import MissionLog
 from hptrack.runtime.network import (
@@ -75,7 +82,8 @@ class FlightOptions:
     """How ``hptrack fly`` connects and flies (m, s, Hz).
 
     Attributes:
-        connection: MAVSDK connection URL (``udpin://0.0.0.0:14540``, ``serial:///dev/...``).
+        connection: MAVSDK connection URL (``udpin://127.0.0.1:14540`` listens on loopback,
+            ``udpin://0.0.0.0:14540`` on every interface, ``serial:///dev/...``).
         detections: where detections arrive, ``udp://HOST:PORT`` (bound here).
         altitude_m: mission altitude above the local origin, m.
         max_distance_m: a setpoint farther than this from home ends the mission, m.
@@ -86,9 +94,12 @@ class FlightOptions:
         connect_timeout_s: wait for an autopilot at most this long, s.
         takeoff_timeout_s: wait for the take-off altitude at most this long, s.
         first_plan_timeout_s: wait for the planner's first plan at most this long, s.
+        log_failure: when the mission log stops growing, ``"continue"`` (say it and fly on)
+            or ``"hold"`` (end the mission in hold).
+        intake: the bounds of the detection intake (its slice is one setpoint period).
     """
 
-    connection: str = "udpin://0.0.0.0:14540"
+    connection: str = "udpin://127.0.0.1:14540"
     detections: str = "udp://127.0.0.1:5005"
     altitude_m: float = 30.0
     max_distance_m: float = 1000.0
@@ -99,6 +110,19 @@ class FlightOptions:
     connect_timeout_s: float = 30.0
     takeoff_timeout_s: float = 120.0
     first_plan_timeout_s: float = 600.0
+    log_failure: str = "continue"
+    intake: IntakeLimits = field(default_factory=IntakeLimits)
+
+    def as_json(self) -> dict:
+        """The options as JSON data (for the log's header)."""
+        return dataclasses.asdict(self)
+
+
+LOG_FAILURES = ("continue", "hold")
+"""What a flight does when its mission log stops growing."""
+WAIT_PROGRESS_S = 5.0
+"""How often ``fly`` says it is still waiting for the autopilot, s (at least twice in a shorter
+wait)."""
 
 
 @dataclass(frozen=True)
@@ -127,13 +151,16 @@ class FlightResult:
 
     Attributes:
         reason: ``"budget"``, ``"interrupted"``, ``"lost link"``, ``"geofence"``,
-            ``"offboard error"`` or ``"controller error"``.
+            ``"offboard error"``, ``"log failure"`` or ``"controller error"``.
         detail: one line with the figures.
         action: ``"hold"`` or ``"return to launch"``.
         confirmed: the flight mode telemetry reported after the switch, or ``None``.
         end: the controller's ``end`` record.
         setpoints_sent: offboard setpoints streamed.
         setpoint_rate_hz: their mean rate over the mission.
+        max_setpoint_gap_s: the longest time between two setpoints sent, s.
+        intake: the detection intake's counts (lines received, handled, dropped by reason).
+        log_stopped: why the mission log stopped growing, or ``None``.
         error: the traceback of a controller error.
     """
 
@@ -144,6 +171,9 @@ class FlightResult:
     end: dict
     setpoints_sent: int
     setpoint_rate_hz: float
+    max_setpoint_gap_s: float = 0.0
+    intake: dict = field(default_factory=dict)
+    log_stopped: str | None = None
     error: str | None = None
 
 
@@ -206,16 +236,6 @@ def _route_mavsdk_logs() -> None:
     log_subscribe(handler)
 
 
-class _Detections(asyncio.DatagramProtocol):
-    """JSON-line detections from UDP into the controller."""
-
-    def __init__(self, flight: _Flight) -> None:
-        self.flight = flight
-
-    def datagram_received(self, data: bytes, addr: tuple) -> None:
-        self.flight.on_datagram(data)
-
-
 class _Flight:
     def __init__(
         self,
@@ -234,17 +254,39 @@ class _Flight:
         self.unix0: float | None = None
         self.error: str | None = None
         self.sent = 0
+        self.max_gap_s = 0.0
         self.recent: deque[float] = deque(maxlen=200)
         self.home: np.ndarray | None = None
         self.early: list[dict] = []
+        self.intake: DetectionIntake | None = None
+        self.log_failure_said = False
 
-    def say(self, message: str, **fields: Any) -> None:
+    def say(self, message: str, *, show: bool = True, **fields: Any) -> None:
+        """Log ``message`` as a ``status`` record with ``fields``, and show it unless not
+        ``show``."""
         record = {"kind": "status", "t": self.mission_time(), "message": message, **fields}
         if self.controller is None:  # the log starts with the controller's header
             self.early.append({**record, "said_at_unix_s": time.time()})
         else:
             self.log.write(record)
-        self.on_message(message)
+        if show:
+            self.on_message(message)
+
+    def log_failed(self) -> bool:
+        """Say once that the mission log stopped growing; ``True`` if the flight must then
+        hold (``log_failure`` is ``"hold"``)."""
+        if self.log.stopped is None:
+            return False
+        hold = self.options.log_failure == "hold"
+        if not self.log_failure_said:
+            self.log_failure_said = True
+            then = (
+                "the mission ends in hold (--on-log-failure hold)"
+                if hold
+                else "the flight goes on without a log (--on-log-failure continue)"
+            )
+            self.on_message(f"logging stopped: --log {self.log.path}: {self.log.stopped}; {then}")
+        return hold
 
     def attach(self, controller: MissionController) -> None:
         """The mission's controller, built once the vehicle's limits are known; the messages
@@ -295,39 +337,28 @@ class _Flight:
 
         await asyncio.gather(modes(), armed(), in_air())
 
-    def on_datagram(self, data: bytes) -> None:
-        received = self.mission_time()
-        if received is None or self.controller is None:
-            if self.controller is not None:
-                self._guard(
-                    lambda: self.controller.bad_input(
-                        "detection",
-                        "before the start",
-                        "arrived before offboard started",
-                        data[:200],
-                    )
-                )
-            return
-        try:
-            text = data.decode("utf-8")
-        except UnicodeDecodeError:
-            self._guard(
-                lambda: self.controller.bad_input(
-                    "detection", "malformed", "a datagram that is not UTF-8 text", data[:200]
-                )
+    def detection_line(self, line: bytes, received: float | None) -> None:
+        """One line of a detection datagram, received at mission time ``received`` (``None``
+        before offboard started), into the controller (run by the detection intake)."""
+        controller = self.controller
+        if received is None:
+            controller.bad_input(
+                "detection", "before the start", "arrived before offboard started", line[:200]
             )
             return
-        for line in text.splitlines():
-            if line.strip():
-                self._guard(lambda line=line: self._detection_line(line, received))
-
-    def _detection_line(self, line: str, received: float) -> None:
-        parsed = parse_detection_line(line)
+        try:
+            text = line.decode("utf-8")
+        except UnicodeDecodeError:
+            controller.bad_input(
+                "detection", "malformed", "a line that is not UTF-8 text", line[:200]
+            )
+            return
+        parsed = parse_detection_line(text)
         if isinstance(parsed, Refusal):
-            self.controller.bad_input("detection", parsed.reason, parsed.detail, line[:200])
+            controller.bad_input("detection", parsed.reason, parsed.detail, text[:200])
             return
         t = received if parsed.stamp is None else parsed.stamp - self.unix0
-        self.controller.detection(t, parsed.target, parsed.position, parsed.covariance)
+        controller.detection(t, parsed.target, parsed.position, parsed.covariance)
 
     # --- the mission ----------------------------------------------------------------------
     async def wait_for(
@@ -355,6 +386,7 @@ class _Flight:
             "altitude_m": up,
             "distance_from_home_m": float(np.hypot(east - home[0], north - home[1])),
             "link_age_s": now - self.vehicle.received_at,
+            "dropped_lines": 0 if self.intake is None else self.intake.dropped_total,
         }
 
     def position_enu(self) -> np.ndarray:
@@ -376,7 +408,8 @@ class _Flight:
             return "offboard error", plain_error(
                 err, "switching to offboard", f"the vehicle stays in {self.mode_name()}"
             )
-        self.mono0, self.unix0 = time.monotonic(), time.time()
+        self.unix0 = time.time()  # first: the intake's thread stamps lines once mono0 is set
+        self.mono0 = time.monotonic()
         self.say(
             "offboard started: mission time 0",
             unix_time=self.unix0,
@@ -386,13 +419,18 @@ class _Flight:
         period = 1.0 / options.setpoint_rate_hz
         next_at = self.mono0
         next_status = self.mono0
+        last_sent: float | None = None
         while True:
             now = time.monotonic()
             t = now - self.mono0
+            if self.error is None and self.intake is not None:
+                self.error = self.intake.error
             if self.error is not None:
                 return "controller error", self.error.strip().splitlines()[-1]
             if self.stop.is_set():
                 return "interrupted", "Ctrl-C or a termination signal"
+            if self.log_failed():
+                return "log failure", f"the mission log stopped ({self.log.stopped})"
             link_age = now - self.vehicle.received_at
             if link_age > options.lost_link_s:
                 return "lost link", (
@@ -423,7 +461,11 @@ class _Flight:
                     err, "sending a setpoint", f"the vehicle reports {self.mode_name()}"
                 )
             self.sent += 1
-            self.recent.append(time.monotonic())
+            sent_at = time.monotonic()
+            if last_sent is not None:
+                self.max_gap_s = max(self.max_gap_s, sent_at - last_sent)
+            last_sent = sent_at
+            self.recent.append(sent_at)
             if now >= next_status:
                 self.on_status(self.status(t, home))
                 next_status = now + 0.25
@@ -526,23 +568,17 @@ async def fly_mission(
     flight = _Flight(None, options, on_status, on_message, stop, log)
     host, port = udp_address(options.detections, "--detections")
     _route_mavsdk_logs()
-    loop = asyncio.get_running_loop()
     tasks: list[asyncio.Task] = []
-    transport = None
+    sock: socket.socket | None = None
+    intake: DetectionIntake | None = None
     config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
     async with Mavsdk(config) as mavsdk:
         try:
-            flight.say(f"connecting to {options.connection}")
             try:
                 await mavsdk.add_any_connection(options.connection)
             except MavsdkConnectionError as err:
                 raise InputError(connection_problem(options.connection, str(err))) from None
-            system = await mavsdk.first_autopilot(timeout_s=options.connect_timeout_s)
-            if system is None:
-                raise FlightError(
-                    f"no autopilot found on {options.connection} within "
-                    f"{options.connect_timeout_s:g} s"
-                )
+            system = await _first_autopilot(mavsdk, flight)
             telemetry = TelemetryAsync(system)
             tasks = [
                 asyncio.create_task(flight.watch_position(telemetry)),
@@ -558,17 +594,26 @@ async def fly_mission(
             limits = await read_limits(system)
             controller = build(limits)
             flight.attach(controller)
-            try:
-                transport, _ = await loop.create_datagram_endpoint(
-                    lambda: _Detections(flight), local_addr=(host, port)
+            if flight.log_failed():
+                raise FlightError(
+                    f"the mission log cannot be written ({log.stopped}); nothing was flown"
                 )
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                sock.bind((host, port))
             except OSError as err:
                 raise InputError(
                     f"--detections {options.detections!r}: cannot receive there ({err.strerror})"
                 ) from None
-            detection_socket = transport.get_extra_info("socket")
-            enlarge_receive_buffer(detection_socket)
-            drops_before = kernel_drops(detection_socket)
+            enlarge_receive_buffer(sock)
+            drops_before = kernel_drops(sock)
+            intake = flight.intake = DetectionIntake(
+                sock,
+                flight.detection_line,
+                flight.mission_time,
+                dataclasses.replace(options.intake, slice_s=1.0 / options.setpoint_rate_hz),
+            )
+            intake.start()
             started = time.monotonic()
             controller.prepare(flight.position_enu())
             flight.say("computing the first plan (the planner compiles or loads its kernels)")
@@ -605,22 +650,33 @@ async def fly_mission(
             )
             if stop.is_set():
                 raise FlightError("interrupted before the mission started")
+            if flight.log_failed():
+                raise FlightError(
+                    f"the mission log stopped before the mission started ({log.stopped}); "
+                    "the vehicle stays in its current mode (offboard never started)"
+                )
             try:
                 reason, detail = await flight.fly(system)
             except Exception:  # noqa: BLE001 - end safely first, report after
                 flight.error = traceback.format_exc()
                 reason, detail = "controller error", flight.error.strip().splitlines()[-1]
-            drops_after = kernel_drops(detection_socket)
-            if drops_before is not None and drops_after is not None:
-                dropped = drops_after - drops_before
-                flight.say(
-                    f"{dropped} detection datagrams dropped by the system (receive buffer full)",
-                    dropped_datagrams=dropped,
-                )
+            flown_s = flight.mission_time()
+            flight.say(
+                f"{flight.sent} setpoints sent in {flown_s:.1f} s, largest gap "
+                f"{flight.max_gap_s:.3f} s",
+                show=False,
+                setpoints=flight.sent,
+                mission_time_s=flown_s,
+                max_gap_s=flight.max_gap_s,
+            )
+            intake.stop()
+            _say_intake(flight, intake, drops_before, kernel_drops(sock))
             action, confirmed = await flight.safe_end(system, reason, detail)
         finally:
-            if transport is not None:
-                transport.close()
+            if intake is not None:
+                intake.stop()
+            if sock is not None:
+                sock.close()
             for task in tasks:
                 task.cancel()
             for task in tasks:
@@ -637,8 +693,68 @@ async def fly_mission(
         controller.end or {},
         flight.sent,
         flight.sent / t if t > 0 else 0.0,
+        flight.max_gap_s,
+        intake.counts(),
+        log.stopped,
         flight.error,
     )
+
+
+async def _first_autopilot(mavsdk: Mavsdk, flight: _Flight) -> Any:
+    """Wait for the first autopilot on the connection, saying at once what is awaited and
+    where, then every `WAIT_PROGRESS_S`; a hint on what to start if none comes."""
+    options = flight.options
+    url, timeout = options.connection, options.connect_timeout_s
+    every_s = min(WAIT_PROGRESS_S, timeout / 2)
+    flight.say(f"waiting for an autopilot on {url} (at most {timeout:g} s; Ctrl-C stops)")
+    started = time.monotonic()
+    search = asyncio.ensure_future(mavsdk.first_autopilot(timeout_s=timeout))
+    stopping = asyncio.ensure_future(flight.stop.wait())
+    try:
+        while not search.done():
+            await asyncio.wait(
+                {search, stopping}, timeout=every_s, return_when=asyncio.FIRST_COMPLETED
+            )
+            if flight.stop.is_set():
+                raise FlightError("interrupted while waiting for the autopilot")
+            if not search.done():
+                flight.say(
+                    f"still waiting for an autopilot on {url} "
+                    f"({time.monotonic() - started:.0f} of {timeout:g} s)"
+                )
+    finally:
+        search.cancel()
+        stopping.cancel()
+    system = search.result()
+    if system is None:
+        raise FlightError(
+            f"no autopilot found on {url} within {timeout:g} s: start the vehicle first (for "
+            "a dry run, hptrack vehicle-sim SCENARIO in another terminal; or PX4 SITL, which "
+            "sends to 127.0.0.1:14540), or give the vehicle's address with --connection"
+        )
+    return system
+
+
+def _say_intake(
+    flight: _Flight, intake: DetectionIntake, drops_before: int | None, drops_after: int | None
+) -> None:
+    """Log the detection intake's counts; show them when lines or datagrams were dropped."""
+    counts = intake.counts()
+    dropped = intake.dropped_total
+    reasons = ", ".join(f"{n} {why}" for why, n in sorted(intake.dropped.items()))
+    flight.say(
+        f"detection lines: {intake.received} received, {intake.handled} logged, {dropped} "
+        f"dropped{f' ({reasons})' if reasons else ''}",
+        show=dropped > 0,
+        detection_lines=counts,
+    )
+    if drops_before is not None and drops_after is not None:
+        datagrams = drops_after - drops_before
+        flight.say(
+            f"{datagrams} detection datagrams dropped by the system (receive buffer full)",
+            show=datagrams > 0,
+            dropped_datagrams=datagrams,
+        )
 
 
 async def _take_off(flight: _Flight, system: Any) -> None:
