@@ -82,3 +82,26 @@ class _Still:
 
     def episode_info(self):
         return {}
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"altitude_m": -5.0}, "altitude_m must be a number in (0, 10000], got -5.0"),
+        ({"setpoint_rate_hz": 5.0}, "setpoint_rate_hz must be a number in [10, 1000], got 5.0"),
+        ({"setpoint_rate_hz": 10.0}, None),
+        ({"lost_link_s": float("nan")}, "lost_link_s must be a number in (0, 600], got nan"),
+        ({"max_distance_m": True}, "max_distance_m must be a number"),
+        ({"first_plan_timeout_s": 86400.0}, None),
+        ({"log_failure": "panic"}, "log_failure 'panic': expected continue or hold"),
+    ],
+)
+def test_flight_options_hold_their_own_bounds(changes, message):
+    """The bounds of a flight's options are the library's, so Python users get the same one-line
+    errors as ``hptrack fly`` (which names the options by their flags)."""
+    if message is None:
+        assert FlightOptions(**changes)
+        return
+    with pytest.raises(ValueError) as err:
+        FlightOptions(**changes)
+    assert str(err.value).startswith(message) and "\n" not in str(err.value)

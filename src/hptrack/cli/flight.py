@@ -56,6 +56,24 @@ def _controller_settings(deadline: float, stale_after: float) -> Any:
         raise InputError(message.replace("stale_odometry_s", "--stale-after")) from None
 
 
+FLIGHT_FLAGS = {
+    "altitude_m": "--altitude",
+    "max_distance_m": "--max-distance",
+    "setpoint_rate_hz": "--rate",
+    "lost_link_s": "--lost-link",
+    "connect_timeout_s": "--connect-timeout",
+    "first_plan_timeout_s": "--first-plan-timeout",
+    "log_failure": "--on-log-failure",
+}
+"""`FlightOptions` fields by the ``fly`` option that sets them."""
+
+
+def _flag_names(message: str) -> str:
+    """A `FlightOptions` message with its field named as the ``fly`` option."""
+    field_name = message.split(" ", 1)[0]
+    return FLIGHT_FLAGS.get(field_name, field_name) + message[len(field_name) :]
+
+
 def _positive(value: float, option: str, low: float = 0.0, high: float = math.inf) -> None:
     if not (math.isfinite(value) and low < value <= high):
         raise InputError(f"{option} must be a number in ({low:g}, {high:g}], got {value}")
@@ -203,13 +221,6 @@ def fly(
     """Fly SCENARIO on a PX4 vehicle: offboard position setpoints from the mission
     controller, detections as JSON lines over UDP, a safe end in hold (or return)."""
     check_seed(seed)
-    _positive(altitude, "--altitude", 0.0, 1e4)
-    _positive(max_distance, "--max-distance", 0.0, 1e6)
-    if not (math.isfinite(rate) and 10.0 <= rate <= 1000.0):
-        raise InputError(f"--rate must be 10 to 1000 setpoints per second, got {rate}")
-    _positive(lost_link, "--lost-link", 0.0, 600.0)
-    _positive(connect_timeout, "--connect-timeout", 0.0, 3600.0)
-    _positive(first_plan_timeout, "--first-plan-timeout", 0.0, 86400.0)
     _positive(log_max_mb, "--log-max-mb", 0.01, 1e7)
     settings = _controller_settings(deadline, stale_after)
     if planner_entry(planner).reads_truth:
@@ -229,7 +240,6 @@ def fly(
     from hptrack.runtime.links import bind_check, check_connection
     from hptrack.runtime.log import MissionLog
     from hptrack.runtime.mavsdk_adapter import (
-        LOG_FAILURES,
         FlightError,
         FlightOptions,
         VehicleLimits,
@@ -237,25 +247,24 @@ def fly(
     )
     from hptrack.runtime.network import udp_address
 
-    if on_log_failure not in LOG_FAILURES:
-        raise InputError(
-            f"--on-log-failure {on_log_failure[:40]!r}: expected {' or '.join(LOG_FAILURES)}"
+    try:
+        options = FlightOptions(
+            connection=connection,
+            detections=detections,
+            altitude_m=altitude,
+            max_distance_m=max_distance,
+            takeoff=takeoff,
+            return_to_launch=return_to_launch,
+            setpoint_rate_hz=rate,
+            lost_link_s=lost_link,
+            connect_timeout_s=connect_timeout,
+            first_plan_timeout_s=first_plan_timeout,
+            log_failure=on_log_failure,
         )
+    except ValueError as err:
+        raise InputError(_flag_names(str(err))) from None
     check_connection(connection)
     bind_check(*udp_address(detections, "--detections"), "--detections", detections)
-    options = FlightOptions(
-        connection=connection,
-        detections=detections,
-        altitude_m=altitude,
-        max_distance_m=max_distance,
-        takeoff=takeoff,
-        return_to_launch=return_to_launch,
-        setpoint_rate_hz=rate,
-        lost_link_s=lost_link,
-        connect_timeout_s=connect_timeout,
-        first_plan_timeout_s=first_plan_timeout,
-        log_failure=on_log_failure,
-    )
     use_live = console.is_terminal if live is None else live
     view = Live(console=console, refresh_per_second=4, transient=False) if use_live else None
 

@@ -77,6 +77,21 @@ logger = logging.getLogger(__name__)
 mavsdk_logger = logging.getLogger("mavsdk")
 
 
+LOG_FAILURES = ("continue", "hold")
+"""What a flight does when its mission log stops growing."""
+FLIGHT_BOUNDS: dict[str, tuple[float, float, bool]] = {
+    "altitude_m": (0.0, 1e4, False),
+    "max_distance_m": (0.0, 1e6, False),
+    "setpoint_rate_hz": (10.0, 1000.0, True),
+    "lost_link_s": (0.0, 600.0, False),
+    "connect_timeout_s": (0.0, 3600.0, False),
+    "takeoff_timeout_s": (0.0, 86400.0, False),
+    "first_plan_timeout_s": (0.0, 86400.0, False),
+}
+"""The numbers `FlightOptions` accepts: ``(low, high, low included)``, the value at most
+``high`` (m, Hz, s)."""
+
+
 @dataclass(frozen=True)
 class FlightOptions:
     """How ``hptrack fly`` connects and flies (m, s, Hz).
@@ -113,13 +128,25 @@ class FlightOptions:
     log_failure: str = "continue"
     intake: IntakeLimits = field(default_factory=IntakeLimits)
 
+    def __post_init__(self) -> None:
+        """Raises `ValueError` (one line naming the field and the value) for a number outside
+        `FLIGHT_BOUNDS` or an unknown ``log_failure``."""
+        for name, (low, high, closed) in FLIGHT_BOUNDS.items():
+            value = getattr(self, name)
+            inside = low <= value if closed else low < value
+            if isinstance(value, bool) or not (math.isfinite(value) and inside and value <= high):
+                interval = f"{'[' if closed else '('}{low:g}, {high:g}]"
+                raise ValueError(f"{name} must be a number in {interval}, got {value}")
+        if self.log_failure not in LOG_FAILURES:
+            raise ValueError(
+                f"log_failure {self.log_failure[:40]!r}: expected {' or '.join(LOG_FAILURES)}"
+            )
+
     def as_json(self) -> dict:
         """The options as JSON data (for the log's header)."""
         return dataclasses.asdict(self)
 
 
-LOG_FAILURES = ("continue", "hold")
-"""What a flight does when its mission log stops growing."""
 WAIT_PROGRESS_S = 5.0
 """How often ``fly`` says it is still waiting for the autopilot, s (at least twice in a shorter
 wait)."""
