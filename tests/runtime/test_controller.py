@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from hptrack.interface import CurrentPlan, Subtask
-from hptrack.runtime.controller import ControllerSettings, MissionController, plan_json
+from hptrack.runtime.controller import MissionController, plan_json
+from hptrack.runtime.inputs import ControllerSettings
 from hptrack.runtime.worker import InlineRunner, ThreadedRunner
 from hptrack.settings import NoSettings
 

@@ -10,8 +10,7 @@ import pytest
 from hptrack.interface import CurrentPlan
 from hptrack.runtime.beliefs import BeliefTimeline
 from hptrack.runtime.clock import MissionClock, step_of
-from hptrack.runtime.controller import ControllerSettings
-from hptrack.runtime.inputs import InputChecks, mission_area, raw, vector
+from hptrack.runtime.inputs import ControllerSettings, InputChecks, mission_area, raw, vector
 from hptrack.runtime.journal import Journal
 from hptrack.runtime.record import MissionHistory
 from hptrack.runtime.worker import (

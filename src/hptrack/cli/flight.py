@@ -47,7 +47,7 @@ EXIT_ABORTED = 3
 
 
 def _controller_settings(deadline: float, stale_after: float) -> Any:
-    from hptrack.runtime.controller import ControllerSettings
+    from hptrack.runtime.inputs import ControllerSettings
 
     try:
         return ControllerSettings(planner_deadline_s=deadline, stale_odometry_s=stale_after)

@@ -3,8 +3,9 @@ JSON-lines log and replay, the simulated-clock runner with faults, and the adapt
 offboard control, a pymavlink vehicle stub), which import their optional packages themselves.
 """
 
-from hptrack.runtime.controller import ControllerSettings, MissionController, Setpoint
+from hptrack.runtime.controller import MissionController, Setpoint
 from hptrack.runtime.frames import enu_to_ned, ned_to_enu
+from hptrack.runtime.inputs import ControllerSettings
 from hptrack.runtime.log import MissionLog, read_log
 from hptrack.runtime.simulated import SimulatedFaults, SimulatedRun, run_simulated
 

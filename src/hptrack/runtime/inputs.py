@@ -14,17 +14,42 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from hptrack.models.measurement import check_noise_covariance
 from hptrack.models.mission import STEP_TOLERANCE
 from hptrack.runtime.beliefs import BeliefTimeline
 from hptrack.scenario.model import Scenario
 
-if TYPE_CHECKING:
-    from hptrack.runtime.controller import ControllerSettings
+
+class ControllerSettings(BaseModel):
+    """How the controller treats time and bad input (s, m).
+
+    Attributes:
+        reorder_tolerance_s: a detection up to this much older than the newest one is filtered
+            in its time order; an older one is refused.
+        future_tolerance_s: a detection stamped more than this ahead of the controller's
+            clock (the newest odometry, setpoint or detection time) is refused.
+        stale_odometry_s: without odometry for longer than this, ``setpoint`` holds.
+        planner_deadline_s: a planner call not back within this is late (logged; the
+            fallback decision is flown meanwhile).
+        max_speed_factor: odometry implying a speed above this times the agent's speed is a
+            jump and is refused.
+        jump_slack_m: distance allowed on top of that speed (position noise), m.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    reorder_tolerance_s: Annotated[float, Field(ge=0.0, le=60.0)] = 2.0
+    future_tolerance_s: Annotated[float, Field(ge=0.0, le=60.0)] = 0.5
+    stale_odometry_s: Annotated[float, Field(gt=0.0, le=600.0)] = 1.0
+    planner_deadline_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 1.0
+    max_speed_factor: Annotated[float, Field(ge=1.0, le=100.0)] = 2.0
+    jump_slack_m: Annotated[float, Field(ge=0.0, le=1e4)] = 3.0
+
 
 Problem = tuple[str, str]
 """A refusal: its reason and one line of figures."""

@@ -28,7 +28,8 @@ from pydantic import ValidationError
 
 from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation, Planner
 from hptrack.registry import make_planner, planner_settings
-from hptrack.runtime.controller import ControllerSettings, MissionController
+from hptrack.runtime.controller import MissionController
+from hptrack.runtime.inputs import ControllerSettings
 from hptrack.runtime.log import MissionLog, check_record, log_array, log_float, read_log
 from hptrack.runtime.worker import ReplayRunner
 from hptrack.scenario.io import format_validation_error, parse_scenario

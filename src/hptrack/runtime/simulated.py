@@ -30,7 +30,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from hptrack.interface import InputError, Planner
-from hptrack.runtime.controller import ControllerSettings, MissionController
+from hptrack.runtime.controller import MissionController
+from hptrack.runtime.inputs import ControllerSettings
 from hptrack.runtime.log import MissionLog
 from hptrack.runtime.worker import InlineRunner
 from hptrack.runtime.world import TrueTargets
