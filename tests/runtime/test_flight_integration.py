@@ -167,6 +167,7 @@ def test_a_dry_run_plans_before_offboard_flies_the_planned_speed_ends_in_hold_an
     assert "ended by budget" in fly.stdout
     assert "first plan ready before offboard" in fly.stdout
     assert "planning with 8 m/s" in fly.stdout
+    assert "datagrams dropped" not in fly.stdout  # none lost: nothing to say
     stats = _stop_stub(long_dry_run)
     log = long_dry_run["log"]
 

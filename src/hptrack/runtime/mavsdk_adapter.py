@@ -611,7 +611,8 @@ async def fly_mission(
                 flight.error = traceback.format_exc()
                 reason, detail = "controller error", flight.error.strip().splitlines()[-1]
             drops_after = kernel_drops(detection_socket)
-            if drops_before is not None and drops_after is not None:
+            # said only when some were lost (the counts are known on Linux only)
+            if drops_before is not None and drops_after is not None and drops_after > drops_before:
                 dropped = drops_after - drops_before
                 flight.say(
                     f"{dropped} detection datagrams dropped by the system (receive buffer full)",
