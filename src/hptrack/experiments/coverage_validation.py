@@ -48,6 +48,7 @@ from hptrack.coverage.sharp_estimator import SharpEstimate
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.experiments.workers import worker_pool
 from hptrack.interface import InputError, MissionSpec
+from hptrack.jsonout import json_text
 from hptrack.models.mission import motion_noise_factors_on
 from hptrack.models.motion import advance_true_state
 from hptrack.scenario.random import random_mean, random_prior
@@ -530,7 +531,7 @@ def write_reports(
     """``mape.md`` (the table), ``mape.csv`` (every summary figure per delay) and
     ``mape-both.json`` (:func:`mape_json_both`)."""
     (out_dir / "mape.md").write_text(table_markdown(summary, wall_time))
-    (out_dir / "mape-both.json").write_text(json.dumps(mape_json_both(summary), indent=2) + "\n")
+    (out_dir / "mape-both.json").write_text(json_text(mape_json_both(summary), indent=2) + "\n")
     keys = ["delay", *next(iter(summary.values())).keys()]
     with (out_dir / "mape.csv").open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=keys)
