@@ -91,3 +91,26 @@ def test_the_share_of_the_gap_closed():
     assert gaps["mcts"] == {6: 75.0, 12: 50.0}
     assert gaps["greedy"] == {6: 0.0, 12: 0.0} and gaps["clairvoyant"] == {6: 100.0, 12: 100.0}
     assert gap_closed({"greedy": summary["greedy"]}) == {}
+
+
+def test_a_target_out_of_reach_is_flown_at_with_a_finite_stay():
+    """3000 m away at 30 m/s, 60 s of budget: no target can be met in time, so the agent flies
+    straight at the nearest and plans to stay there for the budget left (60 s, not inf)."""
+    record = run_episode(_one_target(3000.0), ClairvoyantPlanner())
+    assert record.info["visits"] == [{"step": 0, "target_index": 0, "stay_s": 60.0}]
+    np.testing.assert_allclose(record.agent_path[-1], [60.0 * 30.0, 0.0], atol=1e-9)
+    assert not record.detections.any()
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_a_plan_of_no_time_ranks_first_without_a_warning():
+    """Two static targets already in the footprint: the two visits without a stay take no time,
+    an infinite rate; the first of them (target 0, no stay) is flown, with no division
+    warning."""
+    scenario = _one_target(0.0, budget=5.0)
+    targets = [
+        scenario.targets[0].model_copy(update={"id": tid, "mean": m, "truth": m})
+        for tid, m in (("a", (0.0, 10.0, 0.0, 0.0)), ("b", (0.0, -10.0, 0.0, 0.0)))
+    ]
+    record = run_episode(scenario.model_copy(update={"targets": targets}), ClairvoyantPlanner())
+    assert record.info["visits"][0] == {"step": 0, "target_index": 0, "stay_s": 0.0}

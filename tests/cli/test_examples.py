@@ -1,5 +1,6 @@
 """``hptrack examples`` lists and copies the shipped examples; the small ones run as copied."""
 
+import re
 import subprocess
 import sys
 
@@ -82,3 +83,16 @@ def test_simulated_flight_example_finishes_its_mission(cli, tmp_path):
     cli("examples", "fly_simulated.py", "paper-flight.yaml", "--to", str(tmp_path))
     out = run_example(tmp_path, "fly_simulated.py")
     assert out.startswith("U = ") and "inputs rejected" in out
+
+
+def test_the_commands_in_the_examples_name_files_of_the_copied_folder(cli, tmp_path):
+    # each command an example shows (a comment, a docstring) runs in the folder it was
+    # copied to: every script or scenario it names is there
+    cli("examples", "--to", str(tmp_path))
+    commands = 0
+    for path in tmp_path.iterdir():
+        for command in re.findall(r"(?:hptrack|python3?) [^\n#]+", path.read_text()):
+            for name in re.findall(r"[\w./-]+\.(?:yaml|py)\b", command):
+                commands += 1
+                assert (tmp_path / name).is_file(), f"{path.name}: {command!r} names {name}"
+    assert commands >= 5  # the flight's two commands and the Stone Soup example's three

@@ -212,3 +212,37 @@ def test_benchmark_command_end_to_end(cli, tmp_path):
         assert (tmp_path / "out" / name).exists(), name
     assert "never observed" in (tmp_path / "out" / "table.md").read_text()
     assert "greedy: none" in (tmp_path / "out" / "table.md").read_text()  # no effort claimed
+
+
+def test_the_wall_time_leaves_out_the_warm_up_and_the_result_is_the_same(monkeypatch):
+    from hptrack.experiments import benchmark
+    from hptrack.experiments.store import EpisodeKey
+
+    events = []
+    real_run, real_clock = benchmark.run_episode, benchmark.time.perf_counter
+
+    def run(scenario, planner, **kwargs):
+        events.append(("mission", scenario.n_steps))
+        return real_run(scenario, planner, **kwargs)
+
+    def clock():
+        events.append(("clock",))
+        return real_clock()
+
+    monkeypatch.setattr(benchmark, "run_episode", run)
+    monkeypatch.setattr(benchmark.time, "perf_counter", clock)
+    monkeypatch.setattr(benchmark, "_warmed", set())
+    settings = planner_settings("greedy", None).canonical()
+    first, second = (EpisodeKey("greedy", 2, s, "homogeneous", settings) for s in (0, 1))
+    rows = [benchmark.run_one(first), benchmark.run_one(second), benchmark.run_one(first)]
+    steps = scenario_for(first).n_steps
+    mission, clocked = ("mission", steps), ("clock",)
+    # the warm-up flies the first steps once for the planner, before the timed span opens
+    assert events == [
+        ("mission", benchmark.WARM_UP_STEPS),
+        *[clocked, mission, clocked] * 3,
+    ]
+    # a warmed-up episode gives what a cold one gives
+    alone = run_episode(scenario_for(first), benchmark.planner_for(first))
+    assert rows[0].uncertainty == rows[2].uncertainty == alone.uncertainty
+    assert rows[0].detections == int(alone.detections.sum())

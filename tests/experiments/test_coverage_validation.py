@@ -140,3 +140,30 @@ def test_mape_is_mean_absolute_percentage_error_against_the_empirical_value():
     assert s["mape_p_find"] == pytest.approx((10.0 + 20.0) / 2)
     assert s["mape_expected_time"] == pytest.approx(50.0)  # emp = 0 is left out
     assert s["mape_time_from_departure"] == pytest.approx(12.5)
+
+
+def test_the_terminal_table_names_the_papers_published_table(capsys, monkeypatch):
+    from hptrack.cli import coverage as coverage_cli
+    from hptrack.cli.common import console
+
+    monkeypatch.setattr(console, "width", 300)  # no header wraps
+    cells = ("mape_p_find", "sharp_mape_p_find", "mape_expected_time", "sharp_mape_expected_time")
+    summary = {
+        "0": {"cases": 3, **dict(zip(cells, (1.0, 2.0, 4.0, 5.0), strict=True))},
+        "300": {"cases": 3, **dict(zip(cells, (1.5, 2.5, 4.5, 5.5), strict=True))},
+    }
+    capsys.readouterr()
+    coverage_cli._print_table(summary, 12.0)
+    lines = capsys.readouterr().out.splitlines()
+    header = next(line for line in lines if "t_d (s)" in line)
+    columns = [c.strip() for c in header.strip("┃ ").split("┃")]
+    # each estimate, then the paper's own numbers, named so that neither reads as the other
+    assert columns[2::3] == ["P_find: paper's estimator", "E[T_find]: paper's estimator"]
+    assert columns[4::3] == ["paper's Table I (published)"] * 2
+    assert "paper" not in columns
+    rows = [[c.strip() for c in line.strip("│ ").split("│")] for line in lines if "│" in line]
+    # the paper's Table I at t_d = 0 (3.58 %, 5.18 %); it has no 300 s row
+    assert rows == [
+        ["0", "3", "1.00", "2.00", "3.58", "4.00", "5.00", "5.18"],
+        ["300", "3", "1.50", "2.50", "-", "4.50", "5.50", "-"],
+    ]

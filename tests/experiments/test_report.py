@@ -41,6 +41,8 @@ def test_planners_keep_the_order_asked_and_only_the_first_is_compared():
     text = markdown_tables(_rows(config), planners=config.planners)
     table_rows = [line.split(" |")[0] for line in text.splitlines() if line.startswith("| ")]
     assert table_rows[1:4] == ["| stationary", "| greedy", "| arvi"]
+    assert text.startswith("Mean ± std of U") and "| stationary | 40.00 ± 0.00 (3) |" in text
+    assert "+-" not in text
     # stationary 40 against greedy 30: -33.33 %; against arvi 50: +20 %
     assert "| stationary vs greedy | -33.33 |" in text
     assert "| stationary vs arvi | 20.00 |" in text
@@ -56,7 +58,7 @@ def test_paper_rows_only_with_the_papers_protocol():
     full = _config(PAPER_SCENARIOS, counts=(2, 3))
     assert paper_protocol_gaps(full, _rows(full)) == []
     text = benchmark_report(full, _rows(full))
-    assert "| ARVI (paper) | 40.64 +- 11.58 | 62.84 +- 12.69 |" in text
+    assert "| ARVI (paper) | 40.64 ± 11.58 | 62.84 ± 12.69 |" in text
     assert "ADFQ (paper)" not in text and "left out" not in text
     # an unfinished run, or an n the paper has not, is not the protocol either
     assert paper_protocol_gaps(full, _rows(full)[:-1]) == ["1 planner-n cells are not complete"]

@@ -56,6 +56,7 @@ def test_mission_figure_says_what_it_shows(short_mission, tmp_path):
         "95 % belief, t = 20 s",
         "95 % belief, t = 40 s",
         "95 % belief, t = 60 s",
+        "agent path (shade: time)",
         "agent start",
         "agent end",
         "target start",

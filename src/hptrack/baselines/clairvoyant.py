@@ -95,7 +95,8 @@ class ClairvoyantPlanner:
 
     def _plan(self, obs: Observation, truth: np.ndarray, leaving: int | None) -> tuple[int, float]:
         """The first visit ``(target, stay s)`` of the best plan of two visits, to another
-        target than the one ``leaving`` (the stay chose how long to spend on it)."""
+        target than the one ``leaving`` (the stay chose how long to spend on it; at most the
+        budget left, so always finite)."""
         m = self._mission
         n, left = m.n_targets, obs.remaining_budget
         q, covs = m.process_noise, obs.covariances
@@ -106,8 +107,8 @@ class ClairvoyantPlanner:
         a1 = intercept_time(obs.agent_position, truth, m.agent_speed, m.sensor_radius)[t1]
         ok = (a1 <= left) & ((t1 != leaving) | (n == 1))
         t1, s1, a1 = t1[ok], s1[ok], a1[ok]
-        if t1.size == 0:
-            return int(np.argmin(np.hypot(*(truth[:, :2] - obs.agent_position).T))), math.inf
+        if t1.size == 0:  # no target can be met in time: to the nearest, staying to the end
+            return int(np.argmin(np.hypot(*(truth[:, :2] - obs.agent_position).T))), left
         s1 = np.minimum(s1, left - a1)
         gain1 = base[t1] - self._final_logdets(covs[t1], q[t1], a1, s1, left)
         free1 = a1 + s1  # when the first visit ends, s from now
@@ -123,9 +124,12 @@ class ClairvoyantPlanner:
         k1, t2, s2, a2 = k1[ok], t2[ok], s2[ok], a2[ok]
         s2 = np.minimum(s2, left - a2)
         gain2 = base[t2] - self._final_logdets(covs[t2], q[t2], a2, s2, left)
-        rate = np.concatenate(
-            [gain1 / np.maximum(free1, m.time_step), (gain1[k1] + gain2) / (a2 + s2)]
-        )
+        # a two-visit plan that takes no time (both targets in the footprint already, no stay)
+        # buys its gain at once: its rate is infinite and it ranks first
+        with np.errstate(divide="ignore"):
+            rate = np.concatenate(
+                [gain1 / np.maximum(free1, m.time_step), (gain1[k1] + gain2) / (a2 + s2)]
+            )
         best = int(np.argmax(rate))
         first = best if best < t1.size else int(k1[best - t1.size])
         return int(t1[first]), float(s1[first])

@@ -8,7 +8,6 @@ code 2, and lets every other exception show its traceback with exit code 1.
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from collections.abc import Iterator
@@ -20,6 +19,7 @@ from rich.console import Console
 from rich.progress import Progress, ProgressColumn
 
 from hptrack.interface import InputError, shown
+from hptrack.jsonout import json_text
 from hptrack.registry import PLANNERS, planner_entry
 from hptrack.settings import MAX_ITERATIONS, MAX_TIME_LIMIT_S, PlannerSettings
 
@@ -298,9 +298,10 @@ def check_output_dir(path: Path, option: str) -> None:
 
 
 def write_json(path: Path, data: object, option: str = "--json") -> None:
-    """Write ``data`` as indented strict JSON (a non-finite number is a bug, never written); a
-    failed write is one line naming ``option``."""
-    text = json.dumps(data, indent=2, allow_nan=False) + "\n"
+    """Write ``data`` as indented strict JSON (`hptrack.jsonout.json_text`: a number that
+    is not finite as the string ``"inf"``, ``"-inf"`` or ``"nan"``); a failed write is one line
+    naming ``option``."""
+    text = json_text(data, indent=2) + "\n"
     with writing(path, option):
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text)

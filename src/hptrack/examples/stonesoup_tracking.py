@@ -8,9 +8,9 @@ truths are flown twice: by `HptrackSensorManager` and by
 `HoverSensorManager`. The score is the mean over tracks of
 ``log det`` of the final position covariance (log m^4, lower is tighter).
 
-    python3 examples/stonesoup_tracking.py                      # mcts, 300 simulations/search
-    python3 examples/stonesoup_tracking.py --planner greedy
-    python3 examples/stonesoup_tracking.py --planner mcts -o iterations=2000 --steps 240
+    python3 stonesoup_tracking.py                      # mcts, 300 simulations/search
+    python3 stonesoup_tracking.py --planner greedy
+    python3 stonesoup_tracking.py --planner mcts -o iterations=2000 --steps 240
 """
 
 from __future__ import annotations

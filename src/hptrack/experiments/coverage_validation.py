@@ -48,6 +48,7 @@ from hptrack.coverage.sharp_estimator import SharpEstimate
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.experiments.workers import worker_pool
 from hptrack.interface import InputError, MissionSpec
+from hptrack.jsonout import json_text
 from hptrack.models.mission import motion_noise_factors_on
 from hptrack.models.motion import advance_true_state
 from hptrack.scenario.random import random_mean, random_prior
@@ -483,6 +484,27 @@ def run_validation(
     return sorted(rows, key=lambda r: (r["case"], r["delay"]))
 
 
+def table_rows(summary: dict[str, dict[str, float]], unit: str = "") -> list[list[str]]:
+    """The MAPE table's cells per delay (percent, two decimals, ``unit`` after each): delay,
+    cases, then for ``P_find`` and ``E[T_find]`` the paper's estimator, the sharp one and the
+    paper's published Table I (``-`` for a delay it has not)."""
+    rows = []
+    for delay, s in summary.items():
+        paper = PAPER_MAPE.get(delay)
+        published = [f"{v:.2f}{unit}" for v in paper] if paper else ["-", "-"]
+        ours = [
+            f"{s[k]:.2f}{unit}"
+            for k in (
+                "mape_p_find",
+                "sharp_mape_p_find",
+                "mape_expected_time",
+                "sharp_mape_expected_time",
+            )
+        ]
+        rows.append([delay, str(s["cases"]), *ours[:2], published[0], *ours[2:], published[1]])
+    return rows
+
+
 def table_markdown(summary: dict[str, dict[str, float]], wall_time: float | None = None) -> str:
     """The MAPE table (percent) of both estimators beside the paper's Table I, as Markdown."""
     lines = [
@@ -490,15 +512,7 @@ def table_markdown(summary: dict[str, dict[str, float]], wall_time: float | None
         "MAPE(E[T_find]), paper's estimator | sharp | paper's Table I |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for delay, s in summary.items():
-        paper = PAPER_MAPE.get(delay)
-        p_p, p_t = (f"{paper[0]:.2f} %", f"{paper[1]:.2f} %") if paper else ("-", "-")
-        lines.append(
-            f"| {delay} | {s['cases']} | {s['mape_p_find']:.2f} % | "
-            f"{s['sharp_mape_p_find']:.2f} % | {p_p} | "
-            f"{s['mape_expected_time']:.2f} % | {s['sharp_mape_expected_time']:.2f} % | "
-            f"{p_t} |"
-        )
+    lines += ["| " + " | ".join(row) + " |" for row in table_rows(summary, " %")]
     lines.append("")
     lines.append(
         "E[T_find]: the paper's estimator from the start of the coverage (flight "
@@ -517,7 +531,7 @@ def write_reports(
     """``mape.md`` (the table), ``mape.csv`` (every summary figure per delay) and
     ``mape-both.json`` (`mape_json_both`)."""
     (out_dir / "mape.md").write_text(table_markdown(summary, wall_time))
-    (out_dir / "mape-both.json").write_text(json.dumps(mape_json_both(summary), indent=2) + "\n")
+    (out_dir / "mape-both.json").write_text(json_text(mape_json_both(summary), indent=2) + "\n")
     keys = ["delay", *next(iter(summary.values())).keys()]
     with (out_dir / "mape.csv").open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=keys)

@@ -1,4 +1,4 @@
-"""Benchmark report: Markdown and CSV tables of mean +- std of ``U`` per planner and ``n``, the
+"""Benchmark report: Markdown and CSV tables of mean ± std of ``U`` per planner and ``n``, the
 reduction of the first planner against each other, and the paper's rows beside a run that
 follows the paper's protocol."""
 
@@ -13,13 +13,18 @@ from hptrack.experiments.store import EpisodeKey, EpisodeRow
 from hptrack.registry import planner_entry
 
 
+def mean_std(mean: float, std: float) -> str:
+    """A table cell ``mean ± std`` with two decimals."""
+    return f"{mean:.2f} ± {std:.2f}"
+
+
 def effort_label(key: EpisodeKey) -> str:
     """The planning effort an episode's settings set (``"none"`` for a planner without one)."""
     settings = planner_entry(key.planner).settings_type.from_canonical(key.planner_settings)
     return settings.effort_label()
 
 
-# Paper, Tables II and III (mean +- std of U over its random cases), for side-by-side reports.
+# Paper, Tables II and III (mean ± std of U over its random cases), for side-by-side reports.
 PAPER_TABLE = {
     "ARVI (paper)": {
         2: (40.64, 11.58),
@@ -121,7 +126,7 @@ def markdown_tables(
     head = "| planner | " + " | ".join(f"n={n}" for n in ns) + " |"
     rule = "|---|" + "---|" * len(ns)
     gaps = gap_closed(summary)
-    lines = ["Mean +- std of U (lower is better); episodes per cell in brackets.", "", head, rule]
+    lines = ["Mean ± std of U (lower is better); episodes per cell in brackets.", "", head, rule]
     if gaps:
         lines[0] += (
             " `clairvoyant` reads the true target states (a perfect-knowledge reference that "
@@ -129,7 +134,7 @@ def markdown_tables(
         )
     for planner, by_n in summary.items():
         cells = [
-            f"{by_n[n]['mean']:.2f} +- {by_n[n]['std']:.2f} ({by_n[n]['episodes']})"
+            f"{mean_std(by_n[n]['mean'], by_n[n]['std'])} ({by_n[n]['episodes']})"
             + (f", gap {gaps[planner][n]:.0f} %" if n in gaps.get(planner, {}) else "")
             if n in by_n
             else ""
@@ -149,9 +154,7 @@ def markdown_tables(
         paper = PAPER_TABLE[name]
         lines.append(
             f"| {name} | "
-            + " | ".join(
-                f"{paper[n][0]:.2f} +- {paper[n][1]:.2f}" if n in paper else "" for n in ns
-            )
+            + " | ".join(mean_std(*paper[n]) if n in paper else "" for n in ns)
             + " |"
         )
     if len(summary) > 1:
@@ -169,7 +172,14 @@ def markdown_tables(
                 + " | ".join(f"{by_n[n]:.2f}" if n in by_n else "" for n in ns)
                 + " |"
             )
-    lines += ["", "Mean wall time per episode, s:", "", head, rule]
+    lines += [
+        "",
+        "Mean wall time per episode, s (the mission alone: each process warms a planner's "
+        "kernels up with a short untimed run before its first episode):",
+        "",
+        head,
+        rule,
+    ]
     for planner, by_n in summary.items():
         lines.append(
             f"| {planner} | "

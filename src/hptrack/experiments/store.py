@@ -29,6 +29,7 @@ from pathlib import Path
 
 from hptrack.experiments.workers import process_alive
 from hptrack.interface import InputError
+from hptrack.jsonout import json_text
 from hptrack.settings import digest_of
 
 SCHEMA_VERSION = 5
@@ -265,7 +266,7 @@ class ResultStore:
                 row.never_observed,
                 row.detections,
                 row.wall_time_s,
-                json.dumps(row.info),
+                json_text(row.info),
             ),
         )
         self._db.execute(

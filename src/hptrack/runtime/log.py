@@ -33,28 +33,10 @@ from pydantic import (
 )
 
 from hptrack.interface import InputError, one_line, shown
+from hptrack.jsonout import json_ready
 
 LOG_VERSION = 1
 """Format version written in the header record."""
-
-
-def json_ready(value: Any) -> Any:
-    """``value`` as strict-JSON data: arrays and tuples as lists, numpy scalars as Python
-    numbers, non-finite floats as ``"nan"``/``"inf"``/``"-inf"``."""
-    if isinstance(value, np.ndarray):
-        return json_ready(value.tolist())
-    if isinstance(value, dict):
-        return {str(k): json_ready(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_ready(v) for v in value]
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, float | np.floating):
-        value = float(value)
-        return value if math.isfinite(value) else str(value)
-    return value
 
 
 def log_float(value: Any) -> float:

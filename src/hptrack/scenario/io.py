@@ -189,7 +189,39 @@ def load_scenario(path: str | Path) -> Scenario:
     return parse_scenario(read_yaml(path, "scenario file"), str(path))
 
 
+FIELD_COMMENTS = {
+    "time_step": "s, the step tau",
+    "budget": "s, the mission's length",
+    "seed": "drives the true initial states (when not given) and all noise",
+    "process_noise_form": "the per-step Q: continuous or paper_text",
+    "position": "m, [x, y]",
+    "speed": "m/s",
+    "sensor_diameter": "m, the footprint's diameter w",
+    "measurement_noise_std": "m per axis (R = std^2 I)",
+    "measurement_noise_covariance": "m^2, R (2x2)",
+    "mean": "prior [x, y, vx, vy]: m, m, m/s, m/s",
+    "covariance": "prior over [x, y, vx, vy]: m^2, m^2/s, (m/s)^2",
+    "process_noise": "q, m^2/s^3",
+    "truth": "true initial [x, y, vx, vy]: m, m, m/s, m/s",
+}
+"""The comment `save_scenario` writes after each field: its units and meaning."""
+
+SCENARIO_HEADER = (
+    "# hptrack scenario (check it with: hptrack scenario check FILE); SI units: m, s, m/s\n"
+)
+
+_FIELD_LINE = re.compile(r"^\s*(?:- )?(\w+):")
+
+
 def save_scenario(scenario: Scenario, path: str | Path) -> None:
-    """Write a scenario as YAML (lists, not tuples, so any YAML reader can load it)."""
+    """Write a scenario as YAML (lists, not tuples, so any YAML reader can load it), each field
+    followed by a comment of its units (`FIELD_COMMENTS`); it loads back to the same
+    scenario."""
     data = scenario.model_dump(mode="json", exclude_none=True)
-    Path(path).write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=math.inf)
+    lines = [SCENARIO_HEADER.rstrip("\n")]
+    for line in text.splitlines():
+        field = _FIELD_LINE.match(line)
+        comment = FIELD_COMMENTS.get(field.group(1)) if field else None
+        lines.append(f"{line.ljust(30)}  # {comment}" if comment else line)
+    Path(path).write_text("\n".join(lines) + "\n")

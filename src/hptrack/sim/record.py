@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hptrack.jsonout import json_text
 from hptrack.models.beliefs import position_logdet
 
 PLANNED_ACTIONS = ("plan_after_find", "plan_after_miss", "plan_after_dwell")
@@ -129,7 +130,7 @@ class EpisodeRecord:
         with open(path, "wb") as fh:
             np.savez_compressed(
                 fh,
-                meta=np.array(json.dumps(meta)),
+                meta=np.array(json_text(meta)),
                 agent_path=self.agent_path,
                 true_states=self.true_states,
                 belief_steps=self.belief_steps,

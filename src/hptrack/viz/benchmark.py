@@ -20,6 +20,7 @@ from hptrack.viz.style import (
     legend_below,
     new_figure,
     save_figure,
+    settle_layout,
     style_axes,
 )
 
@@ -110,5 +111,7 @@ def plot_trajectories(
     axes[0].set_xlim(low[0] - pad[0], high[0] + pad[0])
     axes[0].set_ylim(low[1] - pad[1], high[1] + pad[1])
     colorbar_beside(fig, drawn[-1]["agent"], axes[-1], "agent time (s)")
-    legend_below(fig, drawn[0]["legend_handles"], ncol=6)
-    fig.draw_without_rendering()  # the layout settles on the second pass; this is the first
+    legend_below(
+        fig, drawn[0]["legend_handles"], ncol=6, handler_map=drawn[0]["legend_handler_map"]
+    )
+    settle_layout(fig)

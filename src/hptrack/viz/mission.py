@@ -15,8 +15,9 @@ from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.colors import Colormap, LinearSegmentedColormap, Normalize
 from matplotlib.figure import Figure
+from matplotlib.legend_handler import HandlerBase, HandlerPatch
 from matplotlib.lines import Line2D
-from matplotlib.patches import Ellipse
+from matplotlib.patches import Ellipse, Patch
 
 from hptrack.sim.record import EpisodeRecord
 from hptrack.viz.style import (
@@ -25,6 +26,7 @@ from hptrack.viz.style import (
     legend_below,
     new_figure,
     save_figure,
+    settle_layout,
     style_axes,
 )
 
@@ -75,6 +77,40 @@ def mission_title(record: EpisodeRecord) -> str:
     )
 
 
+class _TimeShadedKey(HandlerBase):
+    """Legend key of the agent's path: a short line shaded through the path's colour map."""
+
+    def create_artists(
+        self, legend, orig_handle, xdescent, ydescent, width, height, fontsize, trans
+    ):
+        x = np.linspace(-xdescent, width - xdescent, 9)
+        y = np.full_like(x, height / 2.0 - ydescent)
+        key = LineCollection(
+            np.stack([np.column_stack([x[:-1], y[:-1]]), np.column_stack([x[1:], y[1:]])], 1),
+            cmap=orig_handle.get_cmap(),
+            norm=Normalize(0.0, 1.0),
+            linewidths=orig_handle.get_linewidths(),
+            transform=trans,
+        )
+        key.set_array(np.linspace(0.0, 1.0, 8))
+        return [key]
+
+
+def _ellipse_key(legend, orig_handle, xdescent, ydescent, width, height, fontsize) -> Ellipse:
+    """Legend key of a belief ellipse: a small ellipse in the handle's line style."""
+    center = (width / 2.0 - xdescent, height / 2.0 - ydescent)
+    return Ellipse(center, 0.8 * width, 1.4 * height, ls=orig_handle.get_linestyle())
+
+
+LEGEND_COLUMN_IN = 1.8
+"""Width of a column of the mission figure's legend, inches (its longest entry fits)."""
+
+
+def legend_columns(fig: Figure) -> int:
+    """Columns of the mission legend that fit in ``fig``'s width (four at 7.5 inches)."""
+    return max(1, int(fig.get_figwidth() // LEGEND_COLUMN_IN))
+
+
 def plot_mission(
     ax: Axes,
     record: EpisodeRecord,
@@ -84,11 +120,14 @@ def plot_mission(
     legend: bool = True,
 ) -> dict:
     """Draw one mission on ``ax``, titled by `mission_title`; returns the artists by role
-    (``"agent"`` is the time-coloured path, the mappable for a colour bar).
+    (``"agent"`` is the time-coloured path, the mappable for a colour bar) and the legend's
+    ``"legend_handles"`` and ``"legend_handler_map"``.
 
     The targets' paths and markers are drawn over the agent's path, so a target the agent
     follows stays visible, and the agent's end is a hollow diamond that leaves a target's end
-    square in sight.
+    square in sight. A target's true path, start and end are drawn where the record knows the
+    truth (a flight does not): each measurement is marked on the true path, or without the
+    truth at the belief's mean just after it. The legend lists only what is drawn.
 
     Args:
         ax: target axes (equal aspect is set).
@@ -104,24 +143,40 @@ def plot_mission(
     path = record.agent_path
     segments = np.stack([path[:-1], path[1:]], axis=1)
     agent = LineCollection(
-        segments, cmap=cmap, norm=norm or Normalize(0.0, times[-1]), linewidths=2.4, zorder=2
+        segments,
+        cmap=cmap,
+        norm=norm or Normalize(0.0, times[-1]),
+        linewidths=2.4,
+        zorder=2,
+        label="agent path (shade: time)",
     )
     agent.set_array(times[1:])
     ax.add_collection(agent)
     colors = [target_color(i) for i in range(len(record.target_ids))]
     artists: dict = {"agent": agent, "targets": [], "ellipses": [], "detections": []}
+    keys: list = []  # the targets' legend entries
+    known = np.isfinite(record.true_states[..., :2]).all(axis=-1)  # (K+1, n)
+    stored = {int(k): j for j, k in enumerate(record.belief_steps)}
     for i, (tid, color) in enumerate(zip(record.target_ids, colors, strict=True)):
         truth = record.true_states[:, i, :2]
-        (line,) = ax.plot(truth[:, 0], truth[:, 1], color=color, lw=1.2, label=tid, zorder=4)
-        ax.plot(*truth[0], marker="o", color=color, mec="k", mew=0.5, ms=5.5, zorder=6)
-        ax.plot(*truth[-1], marker="s", color=color, mec="k", mew=0.5, ms=5.5, zorder=6)
-        artists["targets"].append(line)
-        seen = record.detections[:, i]
-        if seen.any():
+        if known[:, i].any():
+            (line,) = ax.plot(truth[:, 0], truth[:, 1], color=color, lw=1.2, label=tid, zorder=4)
+            first, last = np.flatnonzero(known[:, i])[[0, -1]]
+            ax.plot(*truth[first], marker="o", color=color, mec="k", mew=0.5, ms=5.5, zorder=6)
+            ax.plot(*truth[last], marker="s", color=color, mec="k", mew=0.5, ms=5.5, zorder=6)
+            artists["targets"].append(line)
+            keys.append(line)
+        else:
+            keys.append(Patch(facecolor=color, edgecolor="none", label=tid))
+        at = [
+            truth[k] if known[k, i] else record.belief_means[stored[k], i, :2]
+            for k in np.flatnonzero(record.detections[:, i])
+            if known[k, i] or k in stored
+        ]
+        if at:
             artists["detections"].append(
                 ax.scatter(
-                    truth[seen, 0],
-                    truth[seen, 1],
+                    *np.array(at).T,
                     s=14,
                     marker="o",
                     facecolors="none",
@@ -151,10 +206,12 @@ def plot_mission(
             artists["ellipses"].append(patch)
         t = record.belief_steps[j] * record.time_step
         ellipse_keys.append(
-            Line2D(
-                [],
-                [],
-                color="0.2",
+            Ellipse(
+                (0.0, 0.0),
+                1.0,
+                1.0,
+                fill=False,
+                edgecolor="0.2",
                 lw=1.0,
                 ls=style,
                 alpha=alpha,
@@ -168,41 +225,55 @@ def plot_mission(
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     style_axes(ax, mission_title(record))
-    proxies = [
-        *ellipse_keys,
+    marks = [
+        agent,
         Line2D([], [], color="k", marker="^", ms=7, ls="none", label="agent start"),
         Line2D(
             [], [], color="k", marker="D", mfc="none", mew=1.4, ms=7, ls="none", label="agent end"
         ),
-        Line2D(
-            [],
-            [],
-            color="0.6",
-            mec="k",
-            mew=0.5,
-            marker="o",
-            ms=5.5,
-            ls="none",
-            label="target start",
-        ),
-        Line2D(
-            [], [], color="0.6", mec="k", mew=0.5, marker="s", ms=5.5, ls="none", label="target end"
-        ),
-        Line2D(
-            [],
-            [],
-            color="0.4",
-            marker="o",
-            mfc="none",
-            ms=5,
-            mew=0.7,
-            ls="none",
-            label="target measured",
-        ),
     ]
-    artists["legend_handles"] = artists["targets"] + proxies
+    if artists["targets"]:
+        marks += [
+            Line2D(
+                [],
+                [],
+                color="0.6",
+                mec="k",
+                mew=0.5,
+                marker=marker,
+                ms=5.5,
+                ls="none",
+                label=label,
+            )
+            for marker, label in (("o", "target start"), ("s", "target end"))
+        ]
+    if artists["detections"]:
+        where = "" if known[record.detections].all() else " (belief mean)"
+        marks.append(
+            Line2D(
+                [],
+                [],
+                color="0.4",
+                marker="o",
+                mfc="none",
+                ms=5,
+                mew=0.7,
+                ls="none",
+                label=f"target measured{where}",
+            )
+        )
+    artists["legend_handles"] = keys + ellipse_keys + marks
+    artists["legend_handler_map"] = {
+        agent: _TimeShadedKey(),
+        Ellipse: HandlerPatch(patch_func=_ellipse_key),
+    }
     if legend:
-        artists["legend"] = legend_below(ax.figure, artists["legend_handles"], ncol=4)
+        artists["legend"] = legend_below(
+            ax.figure,
+            artists["legend_handles"],
+            ncol=legend_columns(ax.figure),
+            handler_map=artists["legend_handler_map"],
+        )
     return artists
 
 
@@ -224,9 +295,10 @@ def mission_figure(
     colorbar_beside(fig, artists["agent"], ax, "agent time (s)")
     if height_in is None:
         (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
-        rows = -(-len(artists["legend_handles"]) // 4)
+        rows = -(-len(artists["legend_handles"]) // legend_columns(fig))
         map_in = (width_in - _SIDES_IN) * min((y1 - y0) / (x1 - x0), 1.5)
         fig.set_size_inches(width_in, map_in + _ABOVE_BELOW_IN + _LEGEND_ROW_IN * rows)
+    settle_layout(fig)
     return fig
 
 

@@ -9,8 +9,9 @@ library code never touches global plotting state.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from matplotlib.artist import Artist
 from matplotlib.axes import Axes
@@ -19,6 +20,7 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colorbar import Colorbar
 from matplotlib.figure import Figure
 from matplotlib.legend import Legend
+from matplotlib.legend_handler import HandlerBase
 
 DPI = 130
 """Resolution of the written figures, dots per inch."""
@@ -45,12 +47,19 @@ def new_figure(width_in: float, height_in: float, dpi: int = DPI) -> Figure:
     return fig
 
 
-def legend_below(fig: Figure, handles: Sequence[Artist], ncol: int) -> Legend:
-    """The figure's legend, centred below all its plots."""
+def legend_below(
+    fig: Figure,
+    handles: Sequence[Artist],
+    ncol: int,
+    handler_map: Mapping[Any, HandlerBase] | None = None,
+) -> Legend:
+    """The figure's legend, centred below all its plots (``handler_map``: how to draw the
+    keys of some handles, by handle or by type, as in `matplotlib.figure.Figure.legend`)."""
     return fig.legend(
         handles=list(handles),
         loc="outside lower center",
         ncol=max(1, min(ncol, len(handles))),
+        handler_map=dict(handler_map or {}),
         **LEGEND_STYLE,
     )
 
@@ -71,6 +80,16 @@ def style_axes(ax: Axes, title: str | None = None, grid: bool = True) -> None:
         ax.set_axisbelow(True)
 
 
+def settle_layout(fig: Figure) -> None:
+    """Lay ``fig`` out once without rendering: the constrained layout of a first draw sizes
+    the margins by tick labels that change as the plots take their size (a long y tick label
+    or a colour bar's label can then fall off the figure); the next draw, the one shown or
+    written, settles on the labels it draws."""
+    fig.draw_without_rendering()
+
+
 def save_figure(fig: Figure, path: str | Path, dpi: int = DPI) -> None:
-    """Write ``fig`` (PNG, PDF or SVG by the suffix) at ``dpi``."""
+    """Write ``fig`` (PNG, PDF or SVG by the suffix) at ``dpi``, its layout settled first
+    (`settle_layout`)."""
+    settle_layout(fig)
     fig.savefig(path, dpi=dpi)

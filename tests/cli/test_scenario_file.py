@@ -1,0 +1,61 @@
+"""A written scenario file says the unit of every field and loads back to the same scenario."""
+
+import re
+
+import pytest
+
+from hptrack.scenario import load_scenario, random_scenario, save_scenario
+from hptrack.scenario.io import FIELD_COMMENTS
+
+
+def _fields_without_a_comment(text: str) -> list[str]:
+    """The lines of a field with a value or a block (not a target's id) and no comment."""
+    return [
+        line
+        for line in text.splitlines()
+        if re.match(r"^\s*(- )?\w+:", line)
+        and not re.match(r"^\s*(- )?(id|agent|targets):", line)
+        and "  # " not in line
+    ]
+
+
+@pytest.mark.parametrize("homogeneous", [True, False])
+def test_the_random_scenario_command_writes_units_and_the_same_scenario(cli, tmp_path, homogeneous):
+    path = tmp_path / "x.yaml"
+    setting = "--homogeneous" if homogeneous else "--heterogeneous"
+    result = cli("scenario", "random", "--targets", "3", "--seed", "4", setting, "-o", path)
+    assert result.code == 0, result.out + result.err
+    text = path.read_text()
+    assert load_scenario(path) == random_scenario(3, seed=4, homogeneous=homogeneous)
+    assert _fields_without_a_comment(text) == []
+    assert text.startswith("# hptrack scenario")
+    assert "time_step: 0.5                  # s, the step tau" in text
+    assert text.count("# q, m^2/s^3") == 3 and "# m/s" in text
+
+
+def test_every_field_round_trips_with_its_comment(tmp_path):
+    base = random_scenario(2, seed=7)
+    odd_ids = ["a #b: c", "x" * 200]  # a comment sign and a colon inside, the longest id
+    targets = [
+        t.model_copy(update={"id": tid, "truth": (1.0, 2.0, 0.5, -0.25)})
+        for t, tid in zip(base.targets, odd_ids, strict=True)
+    ]
+    agent = base.agent.model_copy(update={"measurement_noise_covariance": ((4.0, 0.5), (0.5, 9.0))})
+    scenario = type(base).model_validate(
+        {
+            **base.model_dump(),
+            "targets": [t.model_dump() for t in targets],
+            "agent": agent.model_dump(),
+            "process_noise_form": "paper_text",
+            "budget": 120.0,
+        }
+    )
+    path = tmp_path / "s.yaml"
+    save_scenario(scenario, path)
+    text = path.read_text()
+    assert load_scenario(path) == scenario
+    assert _fields_without_a_comment(text) == []
+    written = {
+        m.group(1) for m in re.finditer(r"^\s*(?:- )?(\w+):.*  # ", text, flags=re.MULTILINE)
+    }
+    assert written == set(FIELD_COMMENTS)  # every field carries its comment
