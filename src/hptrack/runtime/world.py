@@ -1,11 +1,12 @@
 """The simulated targets shared by the simulated runner and the vehicle stub: the simulator's
-true initial states and one step of true motion per ``tau`` (the scenario's motion model),
+true initial states and one step of true motion per ``tau`` (the scenario's truth motion),
 linearly interpolated between steps so that a sensor may look at any time."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from hptrack.models.truth_motion import sample_truth
 from hptrack.scenario.model import Scenario
 from hptrack.sim.step import initial_true_states
 
@@ -23,19 +24,22 @@ class TrueTargets:
         self, scenario: Scenario, truth_rng: np.random.Generator, motion_rng: np.random.Generator
     ) -> None:
         mission = scenario.mission_spec()
-        self._motion, self._q, self.time_step = (
-            mission.motion,
+        self._record, self._q, self.time_step = (
+            mission.record,
             mission.process_noise,
             mission.time_step,
         )
         self._rng = motion_rng
         self.states: list[np.ndarray] = [initial_true_states(scenario, truth_rng)]
+        self._truth_motion = scenario.truth_motion_model(truth_rng)
         """True states ``(n, 4)`` at steps ``0, 1, ...`` drawn so far."""
 
     def state(self, k: int) -> np.ndarray:
         """True states at step ``k`` (drawing the steps up to it)."""
         while len(self.states) <= k:
-            self.states.append(self._motion.sample_motion(self.states[-1], self._q, self._rng))
+            self.states.append(
+                sample_truth(self._truth_motion, self._record, self.states[-1], self._q, self._rng)
+            )
         return self.states[k]
 
     def positions(self, k: int, fraction: float) -> np.ndarray:

@@ -15,7 +15,7 @@ the 10,000 km area for the whole budget. Errors name the field and the value.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Self
+from typing import Annotated, Any, Literal, Self
 
 import numpy as np
 from pydantic import (
@@ -34,6 +34,12 @@ from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import MAX_TARGETS, steps_left
 from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
+from hptrack.models.truth_motion import (
+    ConstantVelocityTruth,
+    CoordinatedTurn,
+    OrnsteinUhlenbeck,
+    RandomWalk,
+)
 
 MAX_STEPS = 1_000_000
 """Most simulation steps a mission may have (``budget / time_step``)."""
@@ -155,6 +161,52 @@ class TargetSpec(BaseModel):
         return value
 
 
+class ConstantVelocitySpec(BaseModel):
+    """The paper's constant-velocity truth (the default)."""
+
+    model_config = _STRICT
+
+    model: Literal["constant_velocity"] = "constant_velocity"
+
+
+class CoordinatedTurnSpec(BaseModel):
+    """Targets that turn at a constant rate each: ``turn_rate`` rad/s (counter-clockwise
+    positive), or, with ``turn_rate_sd`` rad/s, a rate per target drawn once from
+    ``N(turn_rate, turn_rate_sd^2)``; the constant-velocity noise is kept."""
+
+    model_config = _STRICT
+
+    model: Literal["coordinated_turn"]
+    turn_rate: Annotated[Real, Field(ge=-1.0, le=1.0)] = 0.02
+    turn_rate_sd: Annotated[Real, Field(ge=0.0, le=1.0)] = 0.0
+
+
+class RandomWalkSpec(BaseModel):
+    """Targets whose position diffuses by ``diffusion`` m^2/s per axis, with no velocity."""
+
+    model_config = _STRICT
+
+    model: Literal["random_walk"]
+    diffusion: Annotated[Real, Field(gt=0.0, le=1e6)] = 5.0
+
+
+class OrnsteinUhlenbeckSpec(BaseModel):
+    """Targets whose velocity decays at ``damping`` 1/s (at least 1e-3, a time constant of at
+    most 1000 s) while driven by their ``process_noise``."""
+
+    model_config = _STRICT
+
+    model: Literal["ornstein_uhlenbeck"]
+    damping: Annotated[Real, Field(ge=1e-3, le=10.0)] = 0.01
+
+
+TruthMotionSpec = Annotated[
+    ConstantVelocitySpec | CoordinatedTurnSpec | RandomWalkSpec | OrnsteinUhlenbeckSpec,
+    Field(discriminator="model"),
+]
+"""How the simulated targets truly move (`hptrack.models.truth_motion`), by ``model``."""
+
+
 class Scenario(BaseModel):
     """A whole mission. ``seed`` drives the true initial states (when not given) and all noise."""
 
@@ -164,6 +216,7 @@ class Scenario(BaseModel):
     budget: Annotated[Real, Field(gt=0.0)] = 900.0
     seed: Annotated[int, BeforeValidator(_not_bool), Strict(), Field(ge=0, lt=2**63)] = 0
     process_noise_form: ProcessNoiseForm = "continuous"
+    truth_motion: TruthMotionSpec | None = None
     agent: AgentSpec = AgentSpec()
     targets: Annotated[list[TargetSpec], Field(min_length=1, max_length=MAX_TARGETS)]
 
@@ -272,6 +325,21 @@ class Scenario(BaseModel):
 
     def motion_model(self) -> ConstantVelocityModel:
         return ConstantVelocityModel(self.time_step, self.process_noise_form)
+
+    def truth_motion_model(self, rng: np.random.Generator) -> tuple:
+        """The simulator's truth motion (`hptrack.models.truth_motion`); a coordinated turn
+        with ``turn_rate_sd > 0`` draws its rates from ``rng`` (nothing is drawn otherwise)."""
+        spec = self.truth_motion
+        if spec is None or isinstance(spec, ConstantVelocitySpec):
+            return ConstantVelocityTruth()
+        if isinstance(spec, CoordinatedTurnSpec):
+            rates = np.full(len(self.targets), float(spec.turn_rate))
+            if spec.turn_rate_sd > 0.0:
+                rates = rates + spec.turn_rate_sd * rng.standard_normal(len(self.targets))
+            return CoordinatedTurn(np.ascontiguousarray(rates))
+        if isinstance(spec, RandomWalkSpec):
+            return RandomWalk(float(spec.diffusion))
+        return OrnsteinUhlenbeck(float(spec.damping))
 
     def sensor_model(self) -> PositionMeasurementModel:
         return PositionMeasurementModel(self.agent.noise_covariance(), self.agent.sensor_diameter)

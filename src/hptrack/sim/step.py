@@ -1,8 +1,9 @@
 """One simulator step as a compiled kernel, and `World`, the simulated mission it steps.
 
 A step ``k -> k+1`` (``tau`` seconds) is the simulator's (`hptrack.sim.episode`): the agent
-moves straight towards its waypoint by at most ``v_a tau``; every true target moves with ``F`` and
-``Q`` noise; every belief is predicted one step (Eq. (1)); every target whose true position lies
+moves straight towards its waypoint by at most ``v_a tau``; every true target moves by the
+scenario's truth motion (`hptrack.models.truth_motion`; by default the paper's ``F`` and ``Q``
+noise); every belief is predicted one step (Eq. (1)); every target whose true position lies
 within ``w/2`` of the agent is measured, ``z = [x, y] + L e`` (``L L' = R``), and Kalman-updated.
 Sensing also happens at step 0. The kernels call the model kernels of `hptrack.models`
 (prediction, true motion, Kalman update, ``log det``); they re-derive none of them.
@@ -25,8 +26,9 @@ import numpy as np
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.measurement import kalman_update
-from hptrack.models.mission import motion_noise_factors_on, predict_covariance_on
-from hptrack.models.motion import advance_true_state, mean_position_at
+from hptrack.models.mission import predict_covariance_on
+from hptrack.models.motion import mean_position_at
+from hptrack.models.truth_motion import advance_truth
 from hptrack.scenario.model import Scenario
 
 BLOCK_STEPS = 256
@@ -96,20 +98,31 @@ def sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, log
 
 @numba.njit(cache=True)
 def world_step(
-    mission, agent, waypoint, truth, z_motion, sqrt_q, means, covs, sensor, e, e_pos, out
+    mission,
+    agent,
+    waypoint,
+    truth_motion,
+    truth,
+    z_motion,
+    sqrt_q,
+    means,
+    covs,
+    sensor,
+    e,
+    e_pos,
+    out,
 ):
-    """One simulator step in place (module docstring): move, true motion with the unit normals
-    ``z_motion`` ``(n, 4)``, predict one step, sense (``sensor``: the squared footprint radius
-    and the Cholesky factor of ``R``; ``out``: `sense`'s ``seen``, ``logdets`` and
-    ``z``). Returns the new ``e_pos`` and ``U``."""
+    """One simulator step in place (module docstring): move, true motion by ``truth_motion``
+    with the unit normals ``z_motion`` ``(n, 4)``, predict one step, sense (``sensor``: the
+    squared footprint radius and the Cholesky factor of ``R``; ``out``: `sense`'s ``seen``,
+    ``logdets`` and ``z``). Returns the new ``e_pos`` and ``U``."""
     move_agent(agent, waypoint, mission.step_length)
-    l11, l21, l22 = motion_noise_factors_on(mission)
+    advance_truth(truth_motion, mission, truth, z_motion, sqrt_q)
     tau = mission.time_step
     q = mission.process_noise
     steps = tau / tau
     elapsed = steps * tau
     for i in range(truth.shape[0]):
-        advance_true_state(truth, i, z_motion[i], sqrt_q[i], l11, l21, l22, tau)
         x, y = mean_position_at(means[i], elapsed)
         means[i, 0] = x
         means[i, 1] = y
@@ -153,6 +166,8 @@ class World:
         step_index: current step ``k``.
         agent: ``(2,)`` agent position, m.
         truth: ``(n, 4)`` true target states.
+        truth_motion: how they move (`hptrack.models.truth_motion`; random parameters such
+            as turn rates drawn after the initial states, from the same stream).
         means, covariances: ``(n, 4)``, ``(n, 4, 4)`` beliefs.
         seen: ``(n,)`` which targets were measured at this step.
         logdets: ``(n,)`` per-target ``log det Sigma^xy``.
@@ -170,9 +185,9 @@ class World:
         self.mission: MissionSpec = mission
         n = mission.n_targets
         self.n_steps = mission.n_steps
-        self.truth = np.ascontiguousarray(
-            initial_true_states(scenario, np.random.default_rng(truth_seq))
-        )
+        truth_rng = np.random.default_rng(truth_seq)
+        self.truth = np.ascontiguousarray(initial_true_states(scenario, truth_rng))
+        self.truth_motion = scenario.truth_motion_model(truth_rng)
         self.agent = np.array(scenario.agent.position, dtype=float)
         self.means = np.ascontiguousarray(scenario.means())
         self.covariances = np.ascontiguousarray(scenario.covariances())
@@ -249,6 +264,7 @@ class World:
             self.mission.record,
             self.agent,
             wp,
+            self.truth_motion,
             self.truth,
             z,
             self._sqrt_q,

@@ -1,0 +1,147 @@
+"""Planners whose beliefs assume constant velocity, flown against targets that truly move
+otherwise (`hptrack.models.truth_motion`): the cost of the mismatch.
+
+Each episode is a homogeneous random scenario of the paper (``--targets``, seeds ``0..N-1``)
+with its ``truth_motion`` replaced by one of `TRUTHS`; every planner flies the same scenarios
+(``mcts`` with the default preset at ``--iterations`` simulations per decision, so the rows
+are reproducible). Rows are appended to a CSV as they finish, and a re-run skips those there,
+so a stopped run resumes; ``--report`` writes the mean ``U`` with its standard error and the
+targets never detected per planner, truth and ``n`` (``table.md``) beside the CSV.
+
+    python3 benchmarks/truth_mismatch.py --targets 6,12 --seeds 10 --csv results/mismatch.csv
+    python3 benchmarks/truth_mismatch.py --report --csv results/mismatch.csv \\
+        --out docs/results/truth-mismatch
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+TRUTHS: dict[str, dict | None] = {
+    "constant_velocity": None,
+    "turn_0.02": {"model": "coordinated_turn", "turn_rate": 0.02},
+    "turn_random_0.02": {"model": "coordinated_turn", "turn_rate": 0.0, "turn_rate_sd": 0.02},
+    "random_walk_5": {"model": "random_walk", "diffusion": 5.0},
+    "ou_0.01": {"model": "ornstein_uhlenbeck", "damping": 0.01},
+}
+"""The truth motions flown, by the name the table gives them."""
+PLANNERS = ("mcts", "greedy", "clairvoyant")
+FIELDS = ("planner", "truth", "n", "seed", "iterations", "U", "never_detected")
+
+
+def scenario(n: int, seed: int, truth: str):
+    """The homogeneous random scenario ``(n, seed)`` with ``truth``'s motion."""
+    from hptrack.scenario.model import Scenario
+    from hptrack.scenario.random import random_scenario
+
+    base = random_scenario(n, seed=seed, homogeneous=True)
+    spec = TRUTHS[truth]
+    if spec is None:
+        return base
+    return Scenario.model_validate({**base.model_dump(exclude_none=True), "truth_motion": spec})
+
+
+def episode(job: tuple) -> dict:
+    """One row: ``job`` is ``(planner, truth, n, seed, iterations)``."""
+    from hptrack.registry import make_planner
+    from hptrack.sim.episode import run_episode
+
+    planner, truth, n, seed, iterations = job
+    options = {"iterations": iterations} if planner == "mcts" else None
+    record = run_episode(scenario(n, seed, truth), make_planner(planner, options))
+    never = int((~record.detections.any(axis=0)).sum())
+    values = (planner, truth, n, seed, iterations, repr(record.uncertainty), never)
+    return dict(zip(FIELDS, values, strict=True))
+
+
+def run(args: argparse.Namespace) -> None:
+    path = Path(args.csv)
+    done = set()
+    if path.exists():
+        with path.open() as f:
+            done = {
+                (r["planner"], r["truth"], int(r["n"]), int(r["seed"])) for r in csv.DictReader(f)
+            }
+    counts = [int(n) for n in args.targets.split(",")]
+    jobs = [
+        (planner, truth, n, seed, args.iterations)
+        for n in counts
+        for seed in range(args.seeds)
+        for truth in TRUTHS
+        for planner in PLANNERS
+        if (planner, truth, n, seed) not in done
+    ]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    new = not path.exists()
+    with path.open("a", newline="") as f, ProcessPoolExecutor(args.workers) as pool:
+        writer = csv.DictWriter(f, FIELDS)
+        if new:
+            writer.writeheader()
+        for future in as_completed([pool.submit(episode, job) for job in jobs]):
+            writer.writerow(future.result())
+            f.flush()
+    print(f"{len(jobs)} episodes run, {len(done)} were there: {path}")
+
+
+def report(args: argparse.Namespace) -> None:
+    with Path(args.csv).open() as f:
+        rows = list(csv.DictReader(f))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = [
+        "| n | truth | planner | scenarios | mean U | std. error | never detected |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    summary = []
+    for n in sorted({int(r["n"]) for r in rows}):
+        for truth in TRUTHS:
+            for planner in PLANNERS:
+                sel = [r for r in rows if int(r["n"]) == n and r["truth"] == truth]
+                sel = [r for r in sel if r["planner"] == planner]
+                if not sel:
+                    continue
+                u = [float(r["U"]) for r in sel]
+                mean = sum(u) / len(u)
+                sd = math.sqrt(sum((x - mean) ** 2 for x in u) / max(len(u) - 1, 1))
+                never = sum(int(r["never_detected"]) for r in sel) / len(sel)
+                se = sd / math.sqrt(len(u))
+                lines.append(
+                    f"| {n} | {truth} | {planner} | {len(u)} | {mean:.2f} | {se:.2f} | "
+                    f"{never:.2f} |"
+                )
+                summary.append(
+                    {
+                        "n": n,
+                        "truth": truth,
+                        "planner": planner,
+                        "scenarios": len(u),
+                        "mean_U": mean,
+                        "se": se,
+                        "never_detected": never,
+                    }
+                )
+    (out / "table.md").write_text("\n".join(lines) + "\n")
+    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    print("\n".join(lines))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--targets", default="6,12", help="comma-separated target counts")
+    parser.add_argument("--seeds", type=int, default=10, help="scenario seeds 0..N-1")
+    parser.add_argument("--iterations", type=int, default=2000, help="mcts simulations/decision")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--csv", required=True, help="the episodes' CSV (appended, resumed)")
+    parser.add_argument("--report", action="store_true", help="write the table from the CSV")
+    parser.add_argument("--out", default="docs/results/truth-mismatch")
+    args = parser.parse_args()
+    report(args) if args.report else run(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,207 @@
+"""How the simulated targets truly move: the paper's constant velocity (Sec. III) and motions
+that break it, so that a planner whose beliefs assume constant velocity can be measured against
+targets that turn, wander or slow down.
+
+A truth model is a ``NamedTuple`` class (its fields are its parameters, SI units) registered
+with `register_truth_motion` and a compiled kernel ``advance(model, mission, truth, z,
+sqrt_q)`` that moves every true state ``[x, y, vx, vy]`` of ``truth`` ``(n, 4)`` one step of
+``tau`` in place, with the unit normals ``z`` ``(n, 4)`` (the simulator's motion stream, four per
+target and step whatever the model) and ``sqrt_q`` ``(n,)`` the square roots of the targets'
+noise intensities ``q`` (m^2/s^3). Compiled code calls `advance_truth`, dispatched at compile
+time on the model's class. The models:
+
+* `ConstantVelocityTruth` (the paper's and the default): ``x <- F x + sqrt(q) L z`` with the
+  mission's ``F`` and ``Q`` (`hptrack.models.motion.advance_true_state`);
+* `CoordinatedTurn`: each target turns at its own constant rate ``omega_i`` (rad/s,
+  counter-clockwise positive): the velocity rotates by ``omega tau`` per step and the position
+  follows the exact arc, plus the same noise as constant velocity. Known rates (one for all) or
+  random ones (drawn once per target and mission);
+* `RandomWalk`: the position diffuses, ``x <- x + sqrt(D tau) z``, the velocity stays 0;
+  position variance ``D t`` per axis (``D`` in m^2/s);
+* `OrnsteinUhlenbeck`: the velocity is pulled back to 0 at rate ``K`` (1/s) while driven by the
+  target's ``q``: ``dv = -K v dt + sqrt(q) dW``, sampled exactly (the integrated
+  Ornstein-Uhlenbeck process); as ``K -> 0`` it becomes constant velocity.
+
+Beliefs and planners still assume constant velocity: these models change the truth only.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numba.extending import overload
+
+from hptrack.models.mission import motion_noise_factors_on
+from hptrack.models.motion import advance_true_state
+
+_TRUTH_MODELS: dict[type, Callable] = {}
+
+
+def register_truth_motion(model_class: type, advance: Callable) -> None:
+    """Make ``advance`` (a compiled kernel, module docstring) the true motion of
+    ``model_class``."""
+    _TRUTH_MODELS[model_class] = advance
+
+
+def advance_truth(model, mission, truth, z, sqrt_q):
+    """The registered ``advance`` of ``model``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(advance_truth)
+def _advance_truth(model, mission, truth, z, sqrt_q):
+    cls = getattr(model, "instance_class", None)
+    if cls not in _TRUTH_MODELS:
+        raise numba.errors.TypingError(f"no truth motion registered for {model}")
+    return _TRUTH_MODELS[cls].py_func
+
+
+class ConstantVelocityTruth(NamedTuple):
+    """The paper's constant-velocity motion with the mission's process noise."""
+
+
+class CoordinatedTurn(NamedTuple):
+    """Constant turn rates, one per target.
+
+    Attributes:
+        rates: ``(n,)`` turn rates ``omega_i``, rad/s (counter-clockwise positive).
+    """
+
+    rates: np.ndarray
+
+
+class RandomWalk(NamedTuple):
+    """A diffusing position with no velocity.
+
+    Attributes:
+        diffusion: ``D``, the position variance gained per second on each axis, m^2/s.
+    """
+
+    diffusion: float
+
+
+class OrnsteinUhlenbeck(NamedTuple):
+    """A velocity pulled back to rest.
+
+    Attributes:
+        damping: ``K``, the rate at which the velocity decays, 1/s.
+    """
+
+    damping: float
+
+
+@numba.njit(cache=True)
+def advance_constant_velocity(model, mission, truth, z, sqrt_q):
+    """`ConstantVelocityTruth`'s step (the simulator's true motion of the paper)."""
+    l11, l21, l22 = motion_noise_factors_on(mission)
+    tau = mission.time_step
+    for i in range(truth.shape[0]):
+        advance_true_state(truth, i, z[i], sqrt_q[i], l11, l21, l22, tau)
+
+
+@numba.njit(cache=True)
+def turn_step(x, y, vx, vy, omega, tau):
+    """``(x, y, vx, vy)`` after ``tau`` s of a noise-free turn at ``omega`` rad/s (a straight
+    line when ``omega = 0``)."""
+    angle = omega * tau
+    c, s = math.cos(angle), math.sin(angle)
+    if abs(angle) < 1e-12:
+        along, across = tau, 0.0
+    else:
+        along, across = s / omega, (1.0 - c) / omega
+    return (
+        x + along * vx - across * vy,
+        y + across * vx + along * vy,
+        c * vx - s * vy,
+        s * vx + c * vy,
+    )
+
+
+@numba.njit(cache=True)
+def advance_coordinated_turn(model, mission, truth, z, sqrt_q):
+    """`CoordinatedTurn`'s step: the exact turn, then constant velocity's per-step noise."""
+    l11, l21, l22 = motion_noise_factors_on(mission)
+    tau = mission.time_step
+    for i in range(truth.shape[0]):
+        x, y, vx, vy = turn_step(
+            truth[i, 0], truth[i, 1], truth[i, 2], truth[i, 3], model.rates[i], tau
+        )
+        r = sqrt_q[i]
+        truth[i, 0] = x + r * (l11 * z[i, 0])
+        truth[i, 1] = y + r * (l11 * z[i, 1])
+        truth[i, 2] = vx + r * (l21 * z[i, 0] + l22 * z[i, 2])
+        truth[i, 3] = vy + r * (l21 * z[i, 1] + l22 * z[i, 3])
+
+
+@numba.njit(cache=True)
+def advance_random_walk(model, mission, truth, z, sqrt_q):
+    """`RandomWalk`'s step (uses the first two normals of each target)."""
+    spread = math.sqrt(model.diffusion * mission.time_step)
+    for i in range(truth.shape[0]):
+        truth[i, 0] += spread * z[i, 0]
+        truth[i, 1] += spread * z[i, 1]
+        truth[i, 2] = 0.0
+        truth[i, 3] = 0.0
+
+
+@numba.njit(cache=True)
+def ou_step_factors(damping, tau):
+    """The exact one-step transition of the integrated Ornstein-Uhlenbeck velocity, per axis:
+    ``(decay, gain, l11, l21, l22)`` with ``v <- decay v``, ``x <- x + gain v`` and the
+    Cholesky factor of the noise covariance at ``q = 1``,
+    ``[[tau - 2 g + h, g - h], [g - h, K h]] / K^2`` where ``g = (1 - e^{-K tau}) / K`` and
+    ``h = (1 - e^{-2 K tau}) / (2 K)``."""
+    k = damping
+    decay = math.exp(-k * tau)
+    g = -math.expm1(-k * tau) / k
+    h = -math.expm1(-2.0 * k * tau) / (2.0 * k)
+    qxx = (tau - 2.0 * g + h) / (k * k)
+    qxv = (g - h) / k
+    qvv = h
+    l11 = math.sqrt(qxx)
+    l21 = qxv / l11
+    return decay, g, l11, l21, math.sqrt(max(qvv - l21 * l21, 0.0))
+
+
+@numba.njit(cache=True)
+def advance_ornstein_uhlenbeck(model, mission, truth, z, sqrt_q):
+    """`OrnsteinUhlenbeck`'s step, exact for any ``tau``."""
+    decay, gain, l11, l21, l22 = ou_step_factors(model.damping, mission.time_step)
+    for i in range(truth.shape[0]):
+        r = sqrt_q[i]
+        vx, vy = truth[i, 2], truth[i, 3]
+        truth[i, 0] += gain * vx + r * (l11 * z[i, 0])
+        truth[i, 1] += gain * vy + r * (l11 * z[i, 1])
+        truth[i, 2] = decay * vx + r * (l21 * z[i, 0] + l22 * z[i, 2])
+        truth[i, 3] = decay * vy + r * (l21 * z[i, 1] + l22 * z[i, 3])
+
+
+register_truth_motion(ConstantVelocityTruth, advance_constant_velocity)
+register_truth_motion(CoordinatedTurn, advance_coordinated_turn)
+register_truth_motion(RandomWalk, advance_random_walk)
+register_truth_motion(OrnsteinUhlenbeck, advance_ornstein_uhlenbeck)
+
+
+@numba.njit
+def _advance(model, mission, truth, z, sqrt_q):
+    advance_truth(model, mission, truth, z, sqrt_q)
+
+
+def sample_truth(
+    model: tuple,
+    mission,
+    states: np.ndarray,
+    q: np.ndarray,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """True states ``(n, 4)`` one step of ``model`` after ``states``, drawing ``(n, 4)`` unit
+    normals from ``rng`` (the numpy face of `advance_truth`; ``mission`` the record,
+    ``q`` the intensities, m^2/s^3)."""
+    out = np.array(states, dtype=float)
+    z = rng.standard_normal(out.shape)
+    _advance(model, mission, out, z, np.sqrt(np.asarray(q, dtype=float)))
+    return out
