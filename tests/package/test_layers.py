@@ -8,6 +8,7 @@ import hptrack
 
 LAYERS = [
     "_numba_cache",
+    "jsonout",
     "models",
     "interface",
     "settings",
