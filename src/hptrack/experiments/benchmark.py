@@ -4,7 +4,8 @@ For each number of targets ``n`` and each scenario seed, every planner flies the
 scenario once for the whole budget. Episodes run on worker processes (or any
 :class:`concurrent.futures.Executor`, e.g. a Dask cluster's) and are stored as each one finishes
 (:mod:`hptrack.experiments.store`); a re-run with the same arguments skips what is done, and two
-runs on one database share the work. Next to every ``U`` the store keeps the scenario's *never
+runs on one database share the work: a run whose remaining episodes another run holds waits for
+them (:func:`run_benchmark`). Next to every ``U`` the store keeps the scenario's *never
 observed* score: the ``U`` of a mission that measures nothing, which depends only on the priors
 and the budget.
 """
@@ -21,13 +22,18 @@ from typing import Any
 import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
-from hptrack.experiments.workers import worker_pool
+from hptrack.experiments.workers import stop_workers, worker_pool
 from hptrack.interface import InputError
 from hptrack.registry import planner_entry, planner_settings
 from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
 from hptrack.settings import PlannerSettings
 from hptrack.sim.episode import run_episode
+
+MAX_SEED = 2**63 - 1
+"""Largest scenario seed (SQLite's largest integer)."""
+OTHER_RUN_POLL_S = 2.0
+"""How often a run waiting for another run's episodes looks at the database, s."""
 
 
 @dataclass(frozen=True)
@@ -56,6 +62,11 @@ class BenchmarkConfig:
         missing = [p for p in self.planners if p not in self.settings]
         if missing:
             raise ValueError(f"no settings for planners {missing}")
+        if not 0 <= self.first_seed <= MAX_SEED - self.scenarios + 1:
+            raise InputError(
+                f"seeds {self.first_seed} .. {self.first_seed + self.scenarios - 1} (first seed, "
+                f"{self.scenarios} scenarios) must lie between 0 and {MAX_SEED} (2^63 - 1)"
+            )
 
     @property
     def setting(self) -> str:
@@ -119,9 +130,12 @@ def run_benchmark(
     workers: int = 1,
     on_done: Callable[[EpisodeRow, int, int], None] | None = None,
     executor: Executor | None = None,
+    on_wait: Callable[[int, int], None] | None = None,
 ) -> int:
     """Run every episode not yet in ``store``; each is claimed before it runs and stored as soon
-    as it finishes.
+    as it finishes. Episodes that another run on the database holds are waited for, until that
+    run stores them or its claims are released (:meth:`ResultStore.release_stale_claims`: it
+    died, is no run of this database, or held them too long), and then run here if need be.
 
     Args:
         config: what to run.
@@ -130,11 +144,22 @@ def run_benchmark(
         on_done: ``on_done(row, finished, total)`` reports progress.
         executor: where episodes run (e.g. a Dask ``Client.get_executor()``); default this
             process (``workers == 1``) or a process pool of ``workers``.
+        on_wait: ``on_wait(stored, total)`` says that the rest is another run's, every
+            :data:`OTHER_RUN_POLL_S` while this run waits for it.
 
     Returns:
         The number of episodes run now.
     """
-    return run_keys(config.keys(), store, workers, on_done, executor)
+    keys = config.keys()
+    ran = 0
+    while True:
+        ran += run_keys(keys, store, workers, on_done, executor)
+        stored = len(set(keys) & store.done())
+        if stored == len(keys):
+            return ran
+        if on_wait:
+            on_wait(stored, len(keys))
+        time.sleep(OTHER_RUN_POLL_S)
 
 
 def run_keys(
@@ -162,11 +187,10 @@ def run_keys(
         for key in todo:
             if store.claim(key):
                 try:
-                    row = run_one(key)
+                    record(run_one(key))
                 except BaseException:
                     store.release(key)
                     raise
-                record(row)
         return finished
     own_pool = executor is None
     if own_pool:
@@ -187,6 +211,10 @@ def run_keys(
             for future in ready:
                 pending.pop(future)
                 record(future.result())
+    except BaseException:
+        if own_pool:  # an interrupt or a failure: stop the workers' episodes now
+            stop_workers(pool)
+        raise
     finally:
         for future, key in pending.items():
             future.cancel()
@@ -206,6 +234,8 @@ def benchmark(
     db: str | Path = ":memory:",
     workers: int = 1,
     first_seed: int = 0,
+    iterations: int | None = None,
+    time_limit: float | None = None,
 ) -> dict:
     """Fly every planner once on each random scenario and summarise ``U`` (the library face of
     ``hptrack benchmark``).
@@ -219,15 +249,31 @@ def benchmark(
         db: a results database file to store episodes in and resume from (default in memory).
         workers: episodes in flight at once (worker processes).
         first_seed: first scenario seed.
+        iterations: tree-search iterations per decision of every planner that searches (an
+            option in ``options`` wins).
+        time_limit: planning seconds per decision, likewise; not with ``iterations``.
 
     Returns:
         ``{planner: {n: {"mean", "std", "episodes", "never_observed", "wall_time_s"}}}``.
+
+    Raises:
+        InputError: bad options, or both ``iterations`` and ``time_limit``.
     """
     options = options or {}
     unknown = sorted(set(options) - set(planners))
     if unknown:
         raise InputError(f"options given for planners not benchmarked: {', '.join(unknown)}")
-    settings = {p: planner_settings(p, options.get(p)) for p in planners}
+    check_effort(iterations, time_limit)
+    settings = {
+        p: planner_settings(
+            p,
+            {
+                **planner_entry(p).settings_type.effort_options(iterations, time_limit),
+                **options.get(p, {}),
+            },
+        )
+        for p in planners
+    }
     config = BenchmarkConfig(
         tuple(planners), settings, tuple(target_counts), scenarios, homogeneous, first_seed
     )
@@ -238,6 +284,13 @@ def benchmark(
         return summarise((row for row in store.rows() if row.key in wanted), planners)
     finally:
         store.close()
+
+
+def check_effort(iterations: int | None, time_limit: float | None) -> None:
+    """Refuse both effort limits of a benchmark at once: its planners are compared at one kind
+    of effort."""
+    if iterations is not None and time_limit is not None:
+        raise InputError("give iterations (--iterations) or time_limit (--time-limit), not both")
 
 
 def summarise(rows: Iterable[EpisodeRow], order: Iterable[str] = ()) -> dict:
