@@ -184,13 +184,13 @@ def run_keys(
             on_done(row, finished, total)
 
     if executor is None and workers <= 1:
-        for key in todo:
-            if store.claim(key):
-                try:
+        try:
+            for key in todo:
+                if store.claim(key):
                     record(run_one(key))
-                except BaseException:
-                    store.release(key)
-                    raise
+        except BaseException:
+            store.release_all()
+            raise
         return finished
     own_pool = executor is None
     if own_pool:
@@ -211,14 +211,14 @@ def run_keys(
             for future in ready:
                 pending.pop(future)
                 record(future.result())
-    except BaseException:
-        if own_pool:  # an interrupt or a failure: stop the workers' episodes now
+    except BaseException:  # an interrupt or a failure: stop the episodes in flight now
+        for future in pending:
+            future.cancel()
+        if own_pool:
             stop_workers(pool)
+        store.release_all()
         raise
     finally:
-        for future, key in pending.items():
-            future.cancel()
-            store.release(key)
         if own_pool:
             pool.shutdown(wait=True, cancel_futures=True)
     return finished

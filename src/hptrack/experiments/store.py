@@ -361,14 +361,10 @@ class ResultStore:
             )
             return cur.rowcount == 1
 
-    def release(self, key: EpisodeKey) -> None:
-        """Give up this process's claim of ``key`` (an episode that was not run after all)."""
+    def release_all(self) -> None:
+        """Give up every claim of this process (episodes that were not run after all)."""
         with self._guard():
-            self._db.execute(
-                "DELETE FROM claims WHERE planner=? AND n_targets=? AND seed=? AND "
-                "setting=? AND planner_settings_hash=? AND host=? AND pid=?",
-                (*key._id(), self._host, self._pid),
-            )
+            self._db.execute("DELETE FROM claims WHERE host=? AND pid=?", (self._host, self._pid))
             self._db.commit()
 
     def rows(self) -> list[EpisodeRow]:
