@@ -55,6 +55,10 @@ def refused(result, *needles):
         (["validate-coverage", "--workers", "4096"], "--workers"),
         (["benchmark", "--workers", "4096", "--scenarios", "1"], "--workers"),
         (["benchmark", "--scenarios", str(10**12)], "--scenarios"),
+        (["benchmark", "--scenarios", "2", "--first-seed", str(2**63 - 1)], "(2^63 - 1)"),
+        (["benchmark", "--iterations", "10", "--time-limit", "1"], "not both"),
+        (["replay", "/dev/zero"], "not a mission log (a folder, a device"),
+        (["replay", "/dev/urandom"], "not a mission log (a folder, a device"),
         (["benchmark", "--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "inf"], "3600"),
         (["learn", "adfq", "--targets", "100", "--steps", "10", "--out", "x"], "--targets"),
         (
