@@ -43,13 +43,6 @@ def _stored(path):
     return path
 
 
-def refused(result, *needles):
-    assert result.code == 2, (result.code, result.out, result.err)
-    assert "Traceback" not in result.err and len(result.error_lines) == 1, result.err
-    for needle in needles:
-        assert needle in result.error_lines[0], result.error_lines[0]
-
-
 def _unique_rows(path) -> int:
     rows = ResultStore(path).rows()
     assert len(rows) == len({r.key for r in rows})
@@ -94,7 +87,7 @@ def test_a_disk_that_fills_mid_run_keeps_the_rows_and_the_next_run_resumes(tmp_p
 def test_a_full_disk_is_one_line_in_the_cli(cli, tmp_path, monkeypatch):
     db = tmp_path / "new.db"
     _limit_pages(monkeypatch)  # a new file: not even its tables fit
-    refused(cli(*BENCHMARK, "--db", db, "--out", tmp_path / "o"), str(db), "disk is full")
+    cli(*BENCHMARK, "--db", db, "--out", tmp_path / "o").refused(str(db), "disk is full")
 
 
 def _read_only(monkeypatch) -> None:
@@ -115,7 +108,7 @@ def test_a_read_only_database_serves_a_finished_run_and_refuses_more(cli, tmp_pa
     assert result.code == 0, result.err  # all stored: nothing to write
     assert "0 episodes run now, 3 of 3" in result.out
     more = [*BENCHMARK[:4], "4", *BENCHMARK[5:]]
-    refused(cli(*more, "--db", db, "--out", tmp_path / "o"), str(db), "cannot be written")
+    cli(*more, "--db", db, "--out", tmp_path / "o").refused(str(db), "cannot be written")
 
 
 def _finished(tmp_path, sql: str) -> object:
@@ -137,7 +130,7 @@ def _finished(tmp_path, sql: str) -> object:
 )
 def test_a_stored_value_of_the_wrong_type_is_one_line(cli, tmp_path, sql, needle):
     db = _finished(tmp_path, sql)
-    refused(cli(*BENCHMARK, "--db", db, "--out", tmp_path / "o"), str(db), needle)
+    cli(*BENCHMARK, "--db", db, "--out", tmp_path / "o").refused(str(db), needle)
 
 
 def test_a_trigger_that_refuses_inserts_is_one_line_and_frees_the_claim(cli, tmp_path):
@@ -146,7 +139,7 @@ def test_a_trigger_that_refuses_inserts_is_one_line_and_frees_the_claim(cli, tmp
     )
     db = _finished(tmp_path, sql)
     more = [*BENCHMARK[:4], "4", *BENCHMARK[5:]]
-    refused(cli(*more, "--db", db, "--out", tmp_path / "o"), str(db), "refused a write (frozen)")
+    cli(*more, "--db", db, "--out", tmp_path / "o").refused(str(db), "refused a write (frozen)")
     with sqlite3.connect(db) as raw:
         assert raw.execute("SELECT COUNT(*) FROM claims").fetchone() == (0,)
         assert raw.execute("SELECT COUNT(*) FROM episodes").fetchone() == (3,)
