@@ -133,8 +133,8 @@ def _usable(directory: Path) -> str | None:
     """Create ``directory`` (private) if needed; ``None`` if the cache may live there, else why
     not."""
     try:
-        _make_private(directory)
-        for path in (directory.parent, directory):
+        for path in (directory.parent, directory):  # nothing is made in a folder not safe
+            _make_private(path)
             reason = unsafe_reason(path)
             if reason:
                 return f"{path}: {reason}"

@@ -246,7 +246,8 @@ def benchmark(
         scenarios: scenarios per ``n`` (seeds ``first_seed ..``).
         homogeneous: the paper's ARVI/A* setting (shared prior and ``q``); else heterogeneous.
         options: each planner's options, e.g. ``{"mcts": {"iterations": 20_000}}``.
-        db: a results database file to store episodes in and resume from (default in memory).
+        db: a results database file to store episodes in and resume from (default in memory);
+            episodes another run on it holds are waited for (:func:`run_benchmark`).
         workers: episodes in flight at once (worker processes).
         first_seed: first scenario seed.
         iterations: tree-search iterations per decision of every planner that searches (an
