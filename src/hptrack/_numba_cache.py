@@ -7,7 +7,7 @@ hptrack module they import are hashed, and numba caches in ``<base>/numba-<hash>
 any of them gives a new directory, so nothing stale is ever loaded and nobody deletes files. The
 base is ``$HPTRACK_CACHE_DIR``, else ``$NUMBA_CACHE_DIR/hptrack``, else the user's cache directory
 (``~/.cache/hptrack`` on Linux), else, if that cannot be written (a read-only home), one in the
-system's temporary directory. Directories of other hashes unused for :data:`KEEP_DAYS` are removed.
+system's temporary directory. Directories of other hashes unused for `KEEP_DAYS` are removed.
 
 Numba's cache holds pickled code, which it runs when it loads a kernel: a directory that another
 user owns or can write (a ``/tmp/hptrack-$USER`` that someone else created with mode 777, say)
@@ -156,7 +156,7 @@ def _remove_unused(base: Path, keep: Path) -> None:
 
 def cache_directory(root: Path = PACKAGE) -> Path | None:
     """The cache directory for the sources under ``root`` (created and marked as used now): the
-    first of the candidates that is safe (:func:`unsafe_reason`), else a fresh private temporary
+    first of the candidates that is safe (`unsafe_reason`), else a fresh private temporary
     one; ``None`` if no place can be written."""
     name = f"numba-{sources_digest(root)}"
     reasons = []
@@ -184,7 +184,7 @@ def cache_directory(root: Path = PACKAGE) -> Path | None:
 
 
 def configure() -> None:
-    """Point numba's cache at :func:`cache_directory` (kernels defined from now on)."""
+    """Point numba's cache at `cache_directory` (kernels defined from now on)."""
     directory = cache_directory()
     if directory is None:
         return

@@ -1,7 +1,7 @@
 """``hptrack animate``: a saved episode record as a GIF (or MP4 with ffmpeg), with progress of
 the drawing and then of the GIF's encoding.
 
-:func:`write_animation` is the same rendering for other commands (``simulate --animate``).
+`write_animation` is the same rendering for other commands (``simulate --animate``).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def _declared_bytes(archive: zipfile.ZipFile, item: zipfile.ZipInfo) -> int:
 
 
 def load_record(path: Path) -> EpisodeRecord:
-    """Read an episode record, or raise a one-line :class:`InputError` naming the file."""
+    """Read an episode record, or raise a one-line `InputError` naming the file."""
     if not path.is_file():
         raise InputError(f"RECORD {str(path)!r}: no such file")
     try:

@@ -2,10 +2,10 @@
 
 For each number of targets ``n`` and each scenario seed, every planner flies the same random
 scenario once for the whole budget. Episodes run on worker processes (or any
-:class:`concurrent.futures.Executor`, e.g. a Dask cluster's) and are stored as each one finishes
-(:mod:`hptrack.experiments.store`); a re-run with the same arguments skips what is done, and two
+`concurrent.futures.Executor`, e.g. a Dask cluster's) and are stored as each one finishes
+(`hptrack.experiments.store`); a re-run with the same arguments skips what is done, and two
 runs on one database share the work: a run whose remaining episodes another run holds waits for
-them (:func:`run_benchmark`). Next to every ``U`` the store keeps the scenario's *never
+them (`run_benchmark`). Next to every ``U`` the store keeps the scenario's *never
 observed* score: the ``U`` of a mission that measures nothing, which depends only on the priors
 and the budget.
 """
@@ -47,7 +47,7 @@ class BenchmarkConfig:
         scenarios: scenarios per ``n`` (seeds ``first_seed .. first_seed + scenarios - 1``).
         homogeneous: the paper's setting for ARVI and A* (shared ``q`` and prior).
         first_seed: first scenario seed.
-        process_noise_form: the scenarios' per-step ``Q`` (:mod:`hptrack.models.motion`).
+        process_noise_form: the scenarios' per-step ``Q`` (`hptrack.models.motion`).
     """
 
     planners: tuple[str, ...]
@@ -134,7 +134,7 @@ def run_benchmark(
 ) -> int:
     """Run every episode not yet in ``store``; each is claimed before it runs and stored as soon
     as it finishes. Episodes that another run on the database holds are waited for, until that
-    run stores them or its claims are released (:meth:`ResultStore.release_stale_claims`: it
+    run stores them or its claims are released (`ResultStore.release_stale_claims`: it
     died, is no run of this database, or held them too long), and then run here if need be.
 
     Args:
@@ -145,7 +145,7 @@ def run_benchmark(
         executor: where episodes run (e.g. a Dask ``Client.get_executor()``); default this
             process (``workers == 1``) or a process pool of ``workers``.
         on_wait: ``on_wait(stored, total)`` says that the rest is another run's, every
-            :data:`OTHER_RUN_POLL_S` while this run waits for it.
+            `OTHER_RUN_POLL_S` while this run waits for it.
 
     Returns:
         The number of episodes run now.
@@ -169,7 +169,7 @@ def run_keys(
     on_done: Callable[[EpisodeRow, int, int], None] | None = None,
     executor: Executor | None = None,
 ) -> int:
-    """:func:`run_benchmark` on any list of episodes (in this order)."""
+    """`run_benchmark` on any list of episodes (in this order)."""
     store.release_stale_claims()
     done = store.done()
     todo = [k for k in keys if k not in done]
@@ -247,7 +247,7 @@ def benchmark(
         homogeneous: the paper's ARVI/A* setting (shared prior and ``q``); else heterogeneous.
         options: each planner's options, e.g. ``{"mcts": {"iterations": 20_000}}``.
         db: a results database file to store episodes in and resume from (default in memory);
-            episodes another run on it holds are waited for (:func:`run_benchmark`).
+            episodes another run on it holds are waited for (`run_benchmark`).
         workers: episodes in flight at once (worker processes).
         first_seed: first scenario seed.
         iterations: tree-search iterations per decision of every planner that searches (an

@@ -2,22 +2,22 @@
 nothing already done, and a re-run resumes by skipping the keys already stored.
 
 An episode's identity is its planner, number of targets, scenario seed, scenario setting and the
-planner's full canonical settings (:meth:`hptrack.settings.PlannerSettings.canonical`: every
+planner's full canonical settings (`hptrack.settings.PlannerSettings.canonical`: every
 option, stored as JSON beside its hash), so a run with another value of any option never reuses
 another's rows.
 Before running an episode a run *claims* it (a row in ``claims`` with its process id and host);
 two runs on one database therefore share the work instead of both computing everything. Claims
-older than :data:`STALE_CLAIM_S`, from the future, or of a process on this host that is not a run
+older than `STALE_CLAIM_S`, from the future, or of a process on this host that is not a run
 of this database (gone, or another program under a reused id) are released.
 
 A failure of the database itself (a full disk, a read-only file, a lock another process holds
-for longer than :data:`LOCK_WAIT_S`, a trigger that refuses a write, a value of the wrong type)
-is an :class:`~hptrack.interface.InputError` of one line naming the file: the episodes stored
+for longer than `LOCK_WAIT_S`, a trigger that refuses a write, a value of the wrong type)
+is an `InputError` of one line naming the file: the episodes stored
 before it are kept, and the next run resumes from them.
 
-A database of an older layout is migrated when it is opened (:data:`MIGRATIONS`, one step per
+A database of an older layout is migrated when it is opened (`MIGRATIONS`, one step per
 version). A change of what identifies a result (a new planner option, say) is such a step: it
-bumps :data:`SCHEMA_VERSION` and rewrites the stored identities to what the code now builds for
+bumps `SCHEMA_VERSION` and rewrites the stored identities to what the code now builds for
 the same runs (the new option's value that the old rows were run with), so that stored and
 published results keep their identity without the settings carrying their history.
 """
@@ -99,7 +99,7 @@ def _with_options(options: dict[str, dict], planner: str, text: str) -> str:
 
 
 def _full_identity(planner: str, text: str) -> str:
-    """Layout 2 -> 3: the identity with every option (:data:`_LEFT_OUT_BY_LAYOUT_2`)."""
+    """Layout 2 -> 3: the identity with every option (`_LEFT_OUT_BY_LAYOUT_2`)."""
     return _with_options(_LEFT_OUT_BY_LAYOUT_2, planner, text)
 
 
@@ -170,7 +170,7 @@ class EpisodeKey:
 
     @property
     def planner_settings_hash(self) -> str:
-        """A short hash of :attr:`planner_settings` (the same as the settings' ``digest()``)."""
+        """A short hash of `planner_settings` (the same as the settings' ``digest()``)."""
         return digest_of(self.planner_settings)
 
     def _id(self) -> tuple:
@@ -191,11 +191,11 @@ class EpisodeRow:
 
 
 def check_columns(db: sqlite3.Connection, source: str) -> None:
-    """Refuse a database whose tables lack columns of :data:`SCHEMA` (a file edited by hand or
+    """Refuse a database whose tables lack columns of `SCHEMA` (a file edited by hand or
     written by another program): one line naming the table and the missing columns.
 
     Raises:
-        InputError: a table of :data:`SCHEMA` misses columns.
+        InputError: a table of `SCHEMA` misses columns.
     """
     expected = sqlite3.connect(":memory:")
     expected.executescript(SCHEMA)
@@ -222,11 +222,11 @@ def check_columns(db: sqlite3.Connection, source: str) -> None:
 
 
 class ResultStore:
-    """Episodes in an SQLite file (one row per :class:`EpisodeKey`, inserted once).
+    """Episodes in an SQLite file (one row per `EpisodeKey`, inserted once).
 
     Raises:
         InputError: the file is not an hptrack results database, or one of a layout that
-            cannot be migrated (:data:`MIGRATIONS`).
+            cannot be migrated (`MIGRATIONS`).
     """
 
     def __init__(self, path: str | Path) -> None:
@@ -279,7 +279,7 @@ class ResultStore:
             raise InputError(database_failure(self.path, err)) from None
 
     def _migrate(self) -> None:
-        """Bring the database to :data:`SCHEMA_VERSION` in one transaction (a run that opens it
+        """Bring the database to `SCHEMA_VERSION` in one transaction (a run that opens it
         meanwhile waits, then finds it migrated)."""
         self._db.execute("BEGIN IMMEDIATE")
         try:

@@ -1,11 +1,11 @@
 """Worker processes that die with the process that started them.
 
 A pool's workers outlive a parent killed with SIGKILL (no cleanup runs in it): they would go on
-computing episodes nobody collects. :func:`die_with_parent`, a pool's ``initializer``, makes a
+computing episodes nobody collects. `die_with_parent`, a pool's ``initializer``, makes a
 worker follow its parent: on Linux the kernel sends it SIGKILL when the parent dies
 (``PR_SET_PDEATHSIG``), and everywhere a watcher thread ends it within a second of its parent's
 disappearance. Workers ignore Ctrl-C (SIGINT): the parent decides, and on an interrupt ends them
-at once with :func:`stop_workers` instead of waiting for their episodes.
+at once with `stop_workers` instead of waiting for their episodes.
 """
 
 from __future__ import annotations

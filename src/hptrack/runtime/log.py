@@ -5,7 +5,7 @@ Every record is a JSON object with ``kind`` (``header`` first, then ``odometry``
 ``safety``), ``t`` the mission time in s where it has one, ``wall`` the wall-clock time (Unix
 s) when it was written, and ``seq`` its line number from 0. Non-finite numbers of rejected
 inputs are written as the strings ``"nan"``, ``"inf"``, ``"-inf"`` so that every line is strict
-JSON. :func:`read_log` reads a log back; a last line cut short by a crash or a kill is dropped
+JSON. `read_log` reads a log back; a last line cut short by a crash or a kill is dropped
 and reported, so a log always replays up to where it ends.
 """
 
@@ -222,7 +222,7 @@ def _depth(value: Any) -> int:
 def check_record(record: dict, where: str, header: bool = False) -> None:
     """Refuse a record whose fields replay cannot use: the fields of its kind missing or of
     the wrong type (text for a number), numbers out of range, or nested deeper than
-    :data:`MAX_LOG_DEPTH`. Other fields are compared, not used, and may hold anything.
+    `MAX_LOG_DEPTH`. Other fields are compared, not used, and may hold anything.
 
     Raises:
         InputError: one line naming the place, the field and the shortened value.
@@ -262,7 +262,7 @@ class LogContents:
 
 
 def read_log(path: str | Path) -> LogContents:
-    """Read a mission log written by :class:`MissionLog`.
+    """Read a mission log written by `MissionLog`.
 
     Raises:
         InputError: the file cannot be read, has no header, or has a malformed line other

@@ -4,7 +4,7 @@ The controller is rebuilt from the log's header (scenario, planner and its setti
 controller settings). Each odometry and detection record is fed again, accepted or not; the
 records a ``setpoint`` call made are grouped by their call number and the call is made again at
 the same mission time. The planner runs in the caller's thread, and only when the log says its
-outcome was delivered (:class:`~hptrack.runtime.worker.ReplayRunner`), so no wall clock is
+outcome was delivered (`ReplayRunner`), so no wall clock is
 involved: the beliefs, the ticks, the observations, the planner's decisions and the setpoint
 modes are reproduced, and every difference from the log is reported. A planner whose effort is
 wall time (``mcts`` with a time limit) may decide differently on replay; one with an iteration

@@ -42,7 +42,7 @@ _FLOAT = re.compile(
 
 class _ScenarioLoader(yaml.SafeLoader):
     """A safe YAML loader that refuses a mapping with the same key twice (PyYAML keeps the
-    last one silently) and integers of more than :data:`MAX_INT_DIGITS` digits, keeps merge
+    last one silently) and integers of more than `MAX_INT_DIGITS` digits, keeps merge
     keys (``<<: *defaults``), reads ``1e-4`` as a number (YAML 1.1 needs a dot) and ``1:00``
     as text (YAML 1.1 would read 60)."""
 
@@ -96,7 +96,7 @@ _ScenarioLoader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT, list("-
 
 
 def _check_size(data: object, path: Path) -> None:
-    """Refuse data of more than :data:`MAX_VALUES` values or :data:`MAX_DEPTH` levels, looking
+    """Refuse data of more than `MAX_VALUES` values or `MAX_DEPTH` levels, looking
     at no more than that (aliases make the expanded data far larger than the file)."""
     stack, count = [(data, 1)], 0
     while stack:
@@ -116,7 +116,7 @@ def _check_size(data: object, path: Path) -> None:
 
 
 def _read_regular_file(path: Path, what: str) -> bytes:
-    """The bytes of a regular file of at most :data:`MAX_FILE_BYTES` (a FIFO, a device or a
+    """The bytes of a regular file of at most `MAX_FILE_BYTES` (a FIFO, a device or a
     folder is refused before it is opened: reading one may never end)."""
     try:
         info = path.stat()
@@ -134,7 +134,7 @@ def _read_regular_file(path: Path, what: str) -> bytes:
 
 def read_yaml(path: str | Path, what: str = "file") -> object:
     """Parse a YAML file (UTF-8 text, no duplicated keys, bounded size), or raise
-    :class:`ScenarioError` naming the file."""
+    `ScenarioError` naming the file."""
     path = Path(path)
     raw = _read_regular_file(path, what)
     try:

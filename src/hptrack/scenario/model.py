@@ -4,10 +4,10 @@ A scenario fixes the time step, the budget, the agent, and each target's prior b
 covariance), process noise ``q`` and, optionally, its true initial state. Every number is
 checked before any work starts: a real number (a boolean or a text such as ``"0.5"`` is not),
 finite, inside a sane range; covariances symmetric positive definite, eigenvalues at least
-:data:`MIN_VARIANCE` and within 1e12 of each other, position variances (prior and at the
-budget's end) within what the Kalman update handles (:data:`MAX_UPDATE_RATIO`) and the area
-(:data:`MAX_POSITION_VARIANCE`); the budget a whole number of time steps and at most
-:data:`MAX_STEPS` of them; target ids unique and printable; every target's mean speed below the
+`MIN_VARIANCE` and within 1e12 of each other, position variances (prior and at the
+budget's end) within what the Kalman update handles (`MAX_UPDATE_RATIO`) and the area
+(`MAX_POSITION_VARIANCE`); the budget a whole number of time steps and at most
+`MAX_STEPS` of them; target ids unique and printable; every target's mean speed below the
 agent's (the coverage planner of Sec. IV-A needs ``v_a > |v_hat|``); mean and true paths inside
 the 10,000 km area for the whole budget. Errors name the field and the value.
 """
@@ -241,8 +241,8 @@ class Scenario(BaseModel):
                 )
 
     def _check_variances(self, covs: np.ndarray, when: str) -> None:
-        """Refuse position variances the Kalman update cannot handle (:data:`MAX_UPDATE_RATIO`)
-        or wider than the area (:data:`MAX_POSITION_VARIANCE`)."""
+        """Refuse position variances the Kalman update cannot handle (`MAX_UPDATE_RATIO`)
+        or wider than the area (`MAX_POSITION_VARIANCE`)."""
         r_min = float(np.linalg.eigvalsh(self.agent.noise_covariance())[0])
         limit = min(MAX_POSITION_VARIANCE, MAX_UPDATE_RATIO * r_min)
         largest = np.linalg.eigvalsh(covs[:, :2, :2])[:, -1]
@@ -262,7 +262,7 @@ class Scenario(BaseModel):
 
     @property
     def n_steps(self) -> int:
-        """Simulation steps in the budget (:func:`hptrack.models.mission.steps_left`)."""
+        """Simulation steps in the budget (`hptrack.models.mission.steps_left`)."""
         return steps_left(self.time_step, self.budget)
 
     def means(self) -> np.ndarray:
@@ -298,8 +298,8 @@ class Scenario(BaseModel):
 
     def initial_observation(self) -> Observation:
         """What a planner sees at the start, before any measurement: time 0, the agent at its
-        start position, the prior beliefs, nothing detected (pass it with :meth:`mission_spec`
-        to :func:`hptrack.plan` or a planner's ``reset``)."""
+        start position, the prior beliefs, nothing detected (pass it with `mission_spec`
+        to `hptrack.plan` or a planner's ``reset``)."""
         arrays = [
             np.array(self.agent.position, dtype=float),
             self.means(),
