@@ -9,16 +9,16 @@ base is ``$HPTRACK_CACHE_DIR``, else ``$NUMBA_CACHE_DIR/hptrack``, else the user
 (``~/.cache/hptrack`` on Linux), else, if that cannot be written (a read-only home), one in the
 system's temporary directory. Directories of other hashes unused for `KEEP_DAYS` are removed.
 
+``hptrack/__init__.py`` imports this module first: numba chooses a kernel's cache directory when
+the kernel is defined. It imports no numerics: it sets ``NUMBA_CACHE_DIR`` (and
+``HPTRACK_CACHE_DIR`` to the base, so that child processes key their own sources under the same
+base) for numba to read when it is imported, and numba's configuration if numba already is.
+
 Numba's cache holds pickled code, which it runs when it loads a kernel: a directory that another
 user owns or can write (a ``/tmp/hptrack-$USER`` that someone else created with mode 777, say)
 is never used. The directories created here are private (mode 700); if no candidate is safe,
 the kernels are cached in a fresh private temporary directory, removed at exit, and a warning
 says why (the kernels then compile again in the next process).
-
-``hptrack/__init__.py`` imports this module first: numba chooses a kernel's cache directory when
-the kernel is defined. It imports no numerics: it sets ``NUMBA_CACHE_DIR`` (and
-``HPTRACK_CACHE_DIR`` to the base, so that child processes key their own sources under the same
-base) for numba to read when it is imported, and numba's configuration if numba already is.
 """
 
 from __future__ import annotations

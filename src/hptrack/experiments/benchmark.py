@@ -4,8 +4,7 @@ For each number of targets ``n`` and each scenario seed, every planner flies the
 scenario once for the whole budget. Episodes run on worker processes (or any
 `concurrent.futures.Executor`, e.g. a Dask cluster's) and are stored as each one finishes
 (`hptrack.experiments.store`); a re-run with the same arguments skips what is done, and two
-runs on one database share the work: a run whose remaining episodes another run holds waits for
-them (`run_benchmark`). Next to every ``U`` the store keeps the scenario's *never
+runs on one database share the work. Next to every ``U`` the store keeps the scenario's *never
 observed* score: the ``U`` of a mission that measures nothing, which depends only on the priors
 and the budget.
 """

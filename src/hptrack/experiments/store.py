@@ -7,19 +7,20 @@ option, stored as JSON beside its hash), so a run with another value of any opti
 another's rows.
 Before running an episode a run *claims* it (a row in ``claims`` with its process id and host);
 two runs on one database therefore share the work instead of both computing everything. Claims
-older than `STALE_CLAIM_S`, from the future, or of a process on this host that is not a run
-of this database (gone, or another program under a reused id) are released.
-
-A failure of the database itself (a full disk, a read-only file, a lock another process holds
-for longer than `LOCK_WAIT_S`, a trigger that refuses a write, a value of the wrong type)
-is an `InputError` of one line naming the file: the episodes stored
-before it are kept, and the next run resumes from them.
+of a process that no longer runs (on this host) or older than `STALE_CLAIM_S` are released.
 
 A database of an older layout is migrated when it is opened (`MIGRATIONS`, one step per
 version). A change of what identifies a result (a new planner option, say) is such a step: it
 bumps `SCHEMA_VERSION` and rewrites the stored identities to what the code now builds for
 the same runs (the new option's value that the old rows were run with), so that stored and
 published results keep their identity without the settings carrying their history.
+
+Claims dated more than `FUTURE_CLAIM_S` ahead, and those of a live process on this host that is
+not a run of this database (another program under a reused id), are released too. A failure of
+the database itself (a full disk, a read-only file, a lock another process holds for longer
+than `LOCK_WAIT_S`, a trigger that refuses a write, a value of the wrong type) is an
+`InputError` of one line naming the file: the episodes stored before it are kept, and the next
+run resumes from them.
 """
 
 from __future__ import annotations
