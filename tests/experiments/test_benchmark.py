@@ -257,7 +257,7 @@ def test_ctrl_c_stops_the_workers_at_once_and_a_rerun_resumes(tmp_path):
 
 
 def test_the_library_refuses_both_effort_limits_and_seeds_past_sqlites_range(cli, tmp_path):
-    with pytest.raises(InputError, match=r"give iterations \(--iterations\) or time_limit"):
+    with pytest.raises(InputError, match=r"--time-limit \(iterations or time_limit\), not both"):
         benchmark(("mcts",), (2,), 1, iterations=10, time_limit=1.0)
     with pytest.raises(InputError, match=r"must lie between 0 and 9223372036854775807"):
         config(first_seed=2**63 - 1, scenarios=2)

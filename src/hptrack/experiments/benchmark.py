@@ -290,7 +290,7 @@ def check_effort(iterations: int | None, time_limit: float | None) -> None:
     """Refuse both effort limits of a benchmark at once: its planners are compared at one kind
     of effort."""
     if iterations is not None and time_limit is not None:
-        raise InputError("give iterations (--iterations) or time_limit (--time-limit), not both")
+        raise InputError("give --iterations or --time-limit (iterations or time_limit), not both")
 
 
 def summarise(rows: Iterable[EpisodeRow], order: Iterable[str] = ()) -> dict:
