@@ -22,6 +22,13 @@ class CliResult:
     def error_lines(self) -> list[str]:
         return [line for line in self.err.splitlines() if line.strip()]
 
+    def refused(self, *needles: str) -> None:
+        """Assert a refusal: exit code 2 and one line on stderr holding every needle."""
+        assert self.code == 2, (self.code, self.out, self.err)
+        assert "Traceback" not in self.err and len(self.error_lines) == 1, self.err
+        for needle in needles:
+            assert needle in self.error_lines[0], self.error_lines[0]
+
 
 @pytest.fixture
 def cli(capsys):

@@ -13,14 +13,23 @@ system's temporary directory. Directories of other hashes unused for `KEEP_DAYS`
 the kernel is defined. It imports no numerics: it sets ``NUMBA_CACHE_DIR`` (and
 ``HPTRACK_CACHE_DIR`` to the base, so that child processes key their own sources under the same
 base) for numba to read when it is imported, and numba's configuration if numba already is.
+
+Numba's cache holds pickled code, which it runs when it loads a kernel: a directory that another
+user owns or can write (a ``/tmp/hptrack-$USER`` that someone else created with mode 777, say)
+is never used. The directories created here are private (mode 700); if no candidate is safe,
+the kernels are cached in a fresh private temporary directory, removed at exit, and a warning
+says why (the kernels then compile again in the next process).
 """
 
 from __future__ import annotations
 
+import atexit
 import hashlib
+import logging
 import os
 import re
 import shutil
+import stat
 import sys
 import tempfile
 import time
@@ -97,13 +106,42 @@ def _bases() -> list[Path]:
     return [first, Path(tempfile.gettempdir()) / f"hptrack-{user}"]
 
 
-def _writable(directory: Path) -> bool:
+def _make_private(directory: Path) -> None:
+    """Create ``directory`` and its missing parents, each with mode 700."""
+    missing = []
+    while not directory.exists() and directory.parent != directory:
+        missing.append(directory)
+        directory = directory.parent
+    for path in reversed(missing):
+        path.mkdir(mode=0o700, exist_ok=True)
+
+
+def unsafe_reason(directory: Path) -> str | None:
+    """Why numba must not load code from ``directory`` (another owner, writable by others), or
+    ``None`` if it is the current user's own."""
+    if not hasattr(os, "getuid"):  # Windows: no owner and mode bits to check
+        return None
+    link, target = os.lstat(directory), os.stat(directory)
+    if link.st_uid != os.getuid() or target.st_uid != os.getuid():
+        return f"owned by user id {target.st_uid if link.st_uid == os.getuid() else link.st_uid}"
+    if target.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
+        return f"writable by others (mode {stat.S_IMODE(target.st_mode):o})"
+    return None
+
+
+def _usable(directory: Path) -> str | None:
+    """Create ``directory`` (private) if needed; ``None`` if the cache may live there, else why
+    not."""
     try:
-        directory.mkdir(parents=True, exist_ok=True)
+        for path in (directory.parent, directory):  # nothing is made in a folder not safe
+            _make_private(path)
+            reason = unsafe_reason(path)
+            if reason:
+                return f"{path}: {reason}"
         with tempfile.TemporaryFile(dir=directory):
-            return True
-    except OSError:
-        return False
+            return None
+    except OSError as err:
+        return f"{directory}: {err.strerror or err}"
 
 
 def _remove_unused(base: Path, keep: Path) -> None:
@@ -117,16 +155,32 @@ def _remove_unused(base: Path, keep: Path) -> None:
 
 
 def cache_directory(root: Path = PACKAGE) -> Path | None:
-    """The cache directory for the sources under ``root`` (created and marked as used now), or
-    ``None`` if no place can be written."""
+    """The cache directory for the sources under ``root`` (created and marked as used now): the
+    first of the candidates that is safe (`unsafe_reason`), else a fresh private temporary
+    one; ``None`` if no place can be written."""
     name = f"numba-{sources_digest(root)}"
+    reasons = []
     for base in _bases():
         directory = base / name
-        if _writable(directory):
+        reason = _usable(directory)
+        if reason is None:
             os.utime(directory)
             _remove_unused(base, directory)
             return directory
-    return None
+        reasons.append(reason)
+    try:
+        base = Path(tempfile.mkdtemp(prefix="hptrack-cache-"))
+    except OSError:
+        return None
+    atexit.register(shutil.rmtree, base, ignore_errors=True)
+    logging.getLogger("hptrack").warning(
+        "hptrack: compiled kernels are cached in %s for this run only, since no safe cache "
+        "directory was found (%s); set HPTRACK_CACHE_DIR to a folder only you can write",
+        base,
+        "; ".join(reasons),
+    )
+    (base / name).mkdir(mode=0o700)
+    return base / name
 
 
 def configure() -> None:

@@ -40,6 +40,18 @@ def test_copy_all_then_refuse_to_overwrite(cli, tmp_path):
     assert cli("examples", "plan_once.py", "--to", str(tmp_path / "ex"), "--force").code == 0
 
 
+@pytest.mark.parametrize("force", [False, True])
+def test_a_destination_that_is_no_file_is_refused_before_anything_is_copied(cli, tmp_path, force):
+    folder = tmp_path / "ex"
+    (folder / "plan_once.py").mkdir(parents=True)  # a folder where a script would go
+    (folder / "benchmark.py").symlink_to(tmp_path / "nowhere" / "x")  # a link to elsewhere
+    result = cli("examples", "--to", folder, *(["--force"] if force else []))
+    assert result.code == 2 and len(result.error_lines) == 1, result.err
+    assert "benchmark.py is a folder, a link or a device, not a file" in result.err
+    assert sorted(p.name for p in folder.iterdir()) == ["benchmark.py", "plan_once.py"]
+    assert not (tmp_path / "nowhere").exists()
+
+
 def test_unknown_example_is_one_line(cli):
     result = cli("examples", "nope.py")
     assert result.code == 2

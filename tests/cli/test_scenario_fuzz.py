@@ -5,6 +5,7 @@ import copy
 import json
 import math
 
+import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -123,3 +124,41 @@ def test_mutated_scenarios_run_or_are_refused_in_one_line(cli, tmp_path, text):
     summary = json.loads(out.read_text())
     assert math.isfinite(summary["U"])
     assert _finite_numbers(summary)
+
+
+def _edited(**changes) -> str:
+    data = copy.deepcopy(VALID)
+    for path, value in changes.items():
+        *parents, last = path.split("__")
+        node = data
+        for key in parents:
+            node = node[int(key)] if key.isdigit() else node[key]
+        if value is KeyError:
+            node.pop(last)
+        else:
+            node[last] = value
+    return yaml.safe_dump(data)
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        (_edited(budget=1e308), "budget 1e+308 s is infinitely many steps of 0.5 s"),
+        (_edited(time_step=1e-3, budget=1e300), "budget 1e+300 s is 1e+303 steps of 0.001 s"),
+        (_edited(budget=KeyError, budgett=30.0), "budgett: unknown field; did you mean budget?"),
+        (
+            _edited(targets__1__process_noise=KeyError, targets__1__process_nosie=2e-4),
+            "targets.1.process_nosie: unknown field; did you mean process_noise? (value 0.0002)",
+        ),
+        (_edited(agent__colour="red"), "agent.colour: unknown field; the fields are position,"),
+        (_edited().replace("id: t1", 'id: !!binary "aGVsbG8="'), "targets.0.id: Input should be"),
+        (_edited().replace("id: t1", 'id: "t\\x1b[31m"'), "targets.0.id: must be printable"),
+    ],
+)
+def test_typos_huge_budgets_and_binary_ids_are_one_line(cli, tmp_path, text, needle):
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    result = cli("scenario", "check", path)
+    assert result.code == 2 and "Traceback" not in result.err, result.err
+    assert len(result.error_lines) == 1 and needle in result.err, result.err
+    assert "Field required" not in result.err  # a typo's field is named once, as the typo

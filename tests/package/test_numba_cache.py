@@ -95,3 +95,50 @@ def test_where_the_cache_lives(scratch, tmp_path, monkeypatch):
     monkeypatch.setenv("USER", "someone")
     monkeypatch.setattr("tempfile.tempdir", str(tmp_path / "tmp"))
     assert _numba_cache.cache_directory(scratch) == tmp_path / "tmp" / "hptrack-someone" / name
+
+
+@pytest.mark.skipif(not hasattr(os, "getuid"), reason="POSIX owners and modes")
+@pytest.mark.parametrize("planted", ["base", "directory"])
+def test_a_cache_another_user_owns_or_can_write_is_never_used(
+    scratch, tmp_path, monkeypatch, caplog, planted
+):
+    name = f"numba-{_numba_cache.sources_digest(scratch)}"
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setenv("USER", "someone")
+    mine = tmp_path / "mine"
+    monkeypatch.setenv("HPTRACK_CACHE_DIR", str(mine))
+    shared = tmp_path / "tmp" / "hptrack-someone"  # the fallback another user created first
+    for base in (mine, shared):
+        target = base if planted == "base" else base / name
+        target.mkdir(parents=True)
+        target.chmod(0o777)
+    if os.getuid() == 0:
+        os.chown(shared if planted == "base" else shared / name, 65534, 65534)
+    with caplog.at_level("WARNING", logger="hptrack"):
+        directory = _numba_cache.cache_directory(scratch)
+    assert directory.name == name and directory.parent not in (mine, shared)
+    assert directory.parent.parent == tmp_path / "tmp"
+    assert _numba_cache.unsafe_reason(directory) is None
+    assert _numba_cache.unsafe_reason(directory.parent) is None
+    (line,) = caplog.messages
+    assert "writable by others (mode 777)" in line and str(mine) in line
+    if os.getuid() == 0:
+        assert "owned by user id 65534" in line
+    if planted == "base":  # nothing was made inside a folder others can write
+        assert not (mine / name).exists() and not (shared / name).exists()
+    for path in (mine, mine / name):
+        if path.exists():
+            path.chmod(0o755)
+    assert _numba_cache.cache_directory(scratch) == mine / name  # made private: used again
+
+
+def test_the_directories_it_creates_are_private(scratch, tmp_path, monkeypatch):
+    monkeypatch.setenv("HPTRACK_CACHE_DIR", str(tmp_path / "a" / "b"))
+    old = os.umask(0)  # even where new folders would be writable by everyone
+    try:
+        directory = _numba_cache.cache_directory(scratch)
+    finally:
+        os.umask(old)
+    for path in (tmp_path / "a", tmp_path / "a" / "b", directory):
+        assert (path.stat().st_mode & 0o777) == 0o700, path

@@ -3,6 +3,7 @@ line naming the line and the field; never a traceback (fuzzed over fields and va
 
 import json
 import os
+import sys
 
 import pytest
 from hypothesis import given, settings
@@ -52,6 +53,7 @@ def replayed_or_refused(tmp_path, lines):
         ("plan", "k", 10**300, "less than or equal"),
         ("truth", "states", "x", "valid list"),
         ("end", "reason", KeyError, "reason: Field required"),
+        ("end", "U", "abc", "U: Input should be a valid number"),
         ("header", "seed", 10**300, "seed"),
         ("header", "controller", "x", "valid dictionary"),
         ("header", "planner_settings", "x", "valid dictionary"),
@@ -123,3 +125,20 @@ def test_truth_of_the_wrong_shape_is_left_out(tmp_path, log_lines):
     lines[i] = json.dumps(record)
     summary = replayed_or_refused(tmp_path, lines)
     assert isinstance(summary, dict) and summary["mismatches"] == 0
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="devices and FIFOs")
+def test_a_device_or_a_fifo_is_refused_at_once(tmp_path):
+    fifo = tmp_path / "log.fifo"
+    os.mkfifo(fifo)  # reading it would wait for a writer forever
+    for path in (fifo, "/dev/zero", "/dev/urandom", tmp_path):
+        with pytest.raises(InputError, match="not a mission log .a folder, a device, a FIFO"):
+            replay_log(path)
+
+
+def test_a_header_that_asks_for_hours_of_search_is_refused(tmp_path, log_lines):
+    header = json.loads(log_lines[0])
+    header.update(planner="mcts", planner_settings={"iterations": 10**9})
+    outcome = replayed_or_refused(tmp_path, [json.dumps(header), *log_lines[1:]])
+    assert isinstance(outcome, str), outcome
+    assert "searches 1,000,000,000 iterations per decision; replaying its" in outcome

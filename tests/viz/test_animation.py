@@ -1,6 +1,9 @@
 """Animated missions: frame selection, belief look-up, detection flashes, sub-task labels,
 the written GIF (frame count, size, timing) and the ``animate`` command."""
 
+import io
+import zipfile
+
 import numpy as np
 import pytest
 import typer
@@ -219,3 +222,26 @@ def test_animate_command_input_errors(cli, short_mission, tmp_path, monkeypatch)
     (tmp_path / "folder.gif").mkdir()
     line = _input_error(cli(["animate", str(good), "-o", str(tmp_path / "folder.gif")]))
     assert "--output" in line and "folder" in line
+
+
+def test_an_array_whose_header_declares_a_huge_shape_is_refused_unread(
+    cli, short_mission, tmp_path
+):
+    good = tmp_path / "m.npz"
+    short_mission[1].save(good)
+    forged = tmp_path / "forged.npz"
+    with zipfile.ZipFile(good) as source, zipfile.ZipFile(forged, "w") as target:
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == "agent_path.npy":  # say 238 GiB, hold a few kB
+                header = np.lib.format.header_data_from_array_1_0(np.zeros(1))
+                header["shape"] = (4_000_000, 8_000)
+                buffer = io.BytesIO()
+                np.lib.format.write_array_header_1_0(buffer, header)
+                data = buffer.getvalue() + data[len(buffer.getvalue()) :]
+            target.writestr(item, data)
+    line = _input_error(cli(["animate", str(forged)]))
+    assert (
+        "forged.npz" in line and "agent_path.npy declares an array of shape (4000000, 8000)" in line
+    )
+    assert "256,000,000,000 bytes" in line

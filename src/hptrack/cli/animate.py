@@ -6,10 +6,12 @@ the drawing and then of the GIF's encoding.
 
 from __future__ import annotations
 
+import math
 import zipfile
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
@@ -19,13 +21,37 @@ from hptrack.interface import InputError
 from hptrack.sim.record import EpisodeRecord
 
 
+def _declared_bytes(archive: zipfile.ZipFile, item: zipfile.ZipInfo) -> int:
+    """The bytes that array member ``item`` says it holds (its ``.npy`` header: shape and
+    type), refused if the member is smaller than that (a header that lies)."""
+    with archive.open(item) as member:
+        version = np.lib.format.read_magic(member)
+        read = (
+            np.lib.format.read_array_header_1_0
+            if version == (1, 0)
+            else np.lib.format.read_array_header_2_0
+        )
+        shape, _, dtype = read(member)
+        header = member.tell()
+    need = math.prod(shape) * dtype.itemsize
+    if dtype.hasobject or need > item.file_size - header:
+        raise ValueError(
+            f"{item.filename} declares an array of shape {shape} ({need:,} bytes of "
+            f"{dtype}) but holds {item.file_size - header:,} bytes"
+        )
+    return need
+
+
 def load_record(path: Path) -> EpisodeRecord:
     """Read an episode record, or raise a one-line `InputError` naming the file."""
     if not path.is_file():
         raise InputError(f"RECORD {str(path)!r}: no such file")
     try:
         with zipfile.ZipFile(path) as archive:  # a zip bomb is refused before it is expanded
-            check_memory(sum(item.file_size for item in archive.infolist()), f"RECORD {path}")
+            items = archive.infolist()
+            check_memory(sum(item.file_size for item in items), f"RECORD {path}")
+            for item in items:
+                _declared_bytes(archive, item)
         return EpisodeRecord.load(path)
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as err:
         reason = " ".join(str(err).split()) or type(err).__name__

@@ -3,7 +3,6 @@ cluster."""
 
 from __future__ import annotations
 
-import time
 from contextlib import ExitStack
 from pathlib import Path
 from typing import Annotated
@@ -19,6 +18,7 @@ from hptrack.cli.common import (
     check_seed,
     check_workers,
     console,
+    error_console,
     planner_settings_for,
     progress_display,
     write_json,
@@ -30,8 +30,6 @@ from hptrack.models.motion import ProcessNoiseForm
 
 MAX_SCENARIOS = 1_000_000
 """Most scenarios per number of targets (the paper uses 100)."""
-OTHER_RUN_POLL_S = 2.0
-"""How often a benchmark waiting for another run's episodes looks at the database, s."""
 
 
 def _int_list(text: str, option: str) -> tuple[int, ...]:
@@ -110,7 +108,12 @@ def benchmark(
     ] = None,
 ) -> None:
     """Run the multi-target benchmark (paper Tables II-III); results are stored as they finish."""
-    from hptrack.experiments.benchmark import BenchmarkConfig, run_benchmark, summarise
+    from hptrack.experiments.benchmark import (
+        BenchmarkConfig,
+        check_effort,
+        run_benchmark,
+        summarise,
+    )
     from hptrack.experiments.store import ResultStore
     from hptrack.registry import planner_entry
 
@@ -126,8 +129,7 @@ def benchmark(
         from hptrack.experiments.dask_cluster import check_dask_options
 
         check_dask_options(scheduler, dask_local, scheduler_timeout)
-    if iterations is not None and time_limit is not None:
-        raise InputError("give --iterations or --time-limit, not both")
+    check_effort(iterations, time_limit)
     names = tuple(dict.fromkeys(p.strip() for p in planners.split(",") if p.strip()))
     if not names:
         raise InputError(f"--planners expects planner names, got {planners!r}")
@@ -191,26 +193,30 @@ def benchmark(
                     f"seed={row.key.seed}: U={row.uncertainty:.2f}",
                 )
 
-            keys = set(config.keys())
-            ran = 0
-            while True:
-                ran += run_benchmark(
-                    config, store, workers=in_flight, on_done=on_done, executor=executor
-                )
-                rows = [r for r in store.rows() if r.key in keys]
-                if len(rows) == len(keys):
-                    break
-                # another run on this database holds the rest: wait for it (or for its claims
-                # to go stale if it died) rather than write partial tables
+            def on_wait(stored, total):
                 progress.update(
                     task,
-                    completed=len(rows),
-                    total=len(keys),
-                    description=f"waiting for {len(keys) - len(rows)} episodes that another "
+                    completed=stored,
+                    total=total,
+                    description=f"waiting for {total - stored} episodes that another "
                     "run on this database holds",
                 )
-                time.sleep(OTHER_RUN_POLL_S)
-                store.release_stale_claims()
+
+            try:
+                ran = run_benchmark(
+                    config, store, in_flight, on_done, executor=executor, on_wait=on_wait
+                )
+            except KeyboardInterrupt:
+                error_console.print(
+                    f"interrupted: the episodes finished so far are kept in {db}; run the same "
+                    "command again to resume",
+                    markup=False,
+                    highlight=False,
+                    soft_wrap=True,
+                )
+                raise
+            keys = set(config.keys())
+            rows = [r for r in store.rows() if r.key in keys]
     console.print(f"{ran} episodes run now, {len(rows)} of {len(keys)} in the table ({db})")
     with writing(out, "--out"):
         _write_report(config, rows, out, figure_planners, figure_targets)

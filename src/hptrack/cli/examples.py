@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 from rich.markup import escape
 
-from hptrack.cli.common import console
+from hptrack.cli.common import console, writing
 from hptrack.interface import InputError
 
 SUFFIXES = (".py", ".yaml")
@@ -57,6 +57,10 @@ def examples(
         return
     if to.exists() and not to.is_dir():
         raise InputError(f"--to {to}: is a file, not a folder")
+    for name in chosen:  # every destination is checked before any file is copied
+        target = to / name
+        if target.is_symlink() or (target.exists() and not target.is_file()):
+            raise InputError(f"--to {to}: {name} is a folder, a link or a device, not a file")
     clashes = [n for n in chosen if (to / n).exists()]
     if clashes and not force:
         raise InputError(f"--to {to}: {clashes[0]} exists already (add --force to overwrite)")
@@ -64,8 +68,9 @@ def examples(
         to.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise InputError(f"--to {to}: cannot create the folder ({err.strerror})") from None
-    for name in chosen:
-        shutil.copyfile(shipped[name], to / name)
+    with writing(to, "--to"):
+        for name in chosen:
+            shutil.copyfile(shipped[name], to / name)
     console.print(f"copied {', '.join(chosen)} to {escape(str(to))}", highlight=False)
 
 

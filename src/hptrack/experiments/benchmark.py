@@ -21,13 +21,18 @@ from typing import Any
 import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
-from hptrack.experiments.workers import worker_pool
+from hptrack.experiments.workers import stop_workers, worker_pool
 from hptrack.interface import InputError
 from hptrack.registry import planner_entry, planner_settings
 from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
 from hptrack.settings import PlannerSettings
 from hptrack.sim.episode import run_episode
+
+MAX_SEED = 2**63 - 1
+"""Largest scenario seed (SQLite's largest integer)."""
+OTHER_RUN_POLL_S = 2.0
+"""How often a run waiting for another run's episodes looks at the database, s."""
 
 
 @dataclass(frozen=True)
@@ -56,6 +61,11 @@ class BenchmarkConfig:
         missing = [p for p in self.planners if p not in self.settings]
         if missing:
             raise ValueError(f"no settings for planners {missing}")
+        if not 0 <= self.first_seed <= MAX_SEED - self.scenarios + 1:
+            raise InputError(
+                f"seeds {self.first_seed} .. {self.first_seed + self.scenarios - 1} (first seed, "
+                f"{self.scenarios} scenarios) must lie between 0 and {MAX_SEED} (2^63 - 1)"
+            )
 
     @property
     def setting(self) -> str:
@@ -144,9 +154,12 @@ def run_benchmark(
     workers: int = 1,
     on_done: Callable[[EpisodeRow, int, int], None] | None = None,
     executor: Executor | None = None,
+    on_wait: Callable[[int, int], None] | None = None,
 ) -> int:
     """Run every episode not yet in ``store``; each is claimed before it runs and stored as soon
-    as it finishes.
+    as it finishes. Episodes that another run on the database holds are waited for, until that
+    run stores them or its claims are released (`ResultStore.release_stale_claims`: it
+    died, is no run of this database, or held them too long), and then run here if need be.
 
     Args:
         config: what to run.
@@ -155,11 +168,22 @@ def run_benchmark(
         on_done: ``on_done(row, finished, total)`` reports progress.
         executor: where episodes run (e.g. a Dask ``Client.get_executor()``); default this
             process (``workers == 1``) or a process pool of ``workers``.
+        on_wait: ``on_wait(stored, total)`` says that the rest is another run's, every
+            `OTHER_RUN_POLL_S` while this run waits for it.
 
     Returns:
         The number of episodes run now.
     """
-    return run_keys(config.keys(), store, workers, on_done, executor)
+    keys = config.keys()
+    ran = 0
+    while True:
+        ran += run_keys(keys, store, workers, on_done, executor)
+        stored = len(set(keys) & store.done())
+        if stored == len(keys):
+            return ran
+        if on_wait:
+            on_wait(stored, len(keys))
+        time.sleep(OTHER_RUN_POLL_S)
 
 
 def run_keys(
@@ -184,14 +208,13 @@ def run_keys(
             on_done(row, finished, total)
 
     if executor is None and workers <= 1:
-        for key in todo:
-            if store.claim(key):
-                try:
-                    row = run_one(key)
-                except BaseException:
-                    store.release(key)
-                    raise
-                record(row)
+        try:
+            for key in todo:
+                if store.claim(key):
+                    record(run_one(key))
+        except BaseException:
+            store.release_all()
+            raise
         return finished
     own_pool = executor is None
     if own_pool:
@@ -212,10 +235,14 @@ def run_keys(
             for future in ready:
                 pending.pop(future)
                 record(future.result())
-    finally:
-        for future, key in pending.items():
+    except BaseException:  # an interrupt or a failure: stop the episodes in flight now
+        for future in pending:
             future.cancel()
-            store.release(key)
+        if own_pool:
+            stop_workers(pool)
+        store.release_all()
+        raise
+    finally:
         if own_pool:
             pool.shutdown(wait=True, cancel_futures=True)
     return finished
@@ -231,6 +258,8 @@ def benchmark(
     db: str | Path = ":memory:",
     workers: int = 1,
     first_seed: int = 0,
+    iterations: int | None = None,
+    time_limit: float | None = None,
 ) -> dict:
     """Fly every planner once on each random scenario and summarise ``U`` (the library face of
     ``hptrack benchmark``).
@@ -241,18 +270,35 @@ def benchmark(
         scenarios: scenarios per ``n`` (seeds ``first_seed ..``).
         homogeneous: the paper's ARVI/A* setting (shared prior and ``q``); else heterogeneous.
         options: each planner's options, e.g. ``{"mcts": {"iterations": 20_000}}``.
-        db: a results database file to store episodes in and resume from (default in memory).
+        db: a results database file to store episodes in and resume from (default in memory);
+            episodes another run on it holds are waited for (`run_benchmark`).
         workers: episodes in flight at once (worker processes).
         first_seed: first scenario seed.
+        iterations: tree-search iterations per decision of every planner that searches (an
+            option in ``options`` wins).
+        time_limit: planning seconds per decision, likewise; not with ``iterations``.
 
     Returns:
         ``{planner: {n: {"mean", "std", "episodes", "never_observed", "wall_time_s"}}}``.
+
+    Raises:
+        InputError: bad options, or both ``iterations`` and ``time_limit``.
     """
     options = options or {}
     unknown = sorted(set(options) - set(planners))
     if unknown:
         raise InputError(f"options given for planners not benchmarked: {', '.join(unknown)}")
-    settings = {p: planner_settings(p, options.get(p)) for p in planners}
+    check_effort(iterations, time_limit)
+    settings = {
+        p: planner_settings(
+            p,
+            {
+                **planner_entry(p).settings_type.effort_options(iterations, time_limit),
+                **options.get(p, {}),
+            },
+        )
+        for p in planners
+    }
     config = BenchmarkConfig(
         tuple(planners), settings, tuple(target_counts), scenarios, homogeneous, first_seed
     )
@@ -263,6 +309,13 @@ def benchmark(
         return summarise((row for row in store.rows() if row.key in wanted), planners)
     finally:
         store.close()
+
+
+def check_effort(iterations: int | None, time_limit: float | None) -> None:
+    """Refuse both effort limits of a benchmark at once: its planners are compared at one kind
+    of effort."""
+    if iterations is not None and time_limit is not None:
+        raise InputError("give --iterations or --time-limit (iterations or time_limit), not both")
 
 
 def summarise(rows: Iterable[EpisodeRow], order: Iterable[str] = ()) -> dict:

@@ -14,20 +14,29 @@ version). A change of what identifies a result (a new planner option, say) is su
 bumps `SCHEMA_VERSION` and rewrites the stored identities to what the code now builds for
 the same runs (the new option's value that the old rows were run with), so that stored and
 published results keep their identity without the settings carrying their history.
+
+Claims dated more than `FUTURE_CLAIM_S` ahead, and those of a live process on this host that is
+not a run of this database (another program under a reused id), are released too. A failure of
+the database itself (a full disk, a read-only file, a lock another process holds for longer
+than `LOCK_WAIT_S`, a trigger that refuses a write, a value of the wrong type) is an
+`InputError` of one line naming the file: the episodes stored before it are kept, and the next
+run resumes from them.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import sqlite3
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from hptrack.experiments.workers import process_alive
+from hptrack.experiments.workers import process_alive, runs_with_file_open
 from hptrack.interface import InputError
 from hptrack.jsonout import json_text
 from hptrack.settings import digest_of
@@ -62,6 +71,10 @@ CREATE TABLE IF NOT EXISTS claims (
 """
 STALE_CLAIM_S = 6 * 3600.0
 """A claim older than this is released whatever its owner (a run on another host that died)."""
+FUTURE_CLAIM_S = 300.0
+"""A claim dated more than this ahead of this host's clock is released (no run made it)."""
+LOCK_WAIT_S = 30.0
+"""How long a read or write waits for a lock that another process holds on the database, s."""
 
 
 _LEFT_OUT_BY_LAYOUT_2 = {
@@ -189,15 +202,23 @@ def check_columns(db: sqlite3.Connection, source: str) -> None:
     expected = sqlite3.connect(":memory:")
     expected.executescript(SCHEMA)
     for (table,) in expected.execute("SELECT name FROM sqlite_master WHERE type='table'"):
-        want = [r[1] for r in expected.execute(f"PRAGMA table_info({table})")]
-        have = {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
-        missing = [c for c in want if c not in have]
-        if missing:
+        want = expected.execute(f"PRAGMA table_info({table})").fetchall()
+        have = db.execute(f"PRAGMA table_info({table})").fetchall()
+        missing = [c[1] for c in want if c[1] not in {h[1] for h in have}]
+        key = [c[1] for c in sorted(want, key=lambda c: c[5]) if c[5]]
+        problem = (
+            f"has no column {', '.join(missing)}"
+            if missing
+            else None
+            if [c[1] for c in sorted(have, key=lambda c: c[5]) if c[5]] == key
+            else f"has no primary key ({', '.join(key)})"
+        )
+        if problem:
             expected.close()
             db.close()
             raise InputError(
-                f"{source}: table {table} has no column {', '.join(missing)}; not a results "
-                "database of this hptrack (use a new file)"
+                f"{source}: table {table} {problem}; not a results database of this hptrack "
+                "(use a new file)"
             )
     expected.close()
 
@@ -212,15 +233,21 @@ class ResultStore:
 
     def __init__(self, path: str | Path) -> None:
         path = Path(path)
+        self.path = path
         if path.exists() and path.is_dir():
             raise InputError(f"--db {path}: is a folder, not a results database")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            self._db = sqlite3.connect(str(path), timeout=60.0)
-            version = self._db.execute("PRAGMA user_version").fetchone()[0]
-            tables = {
-                r[0] for r in self._db.execute("SELECT name FROM sqlite_master WHERE type='table'")
-            }
+            self._db = sqlite3.connect(str(path), timeout=LOCK_WAIT_S)
+            with self._guard():
+                version = self._db.execute("PRAGMA user_version").fetchone()[0]
+                tables = {
+                    r[0]
+                    for r in self._db.execute("SELECT name FROM sqlite_master WHERE type='table'")
+                }
+        except InputError:
+            self._db.close()
+            raise
         except (sqlite3.DatabaseError, OSError) as err:
             raise InputError(f"--db {path}: not an hptrack results database ({err})") from None
         known = version == SCHEMA_VERSION or version in MIGRATIONS
@@ -230,14 +257,28 @@ class ResultStore:
                 f"--db {path}: a database of another layout (version {version}, "
                 f"tables {sorted(tables)}); use a new --db file"
             )
-        if tables and version != SCHEMA_VERSION:
-            self._migrate()
-        self._db.executescript(SCHEMA)
-        check_columns(self._db, f"--db {path}")
-        self._db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
-        self._db.commit()
+        with self._guard():
+            if tables and version != SCHEMA_VERSION:
+                self._migrate()
+            if not {"episodes", "claims"} <= tables:
+                self._db.executescript(SCHEMA)
+            check_columns(self._db, f"--db {path}")
+            if version != SCHEMA_VERSION:
+                self._db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            self._db.commit()
         self._host = socket.gethostname()
         self._pid = os.getpid()
+
+    @contextmanager
+    def _guard(self) -> Iterator[None]:
+        """Turn a failure of the database file (not of hptrack's SQL) into one line."""
+        try:
+            yield
+        except sqlite3.ProgrammingError:
+            raise
+        except sqlite3.DatabaseError as err:
+            self._db.rollback()
+            raise InputError(database_failure(self.path, err)) from None
 
     def _migrate(self) -> None:
         """Bring the database to `SCHEMA_VERSION` in one transaction (a run that opens it
@@ -256,6 +297,10 @@ class ResultStore:
     def add(self, row: EpisodeRow) -> None:
         """Insert a finished episode, release its claim and commit at once (a duplicate key is
         ignored)."""
+        with self._guard():
+            self._add(row)
+
+    def _add(self, row: EpisodeRow) -> None:
         key = row.key
         self._db.execute(
             "INSERT OR IGNORE INTO episodes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -278,29 +323,34 @@ class ResultStore:
 
     def done(self) -> set[EpisodeKey]:
         """Keys of every stored episode."""
-        cur = self._db.execute(
-            "SELECT planner, n_targets, seed, setting, planner_settings FROM episodes"
-        )
-        return {EpisodeKey(*r) for r in cur}
+        with self._guard():
+            cur = self._db.execute(
+                "SELECT planner, n_targets, seed, setting, planner_settings FROM episodes"
+            )
+            return {EpisodeKey(*r) for r in cur}
+
+    def _claim_is_stale(self, host: str, pid: int, claimed_at: float, now: float) -> bool:
+        if not -FUTURE_CLAIM_S <= now - claimed_at <= STALE_CLAIM_S:
+            return True
+        if host != self._host or pid == self._pid:
+            return False
+        return not process_alive(pid) or runs_with_file_open(pid, self.path) is False
 
     def release_stale_claims(self) -> int:
-        """Release claims whose process is gone (this host) or that are too old; returns how
-        many were released."""
+        """Release claims that are too old or from the future, and those of this host whose
+        process is gone or is not a run of this database; returns how many were released."""
         now = time.time()
-        rows = self._db.execute("SELECT rowid, host, pid, claimed_at FROM claims").fetchall()
-        stale = [
-            r[0]
-            for r in rows
-            if now - r[3] > STALE_CLAIM_S
-            or (r[1] == self._host and r[2] != self._pid and not process_alive(r[2]))
-        ]
-        self._db.executemany("DELETE FROM claims WHERE rowid=?", [(r,) for r in stale])
-        self._db.commit()
+        with self._guard():
+            rows = self._db.execute("SELECT rowid, host, pid, claimed_at FROM claims").fetchall()
+            stale = [r[0] for r in rows if self._claim_is_stale(*r[1:], now)]
+            if stale:
+                self._db.executemany("DELETE FROM claims WHERE rowid=?", [(r,) for r in stale])
+                self._db.commit()
         return len(stale)
 
     def claim(self, key: EpisodeKey) -> bool:
         """Claim ``key`` for this process; ``False`` if it is done or another run holds it."""
-        with self._db:
+        with self._guard(), self._db:
             if self._db.execute(
                 "SELECT 1 FROM episodes WHERE planner=? AND n_targets=? AND "
                 "seed=? AND setting=? AND planner_settings_hash=?",
@@ -313,25 +363,66 @@ class ResultStore:
             )
             return cur.rowcount == 1
 
-    def release(self, key: EpisodeKey) -> None:
-        """Give up this process's claim of ``key`` (an episode that was not run after all)."""
-        self._db.execute(
-            "DELETE FROM claims WHERE planner=? AND n_targets=? AND seed=? AND "
-            "setting=? AND planner_settings_hash=? AND host=? AND pid=?",
-            (*key._id(), self._host, self._pid),
-        )
-        self._db.commit()
+    def release_all(self) -> None:
+        """Give up every claim of this process (episodes that were not run after all)."""
+        with self._guard():
+            self._db.execute("DELETE FROM claims WHERE host=? AND pid=?", (self._host, self._pid))
+            self._db.commit()
 
     def rows(self) -> list[EpisodeRow]:
-        """Every stored episode, in key order."""
-        cur = self._db.execute(
-            "SELECT planner, n_targets, seed, setting, planner_settings, uncertainty, "
-            "never_observed, "
-            "detections, wall_time_s, info FROM episodes ORDER BY planner, n_targets, seed"
-        )
-        return [
-            EpisodeRow(EpisodeKey(*r[:5]), r[5], r[6], r[7], r[8], json.loads(r[9])) for r in cur
-        ]
+        """Every stored episode, in key order.
+
+        Raises:
+            InputError: a stored value has the wrong type (a file edited by hand).
+        """
+        with self._guard():
+            cur = self._db.execute(
+                "SELECT planner, n_targets, seed, setting, planner_settings, uncertainty, "
+                "never_observed, detections, wall_time_s, info FROM episodes "
+                "ORDER BY planner, n_targets, seed"
+            )
+            return [self._row(r) for r in cur]
+
+    def _row(self, r: tuple) -> EpisodeRow:
+        """A stored row, checked: numbers where numbers belong, a JSON object as ``info``."""
+        where = f"--db {self.path}: episode {r[0]} n={r[1]} seed={r[2]}"
+        for name, value, kind in (
+            ("n_targets", r[1], int),
+            ("seed", r[2], int),
+            ("uncertainty", r[5], float),
+            ("never_observed", r[6], float),
+            ("detections", r[7], int),
+            ("wall_time_s", r[8], float),
+        ):
+            if not isinstance(value, (int, float) if kind is float else int) or (
+                kind is float and not math.isfinite(value)
+            ):
+                raise InputError(f"{where}: {name} is {value!r}, not a finite number")
+        try:
+            info = json.loads(r[9])
+        except (TypeError, ValueError):
+            info = None
+        if not isinstance(info, dict):
+            raise InputError(f"{where}: info is {str(r[9])[:60]!r}, not a JSON object")
+        return EpisodeRow(EpisodeKey(*r[:5]), float(r[5]), float(r[6]), r[7], float(r[8]), info)
 
     def close(self) -> None:
         self._db.close()
+
+
+def database_failure(path: Path, err: sqlite3.DatabaseError) -> str:
+    """One line for a failure of the database file ``path``: what it means for the run."""
+    text = str(err)
+    kept = "the episodes stored before are kept and the next run resumes from them"
+    if "full" in text:
+        return f"--db {path}: the disk is full ({text}); free some space: {kept}"
+    if "readonly" in text or "read-only" in text:
+        return f"--db {path}: cannot be written ({text}); {kept}"
+    if "locked" in text or "busy" in text:
+        return (
+            f"--db {path}: locked by another process for more than {LOCK_WAIT_S:g} s "
+            f"({text}); gave up: run again when that process is done"
+        )
+    if isinstance(err, sqlite3.IntegrityError):
+        return f"--db {path}: the database refused a write ({text}); {kept}"
+    return f"--db {path}: not an hptrack results database, or a damaged one ({text})"

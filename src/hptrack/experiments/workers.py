@@ -4,7 +4,8 @@ A pool's workers outlive a parent killed with SIGKILL (no cleanup runs in it): t
 computing episodes nobody collects. `die_with_parent`, a pool's ``initializer``, makes a
 worker follow its parent: on Linux the kernel sends it SIGKILL when the parent dies
 (``PR_SET_PDEATHSIG``), and everywhere a watcher thread ends it within a second of its parent's
-disappearance.
+disappearance. Workers ignore Ctrl-C (SIGINT): the parent decides, and on an interrupt ends them
+at once with `stop_workers` instead of waiting for their episodes.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import signal
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 PR_SET_PDEATHSIG = 1
 """``prctl`` option: the signal this process receives when its parent dies (Linux)."""
@@ -31,6 +33,32 @@ def process_alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
+
+
+def runs_with_file_open(pid: int, path: Path) -> bool | None:
+    """Whether process ``pid`` has the file ``path`` open (Linux's ``/proc``); ``False`` also
+    for a process that cannot be a run of it (not Python, when its files cannot be listed),
+    ``None`` where this cannot be told."""
+    proc = Path(f"/proc/{pid}")
+    try:
+        wanted = path.stat()
+        names = os.listdir(proc / "fd")
+    except PermissionError:  # another user's process: at least it must be Python
+        try:
+            command = (proc / "cmdline").read_bytes().lower()
+        except OSError:
+            return None
+        return None if b"python" in command or b"hptrack" in command else False
+    except OSError:
+        return None
+    for name in names:
+        try:
+            held = os.stat(proc / "fd" / name)
+        except OSError:
+            continue
+        if (held.st_dev, held.st_ino) == (wanted.st_dev, wanted.st_ino):
+            return True
+    return False
 
 
 def die_with_parent(parent: int | None = None) -> None:
@@ -53,8 +81,22 @@ def die_with_parent(parent: int | None = None) -> None:
     threading.Thread(target=watch, name="die-with-parent", daemon=True).start()
 
 
+def _start_worker(parent: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent)
+
+
 def worker_pool(workers: int) -> ProcessPoolExecutor:
-    """A process pool of ``workers`` processes that die with this process."""
+    """A process pool of ``workers`` processes that die with this process and ignore Ctrl-C."""
     return ProcessPoolExecutor(
-        max_workers=workers, initializer=die_with_parent, initargs=(os.getpid(),)
+        max_workers=workers, initializer=_start_worker, initargs=(os.getpid(),)
     )
+
+
+def stop_workers(pool: ProcessPoolExecutor) -> None:
+    """End ``pool`` now: its queued tasks are cancelled and its running ones killed."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # public in 3.14
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.kill()
+    pool.shutdown(wait=True)

@@ -232,6 +232,7 @@ class _Truth(_Step):
 class _End(_Record):
     t: LogTime
     reason: Annotated[str, Strict(), Field(max_length=200)]
+    U: LogNumber | None = None
 
 
 class _Header(BaseModel):
@@ -322,6 +323,8 @@ def read_log(path: str | Path) -> LogContents:
             than the last one.
     """
     path = Path(path)
+    if path.exists() and not path.is_file():
+        raise InputError(f"{path}: not a mission log (a folder, a device, a FIFO or a socket)")
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as err:

@@ -36,6 +36,9 @@ from hptrack.scenario.io import format_validation_error, parse_scenario
 from hptrack.sim.record import EpisodeRecord
 
 MAX_LISTED_MISMATCHES = 20
+MAX_REPLAY_ITERATIONS = 10**8
+"""Most search iterations a replay runs in all (its planner's per decision times the log's
+plans): minutes to hours at 1e4 to 1e5 a second; a log that asks for more is refused."""
 
 
 @dataclass
@@ -146,6 +149,15 @@ def replay_log(path: str | Path) -> ReplayResult:
         raise InputError(
             f"{path}: header controller settings: {format_validation_error(err)}"
         ) from None
+    plans = sum(r["kind"] == "plan" for r in contents.records)
+    field = type(planner.settings).effort_fields.get("iterations")
+    effort = getattr(planner.settings, field, None) if field else None
+    if effort is not None and effort * plans > MAX_REPLAY_ITERATIONS:
+        raise InputError(
+            f"{path}: the header's planner searches {effort:,} iterations per decision; "
+            f"replaying its {plans} plans would run more than {MAX_REPLAY_ITERATIONS:.0e} "
+            "iterations (hours)"
+        )
     runner = ReplayRunner()
     log = MissionLog()
     controller = MissionController(

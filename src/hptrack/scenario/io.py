@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 import stat
+import typing
 from pathlib import Path
 
 import yaml
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from hptrack.interface import InputError, one_line, shown
 from hptrack.scenario.model import Scenario
@@ -156,14 +158,55 @@ def read_yaml(path: str | Path, what: str = "file") -> object:
     return data
 
 
-def format_validation_error(error: ValidationError) -> str:
+def _model_at(model: type[BaseModel], loc: tuple) -> type[BaseModel] | None:
+    """The model whose field ``loc[-1]`` would be (``targets.0.x``: the target's), or ``None``."""
+    node: object = model
+    for part in loc[:-1]:
+        if isinstance(part, int):
+            continue
+        fields = getattr(node, "model_fields", {})
+        if part not in fields:
+            return None
+        todo, node = [fields[part].annotation], None
+        while todo and node is None:  # list[TargetSpec], Optional[...]: the model inside
+            kind = todo.pop()
+            if isinstance(kind, type) and issubclass(kind, BaseModel):
+                node = kind
+            todo.extend(typing.get_args(kind))
+    return node if isinstance(node, type) and issubclass(node, BaseModel) else None
+
+
+def _unknown_field(item: dict, model: type[BaseModel] | None) -> str | None:
+    """``unknown field; did you mean X?`` for a key no field of its place has."""
+    if item["type"] != "extra_forbidden" or model is None:
+        return None
+    place = _model_at(model, tuple(item["loc"]))
+    names = list(place.model_fields) if place else []
+    close = difflib.get_close_matches(str(item["loc"][-1]), names, n=1, cutoff=0.6)
+    hint = f"did you mean {close[0]}?" if close else f"the fields are {', '.join(names)}"
+    return f"unknown field; {hint}" if names else "unknown field"
+
+
+def format_validation_error(error: ValidationError, model: type[BaseModel] | None = None) -> str:
     """One bounded line: ``field.path: message (value ...)`` for the first few problems,
-    joined with ``; `` (values shortened, never printed whole)."""
+    joined with ``; `` (values shortened, never printed whole). With the ``model`` validated,
+    an unknown key comes first, with the field it is closest to ("did you mean ..."), and that
+    field's "Field required" is left out (the same mistake)."""
     parts = []
     problems = error.errors(include_url=False, include_context=False)
+    unknown = {id(item): _unknown_field(item, model) for item in problems}
+    meant = {
+        (*item["loc"][:-1], text.removeprefix("unknown field; did you mean ").rstrip("?"))
+        for item in problems
+        if (text := unknown[id(item)]) and "did you mean" in text
+    }
+    problems = sorted(
+        (i for i in problems if not (i["type"] == "missing" and tuple(i["loc"]) in meant)),
+        key=lambda i: unknown[id(i)] is None,
+    )
     for item in problems[:MAX_LISTED_PROBLEMS]:
         loc = ".".join(shown(p, 40).strip("'") for p in item["loc"]) or "scenario"
-        msg = one_line(item["msg"].removeprefix("Value error, "), 300)
+        msg = unknown[id(item)] or one_line(item["msg"].removeprefix("Value error, "), 300)
         value = item.get("input")
         large = isinstance(value, float) and math.isfinite(value) and abs(value) >= 1e6
         text = f"{value:g}" if large else shown(value)
@@ -181,7 +224,7 @@ def parse_scenario(data: object, source: str = "scenario") -> Scenario:
     try:
         return Scenario.model_validate(data)
     except ValidationError as err:
-        raise ScenarioError(f"{source}: {format_validation_error(err)}") from None
+        raise ScenarioError(f"{source}: {format_validation_error(err, Scenario)}") from None
 
 
 def load_scenario(path: str | Path) -> Scenario:

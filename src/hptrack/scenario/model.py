@@ -124,7 +124,7 @@ class TargetSpec(BaseModel):
 
     model_config = _STRICT
 
-    id: Annotated[str, Field(min_length=1, max_length=200), AfterValidator(_printable)]
+    id: Annotated[str, Strict(), Field(min_length=1, max_length=200), AfterValidator(_printable)]
     mean: tuple[Coordinate, Coordinate, Real, Real]
     covariance: Matrix4
     process_noise: Annotated[Real, Field(ge=0.0, le=1e6)]
@@ -227,16 +227,23 @@ class Scenario(BaseModel):
             raise ValueError(
                 f"budget {self.budget:g} s is shorter than time_step {self.time_step:g} s"
             )
+        if steps > MAX_STEPS + 0.5:  # also infinite: 1e308 s over 0.5 s
+            count = (
+                "infinitely many"
+                if math.isinf(steps)
+                else f"{steps:,.0f}"
+                if steps < 1e15
+                else f"{steps:.3g}"
+            )
+            raise ValueError(
+                f"budget {self.budget:g} s is {count} steps of "
+                f"{self.time_step:g} s; at most {MAX_STEPS:,} steps are supported "
+                "(use a larger time_step or a shorter budget)"
+            )
         if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
             raise ValueError(
                 f"budget {self.budget!r} s is not a whole number of time steps of "
                 f"{self.time_step:g} s (use e.g. {round(steps) * self.time_step:g})"
-            )
-        if round(steps) > MAX_STEPS:
-            raise ValueError(
-                f"budget {self.budget:g} s is {round(steps):,} steps of "
-                f"{self.time_step:g} s; at most {MAX_STEPS:,} steps are supported "
-                "(use a larger time_step or a shorter budget)"
             )
         seen: set[str] = set()
         for i, target in enumerate(self.targets):
