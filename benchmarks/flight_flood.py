@@ -28,7 +28,7 @@ import yaml
 from hptrack.runtime.log import read_log
 
 SCENARIO = Path(__file__).resolve().parents[1] / "examples/paper-flight.yaml"
-CLI = [sys.executable, "-m", "hptrack.cli.flight"]
+CLI = [sys.executable, "-m", "hptrack"]
 
 
 def free_udp_port() -> int:

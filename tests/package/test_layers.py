@@ -27,6 +27,7 @@ LAYERS = [
     "experiments",
     "cli",
     "examples",
+    "__main__",
 ]
 """Bottom to top."""
 ROOT = Path(hptrack.__file__).parent

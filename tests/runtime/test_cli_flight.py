@@ -169,7 +169,7 @@ def test_ctrl_c_ends_the_wait_for_the_autopilot_at_once(example_path, tmp_path):
         port = sock.getsockname()[1]
     fly = subprocess.Popen(
         [
-            *(sys.executable, "-m", "hptrack.cli.flight", "fly", str(example_path)),
+            *(sys.executable, "-m", "hptrack", "fly", str(example_path)),
             *("--connection", f"udpin://127.0.0.1:{port}", "--detections"),
             *(f"udp://127.0.0.1:{port}", "--connect-timeout", "120", "--no-live"),
             *("--log", str(tmp_path / "l.jsonl")),

@@ -3,7 +3,7 @@ mission on a PX4 vehicle through MAVSDK, a PX4-like MAVLink vehicle stub for dry
 targets and detections for any autopilot in software-in-the-loop, and the replay of a mission
 log.
 
-Also runnable as ``python3 -m hptrack.cli.flight COMMAND ...``.
+Also runnable as ``python3 -m hptrack COMMAND ...`` (as every command).
 """
 
 from __future__ import annotations
@@ -597,17 +597,3 @@ def register(app: typer.Typer) -> None:
     app.command("vehicle-sim")(vehicle_sim)
     app.command("targets-sim")(targets_sim)
     app.command("replay")(replay)
-
-
-def main() -> None:
-    """``python3 -m hptrack.cli.flight``: the main CLI, with these commands registered."""
-    from hptrack.cli import app as app_module
-
-    names = {command.name for command in app_module.app.registered_commands}
-    if "fly" not in names:
-        register(app_module.app)
-    app_module.main()
-
-
-if __name__ == "__main__":
-    main()

@@ -1,0 +1,5 @@
+"""``python3 -m hptrack COMMAND ...``: the ``hptrack`` command line."""
+
+from hptrack.cli.app import main
+
+main()
