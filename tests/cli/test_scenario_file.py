@@ -48,6 +48,7 @@ def test_every_field_round_trips_with_its_comment(tmp_path):
             "agent": agent.model_dump(),
             "process_noise_form": "paper_text",
             "budget": 120.0,
+            "truth_motion": {"model": "coordinated_turn", "turn_rate": 0.01, "turn_rate_sd": 0.005},
         }
     )
     path = tmp_path / "s.yaml"
@@ -58,4 +59,12 @@ def test_every_field_round_trips_with_its_comment(tmp_path):
     written = {
         m.group(1) for m in re.finditer(r"^\s*(?:- )?(\w+):.*  # ", text, flags=re.MULTILINE)
     }
-    assert written == set(FIELD_COMMENTS)  # every field carries its comment
+    other_motions = {"diffusion", "damping"}  # the parameters of the other truth motions
+    assert written == set(FIELD_COMMENTS) - other_motions  # every field carries its comment
+    for motion, parameter in (("random_walk", "diffusion"), ("ornstein_uhlenbeck", "damping")):
+        moving = type(base).model_validate(
+            {**base.model_dump(), "truth_motion": {"model": motion, parameter: 0.5}}
+        )
+        save_scenario(moving, path)
+        assert load_scenario(path) == moving
+        assert re.search(rf"^\s+{parameter}: 0.5\s+# ", path.read_text(), flags=re.MULTILINE)

@@ -262,12 +262,25 @@ SCENARIO_HEADER = (
 _FIELD_LINE = re.compile(r"^\s*(?:- )?(\w+):")
 
 
+class _BlockMappings(yaml.SafeDumper):
+    """Every mapping in block style, one field a line (so each carries its comment); lists of
+    numbers stay on one line."""
+
+
+_BlockMappings.add_representer(
+    dict,
+    lambda dumper, data: dumper.represent_mapping("tag:yaml.org,2002:map", data, flow_style=False),
+)
+
+
 def save_scenario(scenario: Scenario, path: str | Path) -> None:
     """Write a scenario as YAML (lists, not tuples, so any YAML reader can load it), each field
     followed by a comment of its units (`FIELD_COMMENTS`); it loads back to the same
     scenario."""
     data = scenario.model_dump(mode="json", exclude_none=True)
-    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=math.inf)
+    text = yaml.dump(
+        data, Dumper=_BlockMappings, sort_keys=False, default_flow_style=None, width=math.inf
+    )
     lines = [SCENARIO_HEADER.rstrip("\n")]
     for line in text.splitlines():
         field = _FIELD_LINE.match(line)
