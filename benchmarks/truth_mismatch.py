@@ -6,7 +6,8 @@ with its ``truth_motion`` replaced by one of `TRUTHS`; every planner flies the s
 (``mcts`` with the default preset at ``--iterations`` simulations per decision, so the rows
 are reproducible). Rows are appended to a CSV as they finish, and a re-run skips those there,
 so a stopped run resumes; ``--report`` writes the mean ``U`` with its standard error and the
-targets never detected per planner, truth and ``n`` (``table.md``) beside the CSV.
+targets never detected per planner, truth and ``n``, and the paired difference of ``mcts``
+from ``greedy`` (``table.md``, ``summary.json``).
 
     python3 benchmarks/truth_mismatch.py --targets 6,12 --seeds 10 --csv results/mismatch.csv
     python3 benchmarks/truth_mismatch.py --report --csv results/mismatch.csv \\
@@ -125,6 +126,23 @@ def report(args: argparse.Namespace) -> None:
                         "never_detected": never,
                     }
                 )
+    lines += [
+        "",
+        "| n | truth | mcts - greedy, paired mean | std. error |",
+        "|---|---|---|---|",
+    ]
+    for n in sorted({int(r["n"]) for r in rows}):
+        for truth in TRUTHS:
+            by_seed: dict[int, dict[str, float]] = {}
+            for r in rows:
+                if int(r["n"]) == n and r["truth"] == truth:
+                    by_seed.setdefault(int(r["seed"]), {})[r["planner"]] = float(r["U"])
+            diffs = [u["mcts"] - u["greedy"] for u in by_seed.values() if len(u) == len(PLANNERS)]
+            if len(diffs) < 2:
+                continue
+            mean = sum(diffs) / len(diffs)
+            sd = math.sqrt(sum((x - mean) ** 2 for x in diffs) / (len(diffs) - 1))
+            lines.append(f"| {n} | {truth} | {mean:+.2f} | {sd / math.sqrt(len(diffs)):.2f} |")
     (out / "table.md").write_text("\n".join(lines) + "\n")
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     print("\n".join(lines))

@@ -95,3 +95,34 @@ def test_quality_report_gives_the_gap_closed_and_the_targets_never_detected(qual
     assert "| paper @ 0.05 s | 58 (2) |" in table
     assert "| paper | 0.05 | 0.50 |" in table
     assert "| clairvoyant | - | 30.00 +- 10.00 (2) |" in table
+
+
+def test_truth_mismatch_rows_and_their_report(tmp_path):
+    """``benchmarks/truth_mismatch.py``: a row is the episode the simulator flies (same ``U``
+    as running it directly, the truth motion applied), and the report's means, standard errors
+    and paired differences are the arithmetic of the rows."""
+    from hptrack.registry import make_planner
+    from hptrack.sim.episode import run_episode
+
+    mismatch = _script("truth_mismatch")
+    row = mismatch.episode(("greedy", "turn_0.02", 2, 1, 2000))
+    scenario = mismatch.scenario(2, 1, "turn_0.02")
+    assert scenario.truth_motion.model == "coordinated_turn"
+    assert float(row["U"]) == run_episode(scenario, make_planner("greedy")).uncertainty
+    assert mismatch.scenario(2, 1, "constant_velocity").truth_motion is None
+    path = tmp_path / "rows.csv"
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, mismatch.FIELDS)
+        writer.writeheader()
+        for seed, (m, g, c) in enumerate([(10.0, 14.0, 5.0), (12.0, 13.0, 6.0)]):
+            for planner, u in (("mcts", m), ("greedy", g), ("clairvoyant", c)):
+                writer.writerow(
+                    dict(
+                        zip(mismatch.FIELDS, (planner, "ou_0.01", 6, seed, 2000, u, 1), strict=True)
+                    )
+                )
+    args = type("Args", (), {"csv": str(path), "out": str(tmp_path / "out")})
+    mismatch.report(args)
+    table = (tmp_path / "out" / "table.md").read_text()
+    assert "| 6 | ou_0.01 | mcts | 2 | 11.00 | 1.00 | 1.00 |" in table
+    assert "| 6 | ou_0.01 | -2.50 | 1.50 |" in table  # differences -4 and -1
