@@ -9,6 +9,7 @@ import hptrack
 LAYERS = [
     "_numba_cache",
     "jsonout",
+    "_dispatch",
     "models",
     "interface",
     "settings",

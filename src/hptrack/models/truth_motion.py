@@ -35,6 +35,7 @@ import numba
 import numpy as np
 from numba.extending import overload
 
+from hptrack._dispatch import registered
 from hptrack.models.mission import motion_noise_factors_on
 from hptrack.models.motion import advance_true_state
 
@@ -54,10 +55,7 @@ def advance_truth(model, mission, truth, z, sqrt_q):
 
 @overload(advance_truth)
 def _advance_truth(model, mission, truth, z, sqrt_q):
-    cls = getattr(model, "instance_class", None)
-    if cls not in _TRUTH_MODELS:
-        raise numba.errors.TypingError(f"no truth motion registered for {model}")
-    return _TRUTH_MODELS[cls].py_func
+    return registered(_TRUTH_MODELS, model, "truth motion").py_func
 
 
 class ConstantVelocityTruth(NamedTuple):

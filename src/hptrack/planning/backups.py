@@ -43,6 +43,8 @@ import numba
 import numpy as np
 from numba.extending import overload
 
+from hptrack._dispatch import registered
+
 
 class _Registered(NamedTuple):
     back: Callable
@@ -59,10 +61,7 @@ def register_backup(backup_class: type, back: Callable, pairs_outcomes: bool) ->
 
 
 def _registered(backup) -> _Registered:
-    cls = getattr(backup, "instance_class", None)
-    if cls not in _BACKUPS:
-        raise numba.errors.TypingError(f"no backup registered for {backup}")
-    return _BACKUPS[cls]
+    return registered(_BACKUPS, backup, "backup")
 
 
 def back_up(backup, tree, path_state, path_action, path_outcome, depth, ret):

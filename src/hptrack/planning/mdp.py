@@ -13,8 +13,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-import numba
 from numba.extending import overload
+
+from hptrack._dispatch import registered
 
 
 class MdpKernels(NamedTuple):
@@ -54,10 +55,7 @@ def outcome_count(env: tuple) -> int:
 
 
 def _kernel(env, field: str):
-    cls = getattr(env, "instance_class", None)
-    if cls not in _MDPS:
-        raise numba.errors.TypingError(f"no MDP registered for {env}")
-    return getattr(_MDPS[cls], field).py_func
+    return getattr(registered(_MDPS, env, "MDP"), field).py_func
 
 
 def mdp_copy_state(env, src, dst):

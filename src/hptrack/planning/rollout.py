@@ -17,6 +17,7 @@ from typing import NamedTuple
 import numba
 from numba.extending import overload
 
+from hptrack._dispatch import registered
 from hptrack.planning.mdp import mdp_is_available
 from hptrack.planning.stream import uniform
 
@@ -35,10 +36,7 @@ def choose_action(policy, env, state, rng, candidates):
 
 @overload(choose_action)
 def _choose_action(policy, env, state, rng, candidates):
-    cls = getattr(policy, "instance_class", None)
-    if cls not in _POLICIES:
-        raise numba.errors.TypingError(f"no rollout policy registered for {policy}")
-    return _POLICIES[cls].py_func
+    return registered(_POLICIES, policy, "rollout policy").py_func
 
 
 class UniformRandom(NamedTuple):

@@ -27,6 +27,7 @@ from typing import NamedTuple
 import numba
 from numba.extending import overload
 
+from hptrack._dispatch import registered
 from hptrack.coverage.estimator import coverage_outcome
 from hptrack.coverage.intercept import approach_step
 from hptrack.coverage.sharp_estimator import sharp_coverage_outcome
@@ -63,10 +64,7 @@ def estimate_pursuit(estimator, env, state, a, t, ic, work):
 
 @overload(estimate_pursuit)
 def _estimate_pursuit(estimator, env, state, a, t, ic, work):
-    cls = getattr(estimator, "instance_class", None)
-    if cls not in _ESTIMATORS:
-        raise numba.errors.TypingError(f"no estimator registered for {estimator}")
-    return _ESTIMATORS[cls].py_func
+    return registered(_ESTIMATORS, estimator, "estimator").py_func
 
 
 class PaperEstimator(NamedTuple):
