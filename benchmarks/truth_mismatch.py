@@ -3,11 +3,12 @@ otherwise (`hptrack.models.truth_motion`): the cost of the mismatch.
 
 Each episode is a homogeneous random scenario of the paper (``--targets``, seeds ``0..N-1``)
 with its ``truth_motion`` replaced by one of `TRUTHS`; every planner flies the same scenarios
-(``mcts`` with the default preset at ``--iterations`` simulations per decision, so the rows
-are reproducible). Rows are appended to a CSV as they finish, and a re-run skips those there,
-so a stopped run resumes; ``--report`` writes the mean ``U`` with its standard error and the
-targets never detected per planner, truth and ``n``, and the paired difference of ``mcts``
-from ``greedy`` (``table.md``, ``summary.json``).
+(``mcts`` with the default preset at ``--iterations`` simulations per decision, so the rows are
+reproducible; each row names its planner's canonical settings, part of its identity). Rows are
+appended to a CSV as they finish, and a re-run skips those there, so a stopped run resumes;
+``--report`` writes the mean ``U`` with its standard error and the targets never detected per
+planner, truth and ``n``, and the paired difference of ``mcts`` from ``greedy`` (``table.md``,
+``summary.json``).
 
     python3 benchmarks/truth_mismatch.py --targets 6,12 --seeds 10 --csv results/mismatch.csv
     python3 benchmarks/truth_mismatch.py --report --csv results/mismatch.csv \\
@@ -32,7 +33,9 @@ TRUTHS: dict[str, dict | None] = {
 }
 """The truth motions flown, by the name the table gives them."""
 PLANNERS = ("mcts", "greedy", "clairvoyant")
-FIELDS = ("planner", "truth", "n", "seed", "iterations", "U", "never_detected")
+FIELDS = ("planner", "planner_settings", "truth", "n", "seed", "U", "never_detected")
+"""A row: its identity (the planner and its canonical settings, the truth, ``n``, the seed) and
+its results."""
 
 
 def scenario(n: int, seed: int, truth: str):
@@ -47,16 +50,24 @@ def scenario(n: int, seed: int, truth: str):
     return Scenario.model_validate({**base.model_dump(exclude_none=True), "truth_motion": spec})
 
 
+def settings_of(planner: str, iterations: int):
+    """The validated settings a planner flies with (``mcts``: the default preset at
+    ``iterations`` simulations per decision)."""
+    from hptrack.registry import planner_settings
+
+    return planner_settings(planner, {"iterations": iterations} if planner == "mcts" else None)
+
+
 def episode(job: tuple) -> dict:
     """One row: ``job`` is ``(planner, truth, n, seed, iterations)``."""
-    from hptrack.registry import make_planner
+    from hptrack.registry import planner_entry
     from hptrack.sim.episode import run_episode
 
     planner, truth, n, seed, iterations = job
-    options = {"iterations": iterations} if planner == "mcts" else None
-    record = run_episode(scenario(n, seed, truth), make_planner(planner, options))
+    settings = settings_of(planner, iterations)
+    record = run_episode(scenario(n, seed, truth), planner_entry(planner).factory(settings))
     never = int((~record.detections.any(axis=0)).sum())
-    values = (planner, truth, n, seed, iterations, repr(record.uncertainty), never)
+    values = (planner, settings.canonical(), truth, n, seed, repr(record.uncertainty), never)
     return dict(zip(FIELDS, values, strict=True))
 
 
@@ -65,9 +76,8 @@ def run(args: argparse.Namespace) -> None:
     done = set()
     if path.exists():
         with path.open() as f:
-            done = {
-                (r["planner"], r["truth"], int(r["n"]), int(r["seed"])) for r in csv.DictReader(f)
-            }
+            rows = csv.DictReader(f)
+            done = {(r["planner_settings"], r["truth"], int(r["n"]), int(r["seed"])) for r in rows}
     counts = [int(n) for n in args.targets.split(",")]
     jobs = [
         (planner, truth, n, seed, args.iterations)
@@ -75,7 +85,7 @@ def run(args: argparse.Namespace) -> None:
         for seed in range(args.seeds)
         for truth in TRUTHS
         for planner in PLANNERS
-        if (planner, truth, n, seed) not in done
+        if (settings_of(planner, args.iterations).canonical(), truth, n, seed) not in done
     ]
     path.parent.mkdir(parents=True, exist_ok=True)
     new = not path.exists()

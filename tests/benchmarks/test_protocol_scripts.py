@@ -109,6 +109,7 @@ def test_truth_mismatch_rows_and_their_report(tmp_path):
     scenario = mismatch.scenario(2, 1, "turn_0.02")
     assert scenario.truth_motion.model == "coordinated_turn"
     assert float(row["U"]) == run_episode(scenario, make_planner("greedy")).uncertainty
+    assert row["planner_settings"] == make_planner("greedy").settings.canonical()
     assert mismatch.scenario(2, 1, "constant_velocity").truth_motion is None
     path = tmp_path / "rows.csv"
     with path.open("w", newline="") as f:
@@ -118,7 +119,7 @@ def test_truth_mismatch_rows_and_their_report(tmp_path):
             for planner, u in (("mcts", m), ("greedy", g), ("clairvoyant", c)):
                 writer.writerow(
                     dict(
-                        zip(mismatch.FIELDS, (planner, "ou_0.01", 6, seed, 2000, u, 1), strict=True)
+                        zip(mismatch.FIELDS, (planner, "{}", "ou_0.01", 6, seed, u, 1), strict=True)
                     )
                 )
     args = type("Args", (), {"csv": str(path), "out": str(tmp_path / "out")})

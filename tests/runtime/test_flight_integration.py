@@ -21,7 +21,9 @@ pytest.importorskip("pymavlink")
 from hptrack.runtime.log import read_log  # noqa: E402
 from hptrack.scenario import load_scenario  # noqa: E402
 
-pytestmark = pytest.mark.slow
+# the stub flights run one at a time on one test worker (pytest -n with --dist loadgroup):
+# a detection flood beside another flight would starve the stub that measures its setpoints
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("stub-flights")]
 
 BUDGET_S = 15.0
 LONG_BUDGET_S = 30.0

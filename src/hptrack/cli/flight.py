@@ -273,7 +273,8 @@ def fly(
             view.update(_live_view(status))
 
     def on_message(text: str) -> None:
-        (view.console if view is not None else console).print(escape(text), highlight=False)
+        target = view.console if view is not None else console
+        target.print(escape(text), highlight=False, soft_wrap=True)  # paths stay whole
 
     def build(limits: VehicleLimits) -> MissionController:
         speed = planned_speed(scenario.agent.speed, limits, cap_speed)
@@ -306,7 +307,9 @@ def fly(
             view.start()
         result = run_flight(build, log, options, on_status, on_message)
     except FlightError as err:
-        error_console.print(f"[bold red]error:[/] {escape(str(err))}", highlight=False)
+        error_console.print(
+            f"[bold red]error:[/] {escape(str(err))}", highlight=False, soft_wrap=True
+        )
         sys.exit(EXIT_ABORTED)
     finally:
         if view is not None:
@@ -322,9 +325,10 @@ def fly(
             + (f"; logging stopped: {result.log_stopped}" if result.log_stopped else "")
         ),
         highlight=False,
+        soft_wrap=True,
     )
     if result.error:
-        error_console.print(escape(result.error), highlight=False)
+        error_console.print(escape(result.error), highlight=False, soft_wrap=True)
         sys.exit(1)
     if result.reason == "interrupted":
         sys.exit(130)
