@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from collections.abc import Mapping
 from typing import Annotated, Any, ClassVar, Self
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -58,7 +59,7 @@ _PHRASES = {
 }
 
 
-def _phrase(error: dict) -> str:
+def _phrase(error: Mapping[str, Any]) -> str:
     template = _PHRASES.get(error["type"])
     if template is None:
         return error["msg"].removeprefix("Value error, ")

@@ -208,8 +208,8 @@ class AStarPlanner(PrimitivePlanner):
                 heapq.heappush(heap, (f_child, code + (c + 1) * place, n_nodes + c))
             n_nodes += n_controls
         plan = np.full(horizon, HOVER, dtype=np.int64)
-        cost = float(g[node])
+        plan_cost = float(g[node])
         for depth in range(int(levels[node]), 0, -1):
             plan[depth - 1] = controls[node]
             node = int(parents[node])
-        return plan, DecisionStats(observation.step, 0.0, expansions, 1, capped, cost)
+        return plan, DecisionStats(observation.step, 0.0, expansions, 1, capped, plan_cost)

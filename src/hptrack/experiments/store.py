@@ -342,7 +342,7 @@ class ResultStore:
         now = time.time()
         with self._guard():
             rows = self._db.execute("SELECT rowid, host, pid, claimed_at FROM claims").fetchall()
-            stale = [r[0] for r in rows if self._claim_is_stale(*r[1:], now)]
+            stale = [r[0] for r in rows if self._claim_is_stale(r[1], r[2], r[3], now)]
             if stale:
                 self._db.executemany("DELETE FROM claims WHERE rowid=?", [(r,) for r in stale])
                 self._db.commit()

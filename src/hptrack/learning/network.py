@@ -68,7 +68,7 @@ class GaussianQNetwork(nn.Module):
         hidden = tuple(int(h) for h in config["hidden"])
         if state_dict is not None:
             widths = (obs_dim, *hidden)
-            expected = {
+            expected: dict[str, tuple[int, ...]] = {
                 f"body.{2 * i}.weight": (h, w)
                 for i, (w, h) in enumerate(zip(widths[:-1], hidden, strict=True))
             }

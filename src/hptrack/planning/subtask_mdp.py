@@ -284,7 +284,7 @@ class PlanningProblem:
     @property
     def mask(self) -> int:
         """The root's action list as a bitmask."""
-        return int(sum(1 << i for i in np.flatnonzero(self.available)))
+        return int(sum(1 << int(i) for i in np.flatnonzero(np.asarray(self.available))))
 
     def env(self, options: SubtaskOptions = PAPER_SUBTASK) -> SubtaskEnv:
         """The compiled kernels' view of the problem with ``options``, with a fresh memo.
@@ -301,9 +301,11 @@ class PlanningProblem:
         stays = stay_steps(self.mission.time_step, options.dwell)
         if self.current_action is not None and self.current_action >= self.n_targets + len(stays):
             raise ValueError(f"current_action={self.current_action} is not a dwell of {stays}")
+        follow = self.follow
+        assert follow is not None  # built in __post_init__ when not given
         return SubtaskEnv(
             self.mission,
-            self.follow,
+            follow,
             np.ascontiguousarray(self.means),
             n_steps,
             estimator,

@@ -7,6 +7,7 @@ import math
 import re
 import stat
 import typing
+from collections.abc import Mapping
 from pathlib import Path
 
 import yaml
@@ -176,7 +177,7 @@ def _model_at(model: type[BaseModel], loc: tuple) -> type[BaseModel] | None:
     return node if isinstance(node, type) and issubclass(node, BaseModel) else None
 
 
-def _unknown_field(item: dict, model: type[BaseModel] | None) -> str | None:
+def _unknown_field(item: Mapping[str, typing.Any], model: type[BaseModel] | None) -> str | None:
     """``unknown field; did you mean X?`` for a key no field of its place has."""
     if item["type"] != "extra_forbidden" or model is None:
         return None
