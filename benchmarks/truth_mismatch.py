@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import argparse
 import csv
+import importlib.util
 import json
-import math
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
@@ -36,6 +36,14 @@ PLANNERS = ("mcts", "greedy", "clairvoyant")
 FIELDS = ("planner", "planner_settings", "truth", "n", "seed", "U", "never_detected")
 """A row: its identity (the planner and its canonical settings, the truth, ``n``, the seed) and
 its results."""
+
+
+def _sibling(name: str):
+    """Another script of ``benchmarks/``, as a module."""
+    spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name(f"{name}.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def scenario(n: int, seed: int, truth: str):
@@ -100,6 +108,7 @@ def run(args: argparse.Namespace) -> None:
 
 
 def report(args: argparse.Namespace) -> None:
+    mean_se = _sibling("quality_vs_time").mean_se
     with Path(args.csv).open() as f:
         rows = list(csv.DictReader(f))
     out = Path(args.out)
@@ -117,10 +126,8 @@ def report(args: argparse.Namespace) -> None:
                 if not sel:
                     continue
                 u = [float(r["U"]) for r in sel]
-                mean = sum(u) / len(u)
-                sd = math.sqrt(sum((x - mean) ** 2 for x in u) / max(len(u) - 1, 1))
+                mean, se = mean_se(u)
                 never = sum(int(r["never_detected"]) for r in sel) / len(sel)
-                se = sd / math.sqrt(len(u))
                 lines.append(
                     f"| {n} | {truth} | {planner} | {len(u)} | {mean:.2f} | {se:.2f} | "
                     f"{never:.2f} |"
@@ -150,9 +157,8 @@ def report(args: argparse.Namespace) -> None:
             diffs = [u["mcts"] - u["greedy"] for u in by_seed.values() if len(u) == len(PLANNERS)]
             if len(diffs) < 2:
                 continue
-            mean = sum(diffs) / len(diffs)
-            sd = math.sqrt(sum((x - mean) ** 2 for x in diffs) / (len(diffs) - 1))
-            lines.append(f"| {n} | {truth} | {mean:+.2f} | {sd / math.sqrt(len(diffs)):.2f} |")
+            mean, se = mean_se(diffs)
+            lines.append(f"| {n} | {truth} | {mean:+.2f} | {se:.2f} |")
     (out / "table.md").write_text("\n".join(lines) + "\n")
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     print("\n".join(lines))

@@ -127,3 +127,28 @@ def test_truth_mismatch_rows_and_their_report(tmp_path):
     table = (tmp_path / "out" / "table.md").read_text()
     assert "| 6 | ou_0.01 | mcts | 2 | 11.00 | 1.00 | 1.00 |" in table
     assert "| 6 | ou_0.01 | -2.50 | 1.50 |" in table  # differences -4 and -1
+
+
+def test_search_fingerprints_are_the_searches_statistics_and_repeat():
+    """``benchmarks/search_fingerprint.py``: a fingerprint holds a search's root statistics as
+    the search returns them, and the same code gives the same fingerprints."""
+    from hptrack.planning.subtask_mdp import PlanningProblem
+    from hptrack.planning.subtask_search import search
+    from hptrack.scenario.random import random_scenario
+
+    fingerprint = _script("search_fingerprint")
+    first = fingerprint.fingerprints(counts=(2,), seeds=(0,), iterations=100)
+    assert len(first) == 2 * len(fingerprint.VARIANTS)
+    assert fingerprint.fingerprints(counts=(2,), seeds=(0,), iterations=100) == first
+    scenario = random_scenario(2, seed=0, homogeneous=True)
+    problem = PlanningProblem.from_observation(
+        scenario.mission_spec().record, scenario.initial_observation()
+    )
+    settings = MctsSettings.model_validate({"preset": "paper", "iterations": 100})
+    result = search(
+        problem, settings.search_options(), settings.subtask_options(), iterations=100, seed=7
+    )
+    best, root, after, simulations, *_ = first[(2, 0, 0, None)]
+    assert (best, simulations, after) == (result.best_action, result.simulations, [])
+    assert root[:2] == (result.root.actions.tolist(), result.root.visits.tolist())
+    assert root[2] == result.root.values.tobytes()

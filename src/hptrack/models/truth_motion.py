@@ -184,7 +184,7 @@ register_truth_motion(RandomWalk, advance_random_walk)
 register_truth_motion(OrnsteinUhlenbeck, advance_ornstein_uhlenbeck)
 
 
-@numba.njit
+@numba.njit(cache=True)
 def _advance(model, mission, truth, z, sqrt_q):
     advance_truth(model, mission, truth, z, sqrt_q)
 

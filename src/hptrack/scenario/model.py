@@ -168,6 +168,9 @@ class ConstantVelocitySpec(BaseModel):
 
     model: Literal["constant_velocity"] = "constant_velocity"
 
+    def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
+        return ConstantVelocityTruth()
+
 
 class CoordinatedTurnSpec(BaseModel):
     """Targets that turn at a constant rate each: ``turn_rate`` rad/s (counter-clockwise
@@ -180,6 +183,12 @@ class CoordinatedTurnSpec(BaseModel):
     turn_rate: Annotated[Real, Field(ge=-1.0, le=1.0)] = 0.02
     turn_rate_sd: Annotated[Real, Field(ge=0.0, le=1.0)] = 0.0
 
+    def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
+        rates = np.full(n_targets, float(self.turn_rate))
+        if self.turn_rate_sd > 0.0:
+            rates = rates + self.turn_rate_sd * rng.standard_normal(n_targets)
+        return CoordinatedTurn(np.ascontiguousarray(rates))
+
 
 class RandomWalkSpec(BaseModel):
     """Targets whose position diffuses by ``diffusion`` m^2/s per axis, with no velocity."""
@@ -188,6 +197,9 @@ class RandomWalkSpec(BaseModel):
 
     model: Literal["random_walk"]
     diffusion: Annotated[Real, Field(gt=0.0, le=1e6)] = 5.0
+
+    def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
+        return RandomWalk(float(self.diffusion))
 
 
 class OrnsteinUhlenbeckSpec(BaseModel):
@@ -199,12 +211,17 @@ class OrnsteinUhlenbeckSpec(BaseModel):
     model: Literal["ornstein_uhlenbeck"]
     damping: Annotated[Real, Field(ge=1e-3, le=10.0)] = 0.01
 
+    def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
+        return OrnsteinUhlenbeck(float(self.damping))
+
 
 TruthMotionSpec = Annotated[
     ConstantVelocitySpec | CoordinatedTurnSpec | RandomWalkSpec | OrnsteinUhlenbeckSpec,
     Field(discriminator="model"),
 ]
-"""How the simulated targets truly move (`hptrack.models.truth_motion`), by ``model``."""
+"""How the simulated targets truly move (`hptrack.models.truth_motion`), by ``model``; each
+spec's ``build(n_targets, rng)`` gives the part it stands for (random parameters drawn from
+``rng``)."""
 
 
 class Scenario(BaseModel):
@@ -336,17 +353,8 @@ class Scenario(BaseModel):
     def truth_motion_model(self, rng: np.random.Generator) -> tuple:
         """The simulator's truth motion (`hptrack.models.truth_motion`); a coordinated turn
         with ``turn_rate_sd > 0`` draws its rates from ``rng`` (nothing is drawn otherwise)."""
-        spec = self.truth_motion
-        if spec is None or isinstance(spec, ConstantVelocitySpec):
-            return ConstantVelocityTruth()
-        if isinstance(spec, CoordinatedTurnSpec):
-            rates = np.full(len(self.targets), float(spec.turn_rate))
-            if spec.turn_rate_sd > 0.0:
-                rates = rates + spec.turn_rate_sd * rng.standard_normal(len(self.targets))
-            return CoordinatedTurn(np.ascontiguousarray(rates))
-        if isinstance(spec, RandomWalkSpec):
-            return RandomWalk(float(spec.diffusion))
-        return OrnsteinUhlenbeck(float(spec.damping))
+        spec = self.truth_motion or ConstantVelocitySpec()
+        return spec.build(len(self.targets), rng)
 
     def sensor_model(self) -> PositionMeasurementModel:
         return PositionMeasurementModel(self.agent.noise_covariance(), self.agent.sensor_diameter)
