@@ -266,3 +266,30 @@ def test_a_leg_moves_its_reference_at_its_speed_and_stops_at_its_end():
     reference, velocity = leg.at(4.5)  # 5 m at 2 m/s: there after 2.5 s
     np.testing.assert_array_equal(reference, [3.0, 4.0])
     np.testing.assert_array_equal(velocity, [0.0, 0.0])
+
+
+def test_true_targets_draw_their_first_step_before_any_flight(flight_scenario):
+    """The flight's simulated targets take their first step when made (so the true-motion
+    kernel is loaded before a flight starts), and drawing it then changes no state: the
+    steps are those of the simulator's true motion, one draw per step in order."""
+    from hptrack.models.truth_motion import sample_truth
+    from hptrack.runtime.world import TrueTargets
+    from hptrack.sim.step import initial_true_states
+
+    targets = TrueTargets(flight_scenario, np.random.default_rng(1), np.random.default_rng(2))
+    assert len(targets.states) == 2
+    spec = flight_scenario.mission_spec()
+    motion = np.random.default_rng(2)
+    states = [initial_true_states(flight_scenario, np.random.default_rng(1))]
+    for _ in range(3):
+        states.append(
+            sample_truth(
+                flight_scenario.truth_motion_model(np.random.default_rng(0)),
+                spec.record,
+                states[-1],
+                spec.process_noise,
+                motion,
+            )
+        )
+    for k, expected in enumerate(states):
+        np.testing.assert_array_equal(targets.state(k), expected)

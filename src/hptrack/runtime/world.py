@@ -32,6 +32,7 @@ class TrueTargets:
         self._rng = motion_rng
         self.states: list[np.ndarray] = [initial_true_states(scenario, truth_rng)]
         self._truth_motion = scenario.truth_motion_model(truth_rng)
+        self.state(1)  # the first step now: its kernel loads (or compiles) before any flight
         """True states ``(n, 4)`` at steps ``0, 1, ...`` drawn so far."""
 
     def state(self, k: int) -> np.ndarray:
