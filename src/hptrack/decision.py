@@ -25,10 +25,10 @@ class Decision:
     Attributes:
         waypoint: ``(2,)`` position to fly towards now, m.
         target: id of the target the planner pursues (the hierarchical planner's sub-task), or
-            ``None`` for planners without sub-tasks.
-        subtask: the planned sub-task, targets named by id (``target``, intercept time,
-            ``t_cutoff``, ``p_find``, expected time in s, the plan after a find and a miss) or
-            ``None``.
+            ``None`` for planners without sub-tasks (or one that follows or hovers).
+        subtask: the planned sub-task (`hptrack.subtasks.Subtask.to_json`, targets named by
+            id: ``kind``, ``target``, intercept time, ``t_cutoff``, ``p_find``, expected time
+            in s, the actions planned after a find and a miss) or ``None``.
         info: the planner's ``episode_info()``: its searches, settings and plans so far.
     """
 
@@ -88,5 +88,5 @@ def plan(
     waypoint = np.array(planner.act(observation), dtype=float)
     info = dict(planner.episode_info())
     subtask = _first_subtask(info, mission)
-    target = None if subtask is None else subtask.get("target")
+    target = subtask["target"] if subtask is not None and subtask["kind"] == "pursue" else None
     return Decision(waypoint, target, subtask, info)

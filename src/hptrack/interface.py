@@ -5,8 +5,9 @@ declares it reads it, `TruthReader`).
 Every planner, whether it chooses sub-tasks (the paper's hierarchical planner), controls (ARVI,
 A*) or a learned policy, implements `Planner`. Each step the simulator (or the real-time
 controller) hands it an `Observation` (what a real UAV would know: time, remaining budget,
-its own position, the target beliefs and which targets it just measured) and receives a
-waypoint: the position the agent should fly towards, at most ``agent_speed * time_step`` away.
+the vehicles' positions, the target beliefs and which targets it just measured) and receives a
+waypoint per vehicle: the position each should fly towards, at most ``agent_speed * time_step``
+away. Missions have ``m`` vehicles (`MissionSpec.n_vehicles`, 1 everywhere today).
 
 `MissionSpec` is the one vocabulary for the mission constants (time step, budget, speed,
 sensor diameter, measurement noise, process noise); the compiled kernels receive them as one
@@ -19,13 +20,14 @@ from __future__ import annotations
 import math
 import reprlib
 from dataclasses import dataclass, field
-from typing import Any, Literal, Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import Mission, mission_record
 from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
+from hptrack.subtasks import Subtask, SubtaskAction
 
 DEFAULT_MEASUREMENT_NOISE = 10.0
 """Default ``R = 10 I`` m^2 (sigma = 3.16 m per axis); the paper does not state ``R``."""
@@ -104,6 +106,8 @@ class MissionSpec:
         process_noise_form: which per-step ``Q`` (`hptrack.models.motion`).
         process_noise: ``(n,)`` per-target noise intensities ``q``, m^2/s^3.
         target_ids: the targets' names.
+        n_vehicles: ``m``, the vehicles flown (every planner today flies one and refuses
+            more, `one_vehicle`); they share the speed and the sensor.
     """
 
     time_step: float = 0.5
@@ -114,6 +118,7 @@ class MissionSpec:
     process_noise_form: ProcessNoiseForm = "continuous"
     process_noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     target_ids: tuple[str, ...] = ()
+    n_vehicles: int = 1
     record: Mission = field(init=False, repr=False)
     """The mission's constants as the compiled kernels take them (built and validated once,
     with the spec)."""
@@ -121,6 +126,10 @@ class MissionSpec:
     def __post_init__(self) -> None:
         if self.process_noise_form not in ("continuous", "paper_text"):
             raise ValueError(f"unknown process_noise_form {self.process_noise_form!r}")
+        if isinstance(self.n_vehicles, bool) or not (
+            isinstance(self.n_vehicles, int | np.integer) and self.n_vehicles >= 1
+        ):
+            raise ValueError(f"n_vehicles must be a whole number >= 1, got {self.n_vehicles!r}")
         record = mission_record(
             self.time_step,
             self.budget,
@@ -165,6 +174,34 @@ class MissionSpec:
         return PositionMeasurementModel(self.measurement_noise, self.sensor_diameter)
 
 
+def one_vehicle(planner: str, mission: MissionSpec) -> None:
+    """Refuse a mission of several vehicles for a planner that flies one (its ``reset``).
+
+    Raises:
+        InputError: ``mission.n_vehicles`` is not 1.
+    """
+    if mission.n_vehicles != 1:
+        raise InputError(
+            f"planner {planner!r} flies one vehicle; the mission's n_vehicles is "
+            f"{mission.n_vehicles}"
+        )
+
+
+def vehicle_waypoints(waypoints: Any, n_vehicles: int, planner: str) -> np.ndarray:
+    """A planner's ``act`` answer as ``(m, 2)`` waypoints, m (a ``(2,)`` answer is the one
+    vehicle's).
+
+    Raises:
+        ValueError: another shape, or a value that is not finite (a planner's bug).
+    """
+    out = np.asarray(waypoints, dtype=float)
+    if out.shape == (2,) and n_vehicles == 1:
+        out = out[None]
+    if out.shape != (n_vehicles, 2) or not np.all(np.isfinite(out)):
+        raise ValueError(f"planner {planner!r} returned an invalid waypoint {waypoints!r}")
+    return out
+
+
 @dataclass(frozen=True)
 class Observation:
     """The planner's view at one step (arrays are read-only copies).
@@ -173,19 +210,36 @@ class Observation:
         step: step index ``k`` (time ``k * tau``).
         time: elapsed time, s.
         remaining_budget: ``B - time``, s.
-        agent_position: ``(2,)`` agent position, m.
+        agent_positions: ``(m, 2)`` the vehicles' positions, m (a ``(2,)`` position given
+            here is one vehicle's; `agent_position` is the first vehicle's).
         means: ``(n, 4)`` belief means (m, m/s).
         covariances: ``(n, 4, 4)`` belief covariances.
-        detected: ``(n,)`` which targets were measured at this step.
+        detected: ``(n,)`` which targets were measured at this step (by any vehicle).
     """
 
     step: int
     time: float
     remaining_budget: float
-    agent_position: np.ndarray
+    agent_positions: np.ndarray
     means: np.ndarray
     covariances: np.ndarray
     detected: np.ndarray
+
+    def __post_init__(self) -> None:
+        positions = np.asarray(self.agent_positions)
+        if positions.shape == (2,):
+            object.__setattr__(self, "agent_positions", positions[None])
+
+    @property
+    def n_vehicles(self) -> int:
+        """``m``, the vehicles seen."""
+        return self.agent_positions.shape[0]
+
+    @property
+    def agent_position(self) -> np.ndarray:
+        """``(2,)`` the first vehicle's position, m (the one vehicle of a single-vehicle
+        planner)."""
+        return self.agent_positions[0]
 
 
 class SettingsRecord(Protocol):
@@ -198,38 +252,19 @@ class SettingsRecord(Protocol):
 
 
 @dataclass(frozen=True)
-class Subtask:
-    """The sub-task a planner is flying (paper Sec. IV).
-
-    Attributes:
-        kind: ``"pursue"`` (a coverage sub-task on ``target``), ``"follow"`` (follow a found
-            target) or ``"dwell"`` (follow it for the dwell's length).
-        target: the target's index.
-        since_step: the step it began at.
-        p_find: the pursuit's estimated chance of finding the target, or ``None``.
-    """
-
-    kind: Literal["pursue", "follow", "dwell"]
-    target: int
-    since_step: int
-    p_find: float | None = None
-
-
-@dataclass(frozen=True)
 class CurrentPlan:
     """What a planner is doing now and means to do next.
 
     Attributes:
         subtask: the sub-task being flown, or ``None`` (a planner without sub-tasks, or one
             hovering with nothing left to do).
-        after_find: the action planned after a find (a target index; ``n`` is the dwell), or
-            ``None``.
+        after_find: the action planned after a find (after a dwell: when it ends), or ``None``.
         after_miss: the action planned after a miss, or ``None``.
     """
 
     subtask: Subtask | None = None
-    after_find: int | None = None
-    after_miss: int | None = None
+    after_find: SubtaskAction | None = None
+    after_miss: SubtaskAction | None = None
 
 
 @runtime_checkable
@@ -238,8 +273,10 @@ class Planner(Protocol):
     are the options it was made with.
 
     ``reset`` is called once before the first step with the mission facts, the first
-    observation and the planner's own random generator; ``act`` then returns, every step, the
-    waypoint ``(2,)`` in m that the agent should fly towards; ``current_plan`` says, after an
+    observation and the planner's own random generator (a planner that flies one vehicle
+    refuses a mission of more, `one_vehicle`); ``act`` then returns, every step, the
+    waypoints ``(m, 2)`` in m that the vehicles should fly towards (a ``(2,)`` answer is the
+    one vehicle's, `vehicle_waypoints`); ``current_plan`` says, after an
     ``act``, what it is doing and means to do next (the real-time controller shows it);
     ``episode_info`` returns JSON-ready metadata of the mission so far (its decisions, effort,
     settings).

@@ -11,6 +11,7 @@ LAYERS = [
     "jsonout",
     "_dispatch",
     "models",
+    "subtasks",
     "interface",
     "settings",
     "scenario",

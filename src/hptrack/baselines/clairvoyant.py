@@ -21,7 +21,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation
+from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation, one_vehicle
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.mission import STEP_TOLERANCE
 from hptrack.settings import NoSettings
@@ -65,6 +65,7 @@ class ClairvoyantPlanner:
     def reset(
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
     ) -> None:
+        one_vehicle(self.name, mission)
         self._mission = mission
         self._truth: np.ndarray | None = None
         self._target: int | None = None

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Annotated, Any, ClassVar
 import numpy as np
 from pydantic import BeforeValidator, Field
 
-from hptrack.interface import CurrentPlan
+from hptrack.interface import CurrentPlan, one_vehicle
 from hptrack.settings import PlannerSettings
 
 if TYPE_CHECKING:
@@ -113,6 +113,7 @@ class PrimitivePlanner(ABC):
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
     ) -> None:
         """Start a mission (the searches are deterministic; ``rng`` is unused)."""
+        one_vehicle(self.name, mission)
         self.mission = mission
         self.step_displacements = mission.step_length * step_directions(self.settings.n_headings)
         self.decisions = []

@@ -9,7 +9,14 @@ import numpy as np
 from pydantic import Field
 
 from hptrack.coverage.subtask import CoverageSubtask
-from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation, Subtask
+from hptrack.interface import (
+    CurrentPlan,
+    InputError,
+    MissionSpec,
+    Observation,
+    Subtask,
+    one_vehicle,
+)
 from hptrack.models.motion import predicted_positions
 from hptrack.settings import PlannerSettings
 
@@ -41,6 +48,7 @@ class CoveragePlanner:
     def reset(
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
     ) -> None:
+        one_vehicle(self.name, mission)
         target = self.settings.target
         if target not in mission.target_ids:
             raise InputError(
@@ -50,11 +58,11 @@ class CoveragePlanner:
         self._index = mission.target_ids.index(target)
         self._mission = mission
         self._subtask: CoverageSubtask | None = None
-        self._log: list[dict] = []
+        self._log: list[Subtask] = []
 
     def _close(self, observation: Observation, outcome: str) -> None:
         if self._subtask is not None:
-            self._log[-1].update(outcome=outcome, end_step=observation.step)
+            self._log[-1] = self._log[-1].ended(observation.step, outcome)
             self._subtask = None
 
     def act(self, observation: Observation) -> np.ndarray:
@@ -66,7 +74,7 @@ class CoveragePlanner:
             self._close(observation, "missed")
         if self._subtask is None:
             self._subtask = CoverageSubtask.from_observation(observation, i, self._mission)
-            self._log.append(self._subtask.summary())
+            self._log.append(self._subtask.record())
         return self._subtask.next_waypoint(observation)
 
     def current_plan(self) -> CurrentPlan:
@@ -74,8 +82,11 @@ class CoveragePlanner:
         sub = self._subtask
         if sub is None:
             return CurrentPlan()
-        return CurrentPlan(Subtask("pursue", sub.target_index, sub.start_step, float(sub.p_find)))
+        return CurrentPlan(self._log[-1])
 
     def episode_info(self) -> dict:
         """The sub-tasks flown, each with its plan and outcome, and the settings."""
-        return {"settings": self.settings.as_json(), "subtasks": self._log}
+        return {
+            "settings": self.settings.as_json(),
+            "subtasks": [entry.to_json() for entry in self._log],
+        }

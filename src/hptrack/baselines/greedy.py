@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hptrack.interface import CurrentPlan, MissionSpec, Observation
+from hptrack.interface import CurrentPlan, MissionSpec, Observation, one_vehicle
 from hptrack.models.beliefs import position_logdet
 from hptrack.settings import NoSettings
 
@@ -32,6 +32,7 @@ class GreedyPlanner:
     def reset(
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
     ) -> None:
+        one_vehicle(self.name, mission)
         self._mission = mission
         self._target: int | None = None
         self._given_up = np.zeros(mission.n_targets, dtype=bool)

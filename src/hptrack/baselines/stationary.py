@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hptrack.interface import CurrentPlan, MissionSpec, Observation
+from hptrack.interface import CurrentPlan, MissionSpec, Observation, one_vehicle
 from hptrack.settings import NoSettings
 
 
@@ -19,6 +19,7 @@ class StationaryPlanner:
     def reset(
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
     ) -> None:
+        one_vehicle(self.name, mission)
         self._home = observation.agent_position.copy()
 
     def act(self, observation: Observation) -> np.ndarray:

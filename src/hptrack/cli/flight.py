@@ -83,12 +83,14 @@ def _subtask_text(plan: CurrentPlan | None, target_ids: tuple[str, ...]) -> str:
     if plan is None or plan.subtask is None:
         return "-"
     sub = plan.subtask
+    if sub.target is None:
+        return f"{sub.kind} (since step {sub.start_step})"
     name = target_ids[sub.target]
     if sub.kind == "pursue":
         extra = "" if sub.p_find is None else f", p_find {sub.p_find:.2f}"
-        return f"pursue {name} (since step {sub.since_step}{extra})"
+        return f"pursue {name} (since step {sub.start_step}{extra})"
     verb = "dwell on" if sub.kind == "dwell" else "follow"
-    return f"{verb} {name} (since step {sub.since_step})"
+    return f"{verb} {name} (since step {sub.start_step})"
 
 
 def _live_view(status: dict) -> Group:

@@ -33,6 +33,7 @@ from hptrack.coverage.intercept import (
 from hptrack.coverage.sharp_estimator import SharpEstimate, estimate_sharp
 from hptrack.coverage.spiral import ShiftingSpiral
 from hptrack.interface import MissionSpec, Observation
+from hptrack.subtasks import Subtask
 
 
 class CoverageSubtask:
@@ -172,17 +173,18 @@ class CoverageSubtask:
         """The step at which the sub-task ends if the target is not detected."""
         return self.start_step + self.total_steps
 
-    def summary(self) -> dict:
-        """JSON-ready summary of the plan (times in s)."""
-        return {
-            "target_index": self.target_index,
-            "start_step": self.start_step,
-            "intercept_time": self.intercept_time,
-            "t_cutoff": self.cutoff_time,
-            "p_find": self.p_find,
-            "expected_time": self.expected_time,
-            "budget_limited": self.estimate.budget_limited,
-        }
+    def record(self) -> Subtask:
+        """The plan as a pursuit's sub-task record (times in s)."""
+        return Subtask(
+            "pursue",
+            self.target_index,
+            self.start_step,
+            intercept_time=self.intercept_time,
+            t_cutoff=self.cutoff_time,
+            p_find=self.p_find,
+            expected_time=self.expected_time,
+            budget_limited=self.estimate.budget_limited,
+        )
 
     # --- execution --------------------------------------------------------------------------
     def waypoint(self, j: int) -> np.ndarray:

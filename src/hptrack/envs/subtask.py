@@ -13,31 +13,32 @@ Rules (those of the tree search's sub-task MDP, `hptrack.planning.subtask_mdp`):
   position every step) to the end of the budget;
 * action ``i`` is *feasible* when the agent can reach target ``i``'s belief mean before the
   budget ends (``0 <= n_i < steps left``, ``n_i`` the intercept steps) or ``i`` is the target
-  just found. An infeasible action (including a padding slot ``i >= n``) hovers one step.
+  just found (the search's rule, `hptrack.planning.subtask_flight.feasible`; the sub-task is
+  flown by `hptrack.planning.subtask_flight.SubtaskFlight`, as the planner flies it). An
+  infeasible action (including a padding slot ``i >= n``) hovers one step.
   `SubtaskTrackingEnv.action_masks` and ``info["action_mask"]`` give the feasible ones.
   Unlike the tree search, a target missed earlier may be chosen again.
 
 Observation: `hptrack.envs.observation`, as ``Tracking-v0``. Reward: ``-(change of U) / n``
 over the sub-task. ``info`` as ``Tracking-v0`` plus ``action_mask`` and ``last_found``, and after
-a step ``subtask``: ``target_index``, ``outcome`` (``"found"``; ``"missed"``: ``t_cutoff``
-reached; ``"budget"``: the budget ended first; ``"followed"``; ``"infeasible"``), ``start_step``,
-``end_step``, ``steps``, ``duration`` (s), and for a coverage its plan (``intercept_time``,
-``t_cutoff``, ``p_find``, ``expected_time``, ``budget_limited``).
+a step ``subtask``: the sub-task's record (`hptrack.subtasks.Subtask.to_json`: ``kind``
+(``"pursue"``, ``"follow"``, ``"hover"`` for an infeasible action), ``target``,
+``start_step``, ``end_step``, ``outcome`` (``"found"``; ``"missed"``: ``t_cutoff`` reached;
+``"budget"``: the budget ended first; ``"followed"``; ``"infeasible"``), and for a pursuit its
+plan: ``intercept_time``, ``t_cutoff``, ``p_find``, ``expected_time``, ``budget_limited``),
+with ``action`` (the index chosen), ``steps`` and ``duration`` (s).
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
-from hptrack.coverage.intercept import intercept_steps
-from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.envs.tracking import MissionEnv, discrete_action
-from hptrack.models.mission import reachable_before_budget, steps_left
-from hptrack.models.motion import predicted_positions
+from hptrack.planning.subtask_flight import SubtaskFlight, feasible
+from hptrack.subtasks import HOVER, ActionTable, Subtask, SubtaskAction
 
 
 class SubtaskTrackingEnv(MissionEnv):
@@ -56,32 +57,23 @@ class SubtaskTrackingEnv(MissionEnv):
         self.last_found = None
         return super().reset(seed=seed, options=options)
 
+    @property
+    def _table(self) -> ActionTable:
+        """The actions: one per target, no dwell."""
+        return ActionTable(self._world().n_targets)
+
     def action_masks(self) -> np.ndarray:
-        """``(n_slots,)`` bool: the feasible actions now (module docstring)."""
+        """``(n_slots,)`` bool: the feasible actions now (module docstring; the tree search's
+        rule, `hptrack.planning.subtask_flight.feasible`, with every target in the action
+        list)."""
         w = self._world()
-        m = w.mission
         mask = np.zeros(self.layout.n_slots, dtype=bool)
         if w.done:
             return mask
-        left = steps_left(m.time_step, w.remaining_budget)
+        observation = w.observation()
+        every = np.ones(w.n_targets, dtype=bool)
         for i in range(w.n_targets):
-            mean = w.means[i]
-            if math.hypot(mean[2], mean[3]) >= m.agent_speed:
-                continue
-            steps = intercept_steps(
-                w.agent[0],
-                w.agent[1],
-                mean[0],
-                mean[1],
-                mean[2],
-                mean[3],
-                m.agent_speed,
-                m.time_step,
-                m.sensor_radius,
-            )
-            mask[i] = reachable_before_budget(steps, left)
-        if self.last_found is not None:
-            mask[self.last_found] = True
+            mask[i] = feasible(self._table, i, w.mission, observation, every, self.last_found)
         return mask
 
     def _info(self) -> dict[str, Any]:
@@ -91,58 +83,41 @@ class SubtaskTrackingEnv(MissionEnv):
             "last_found": self.last_found,
         }
 
-    def _follow(self, i: int) -> None:
-        w = self._world()
-        while not w.done:
-            x, y = predicted_positions(w.means[i], w.mission.time_step)
-            self._advance(float(x), float(y))
-
-    def _cover(self, i: int) -> tuple[str, dict]:
+    def _fly(self, action: SubtaskAction) -> tuple[Subtask, str]:
+        """Fly ``action`` (`SubtaskFlight`) until it ends or the budget does; its record and
+        outcome."""
         w = self._world()
         observation = w.observation()
-        subtask = CoverageSubtask.from_observation(observation, i, w.mission)
+        flight = SubtaskFlight(action, observation, w.mission)
         while True:
-            x, y = subtask.next_waypoint(observation)
+            x, y = flight.waypoint(observation)
             self._advance(float(x), float(y))
             observation = w.observation()
-            if subtask.done(observation):
+            if action.kind == "hover" or flight.done(observation) or w.done:
                 break
-        if subtask.found(observation):
-            outcome = "found"
-        else:
-            outcome = "budget" if w.done else "missed"
-        plan = subtask.summary()
-        return outcome, {
-            k: plan[k]
-            for k in ("intercept_time", "t_cutoff", "p_find", "expected_time", "budget_limited")
-        }
+        if action.kind == "hover":
+            return flight.record, "infeasible"
+        if action.kind == "follow":
+            return flight.record, "followed"
+        if flight.found(observation):
+            return flight.record, "found"
+        return flight.record, "budget" if w.done else "missed"
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         world = self._check_running()
         i = discrete_action(action, self.layout.n_slots)
-        feasible = bool(self.action_masks()[i])
-        before, start = world.uncertainty, world.step_index
-        plan: dict = {}
-        if not feasible:
-            w = world.agent
-            self._advance(float(w[0]), float(w[1]))
-            outcome = "infeasible"
-        elif i == self.last_found:
-            self._follow(i)
-            outcome = "followed"
-        else:
-            outcome, plan = self._cover(i)
+        feasible_now = bool(self.action_masks()[i])
+        before = world.uncertainty
+        chosen = self._table.action(i, self.last_found) if feasible_now else None
+        record, outcome = self._fly(chosen or HOVER)
         self.last_found = i if outcome == "found" else None
-        steps = world.step_index - start
+        steps = world.step_index - record.start_step
         reward = -(world.uncertainty - before) / world.n_targets
         info = self._info()
         info["subtask"] = {
-            "target_index": i,
-            "outcome": outcome,
-            "start_step": start,
-            "end_step": world.step_index,
+            **record.ended(world.step_index, outcome).to_json(),
+            "action": i,
             "steps": steps,
             "duration": steps * world.mission.time_step,
-            **plan,
         }
         return self._observation(), float(reward), False, world.done, info

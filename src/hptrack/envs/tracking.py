@@ -281,7 +281,7 @@ class MissionEnv(gym.Env):
             target_ids=m.target_ids,
             time_step=m.time_step,
             sensor_diameter=m.sensor_diameter,
-            agent_path=agent,
+            agent_paths=agent,
             true_states=truth,
             belief_steps=np.arange(len(self._history)),
             belief_means=means,

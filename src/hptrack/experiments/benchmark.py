@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from hptrack.experiments.store import EpisodeKey, EpisodeRow, ResultStore
+from hptrack.experiments.store import EpisodeKey, ResultStore
 from hptrack.experiments.workers import stop_workers, worker_pool
 from hptrack.interface import InputError
 from hptrack.registry import planner_entry, planner_settings
@@ -28,6 +28,7 @@ from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
 from hptrack.settings import PlannerSettings
 from hptrack.sim.episode import run_episode
+from hptrack.sim.record import EpisodeRow
 
 MAX_SEED = 2**63 - 1
 """Largest scenario seed (SQLite's largest integer)."""

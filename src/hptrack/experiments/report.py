@@ -9,8 +9,9 @@ from collections import Counter
 from pathlib import Path
 
 from hptrack.experiments.benchmark import BenchmarkConfig, gap_closed, reductions, summarise
-from hptrack.experiments.store import EpisodeKey, EpisodeRow
+from hptrack.experiments.store import EpisodeKey
 from hptrack.registry import planner_entry
+from hptrack.sim.record import EpisodeRow
 
 
 def mean_std(mean: float, std: float) -> str:

@@ -40,6 +40,7 @@ from hptrack.experiments.workers import process_alive, runs_with_file_open
 from hptrack.interface import InputError
 from hptrack.jsonout import json_text
 from hptrack.settings import digest_of
+from hptrack.sim.record import EpisodeRow
 
 SCHEMA_VERSION = 5
 SCHEMA = """
@@ -177,19 +178,6 @@ class EpisodeKey:
 
     def _id(self) -> tuple:
         return (self.planner, self.n_targets, self.seed, self.setting, self.planner_settings_hash)
-
-
-@dataclass(frozen=True)
-class EpisodeRow:
-    """One finished episode: its key, ``U``, the never-observed ``U`` of the same scenario,
-    the number of detection steps, the wall time (s) and planner metadata."""
-
-    key: EpisodeKey
-    uncertainty: float
-    never_observed: float
-    detections: int
-    wall_time_s: float
-    info: dict
 
 
 def check_columns(db: sqlite3.Connection, source: str) -> None:

@@ -22,7 +22,7 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import Field
 
-from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation
+from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation, one_vehicle
 from hptrack.models.beliefs import position_logdet
 from hptrack.settings import PlannerSettings
 
@@ -80,6 +80,8 @@ class _DiscretePolicyPlanner(ABC):
     ) -> None:
         from hptrack.envs.observation import ObservationLayout
         from hptrack.envs.tracking import HEADINGS
+
+        one_vehicle(self.name, mission)
 
         self._mission, self._rng = mission, rng
         self._layout = ObservationLayout(mission.n_targets, masked=False)

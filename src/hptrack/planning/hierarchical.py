@@ -10,8 +10,10 @@
 4. When the sub-task ends, the outcome that happened picks the next target from the plan. A
    missed target leaves the action list (Sec. IV-C-2); choosing the target just found again means
    following it to the end of the budget. With the ``dwell`` option (beyond the paper) the plan
-   may also follow it for a dwell's length only (action index ``n + j`` for the ``j``-th
-   length, also in the log's plans), re-planning with the dwell fixed as it starts. With
+   may also follow it for a dwell's length only, re-planning with the dwell fixed as it
+   starts. The search numbers the actions (`hptrack.subtasks.ActionTable`); the planner flies
+   them (`hptrack.planning.subtask_flight`) and logs each as a typed record
+   (`hptrack.subtasks.Subtask`, its planned actions typed too). With
    ``miss="keep"`` a missed target stays in the action list.
 
 Choices the paper leaves open (``docs/model.md``): a missed target that the agent measures
@@ -23,26 +25,24 @@ follows the last found target, or hovers.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
-from hptrack.coverage.intercept import intercept_steps
-from hptrack.coverage.subtask import CoverageSubtask
-from hptrack.interface import CurrentPlan, MissionSpec, Observation, Subtask
-from hptrack.models.mission import follow_tables, reachable_before_budget, steps_left
-from hptrack.models.motion import predicted_positions
+from hptrack.interface import CurrentPlan, MissionSpec, Observation, one_vehicle
+from hptrack.models.mission import follow_tables
 from hptrack.planning.backups import backup_of
 from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchOptions, SearchResult
+from hptrack.planning.subtask_flight import SubtaskFlight, feasible
 from hptrack.planning.subtask_mdp import (
     FIND,
     MISS,
     PlanningProblem,
     SubtaskOptions,
-    dwell_action,
-    stay_steps,
+    action_table,
 )
 from hptrack.planning.subtask_rollout import (
     MostUncertain,
@@ -53,6 +53,7 @@ from hptrack.planning.subtask_rollout import (
 )
 from hptrack.planning.subtask_search import search, warm_up
 from hptrack.settings import Iterations, PlannerSettings, TimeLimit
+from hptrack.subtasks import HOVER, Subtask
 
 DEFAULT_ITERATIONS = 100_000
 """Simulations per tree search when neither ``iterations`` nor ``time_limit`` is given."""
@@ -293,95 +294,45 @@ class HierarchicalPlanner:
         )
         return result
 
-    def _feasible(self, observation: Observation, target: int) -> bool:
-        """In the action list and interceptable before the budget ends (as in the MDP)."""
-        if not self._available[target]:
-            return False
-        m, agent, mission = observation.means[target], observation.agent_position, self._record
-        steps = intercept_steps(
-            agent[0],
-            agent[1],
-            m[0],
-            m[1],
-            m[2],
-            m[3],
-            mission.speed,
-            mission.time_step,
-            mission.footprint_radius,
-        )
-        left = steps_left(mission.time_step, observation.remaining_budget)
-        return reachable_before_budget(steps, left)
-
-    def _dwell_length(self, action: int) -> int:
-        """Steps of dwell action ``action``."""
-        return self._stay_steps[action - dwell_action(self._mission.n_targets)]
-
-    def _dwell_feasible(
-        self, observation: Observation, last_found: int | None, action: int
-    ) -> bool:
-        """A target was just found and the dwell ends before the budget (as in the MDP)."""
-        left = steps_left(self._record.time_step, observation.remaining_budget)
-        return last_found is not None and self._dwell_length(action) < left
-
-    def _start_dwell(self, observation: Observation, target: int, action: int) -> None:
-        """Follow ``target`` for dwell ``action``'s length and re-plan with it fixed."""
-        self._follow = target
-        self._subtask = None
-        length = self._dwell_length(action)
-        self._dwell_end = observation.step + length
-        plan = self._search(observation, current_action=action, last_found=target)
-        self._plan = (plan.best_after(FIND), None)
-        self._log.append(
-            {
-                "dwell": target,
-                "start_step": observation.step,
-                "dwell_steps": length,
-                "plan_after_dwell": self._plan[0],
-            }
-        )
-
-    def _start(self, observation: Observation, target: int) -> None:
-        """Begin a sub-task on ``target`` and re-plan with it fixed (conditional plan)."""
-        self._subtask = CoverageSubtask.from_observation(observation, target, self._mission)
-        plan = self._search(observation, current_action=target)
-        self._plan = (plan.best_after(FIND), plan.best_after(MISS))
-        self._log.append(
-            {
-                **self._subtask.summary(),
-                "plan_after_find": self._plan[0],
-                "plan_after_miss": self._plan[1],
-            }
-        )
+    def _start(self, observation: Observation, index: int | None, last_found: int | None) -> None:
+        """Begin flying action ``index`` (`hptrack.subtasks.ActionTable`; ``None``: follow
+        ``last_found``, or hover); a pursuit or a dwell re-plans with it fixed (the conditional
+        plan: the next action after each outcome)."""
+        if index is None:
+            index = last_found  # nothing to do: follow the target just found, or hover
+        action = self._table.action(index, last_found) or HOVER
+        flight = SubtaskFlight(action, observation, self._mission)
+        self._flight = flight
+        after_find = after_miss = None
+        if action.kind == "pursue":
+            plan = self._search(observation, current_action=action.target)
+            self._plan = (plan.best_after(FIND), plan.best_after(MISS))
+            after_miss = self._table.action(self._plan[1])
+        elif action.kind == "dwell":
+            plan = self._search(observation, current_action=index, last_found=action.target)
+            self._plan = (plan.best_after(FIND), None)
+        else:
+            self._plan = (None, None)
+        after_find = self._table.action(self._plan[0], action.target)
+        self._log.append(replace(flight.record, after_find=after_find, after_miss=after_miss))
 
     def _next(self, observation: Observation, planned: int | None, last_found: int | None) -> None:
         """Carry on after a sub-task: follow, dwell, start the planned target, or plan
         afresh."""
-        dwell = dwell_action(self._mission.n_targets)
-        if planned is None:
-            feasible = False
-        elif planned >= dwell:
-            feasible = self._dwell_feasible(observation, last_found, planned)
-        else:
-            feasible = planned == last_found or self._feasible(observation, planned)
-        if not feasible:
+        if planned is None or not feasible(
+            self._table, planned, self._mission, observation, self._available, last_found
+        ):
             if self._available.any() and observation.remaining_budget > 0:
                 planned = self._search(observation, last_found=last_found).best_action
             else:
                 planned = None
-        if planned is None or (planned == last_found):
-            self._follow = last_found
-            self._subtask = None
-            self._log.append({"follow": last_found, "start_step": observation.step})
-            return
-        if planned >= dwell:
-            self._start_dwell(observation, last_found, planned)
-            return
-        self._start(observation, planned)
+        self._start(observation, planned, last_found)
 
     # --- Planner protocol ----------------------------------------------------------------
     def reset(
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
     ) -> None:
+        one_vehicle(self.name, mission)
         if self.time_limit is not None:
             warm_up(self.options, self.subtask_options)
         self._mission = mission
@@ -389,56 +340,47 @@ class HierarchicalPlanner:
         self._follow_tables = follow_tables(self._record)
         self._rng = rng
         self._available = np.ones(mission.n_targets, dtype=bool)
-        self._subtask: CoverageSubtask | None = None
+        self._table = action_table(mission.n_targets, mission.time_step, self.subtask_options)
+        self._flight: SubtaskFlight | None = None
         self._plan: tuple[int | None, int | None] = (None, None)
-        self._follow: int | None = None
-        self._dwell_end: int | None = None
-        self._stay_steps = stay_steps(mission.time_step, self.settings.dwell)
-        self._log: list[dict] = []
+        self._log: list[Subtask] = []
         self._searches: list[dict] = []
         self._next(observation, None, None)
 
     def act(self, observation: Observation) -> np.ndarray:
         self._available |= observation.detected
-        subtask = self._subtask
-        if subtask is not None and subtask.done(observation):
-            found = subtask.found(observation)
-            target = subtask.target_index
-            self._log[-1].update(outcome="found" if found else "missed", end_step=observation.step)
-            if not found and self.settings.miss == "drop":
-                self._available[target] = False
-            self._next(
-                observation, self._plan[0] if found else self._plan[1], target if found else None
-            )
-        if self._dwell_end is not None and observation.step >= self._dwell_end:
-            target = self._follow
-            self._follow = self._dwell_end = None
-            self._log[-1].update(end_step=observation.step)
-            self._next(observation, self._plan[0], target)
-        if self._subtask is not None:
-            return self._subtask.next_waypoint(observation)
-        if self._follow is not None:
-            return predicted_positions(observation.means[self._follow], self._mission.time_step)
-        return observation.agent_position
+        flight = self._flight
+        assert flight is not None  # started by reset
+        kind, target = flight.action.kind, flight.action.target
+        if kind in ("pursue", "dwell") and flight.done(observation):
+            if kind == "pursue":
+                found = flight.found(observation)
+                self._log[-1] = self._log[-1].ended(
+                    observation.step, "found" if found else "missed"
+                )
+                if not found and self.settings.miss == "drop":
+                    self._available[target] = False
+                planned = self._plan[0] if found else self._plan[1]
+                self._next(observation, planned, target if found else None)
+            else:
+                self._log[-1] = self._log[-1].ended(observation.step)
+                self._next(observation, self._plan[0], target)
+        assert self._flight is not None
+        return self._flight.waypoint(observation)
 
     def current_plan(self) -> CurrentPlan:
-        """The sub-task being flown (pursuit, dwell or follow) and the plans after it."""
-        if self._subtask is not None:
-            sub = self._subtask
-            pursuit = Subtask("pursue", sub.target_index, sub.start_step, float(sub.p_find))
-            return CurrentPlan(pursuit, *self._plan)
-        if self._follow is None:
+        """The sub-task being flown (pursuit, dwell or follow) and the actions planned after
+        it; nothing while hovering."""
+        if self._flight is None or self._flight.action.kind == "hover":
             return CurrentPlan()
-        since = self._log[-1]["start_step"]
-        if self._dwell_end is not None:
-            return CurrentPlan(Subtask("dwell", self._follow, since), self._plan[0])
-        return CurrentPlan(Subtask("follow", self._follow, since))
+        record = self._log[-1]
+        return CurrentPlan(record, record.after_find, record.after_miss)
 
     def episode_info(self) -> dict:
-        """The sub-tasks flown (plan, estimate, outcome; a planned action ``n`` is the dwell),
-        every search's effort, the settings."""
+        """The sub-tasks flown (`hptrack.subtasks.Subtask.to_json`: action, estimate,
+        outcome, the actions planned after it), every search's effort, the settings."""
         return {
             "settings": self.settings.as_json(),
-            "subtasks": self._log,
+            "subtasks": [entry.to_json() for entry in self._log],
             "searches": self._searches,
         }

@@ -46,8 +46,9 @@ guaranteed: it is measured at every step, its covariance follows the Riccati rec
 
 **Dwell** (an option beyond the paper, off by default: ``dwell = 0``). With dwell lengths
 ``stay_steps`` the MDP has one more action per length, index ``n + j`` for the ``j``-th
-(`dwell_action`): follow the target just found for ``stay_steps[j]`` steps only,
-measured at every step, then choose again with that target still the last found. A single find
+(`hptrack.subtasks.ActionTable`, the one place that numbers the actions): follow the target
+just found for ``stay_steps[j]`` steps only, measured at every step, then choose again
+with that target still the last found. A single find
 fixes a target's position but leaves much of its velocity uncertain, so its belief grows fast
 afterwards; a short dwell measures the velocity too. A dwell is available when a target was
 just found and it ends strictly before the budget (otherwise it is the follow).
@@ -93,6 +94,7 @@ from hptrack.models.motion import mean_position_at
 from hptrack.models.riccati import measured_covariance
 from hptrack.planning.mdp import MdpKernels, register_mdp
 from hptrack.planning.subtask_estimators import estimate_pursuit, estimator_of
+from hptrack.subtasks import ActionTable, dwell_number, is_dwell_index
 
 if TYPE_CHECKING:
     from hptrack.interface import Observation
@@ -194,7 +196,7 @@ class PlanningProblem:
         last_found: the target found by the sub-task that just ended, if any (choosing it again
             follows it to the end of the budget).
         current_action: re-planning mode (Sec. IV-C-4): the target being pursued (or a
-            dwell, `dwell_action` and after), fixed as the root's only action; ``None``
+            dwell, `hptrack.subtasks.ActionTable`), fixed as the root's only action; ``None``
             for a first plan.
         follow: the mission's Riccati tables (`hptrack.models.mission.follow_tables`),
             built once per mission and shared; default built here.
@@ -239,7 +241,7 @@ class PlanningProblem:
         action = self.current_action
         if action is not None and not (
             (0 <= action < n and available[action])
-            or (action >= dwell_action(n) and self.last_found is not None)
+            or (is_dwell_index(n, action) and self.last_found is not None)
         ):
             raise ValueError(f"current_action={action} is not an available target or the dwell")
         object.__setattr__(self, "remaining_budget", remaining)
@@ -341,7 +343,7 @@ measures a target or does not."""
 
 
 def n_actions(n_targets: int, options: SubtaskOptions) -> int:
-    """Actions of the MDP: one per target, and one per dwell length."""
+    """Actions of the MDP: one per target, and one per dwell length (`action_table`)."""
     return n_targets + len(dwell_lengths(options.dwell))
 
 
@@ -371,10 +373,10 @@ def stay_steps(time_step: float, dwell: float | tuple[float, ...]) -> tuple[int,
     return tuple(dwell_steps(time_step, d) for d in dwell_lengths(dwell))
 
 
-@numba.njit(cache=True, inline="always")
-def dwell_action(n_targets):
-    """The first dwell's action index: ``n``, after the targets (dwell ``j`` is ``n + j``)."""
-    return n_targets
+def action_table(n_targets: int, time_step: float, options: SubtaskOptions) -> ActionTable:
+    """The MDP's actions with ``options`` (`hptrack.subtasks.ActionTable`): one per target,
+    one per dwell length."""
+    return ActionTable(n_targets, stay_steps(time_step, options.dwell))
 
 
 def _frozen(value, name: str) -> np.ndarray:
@@ -417,54 +419,87 @@ def copy_state(env, src, dst):
 
 
 @numba.njit(cache=True)
-def intercept_of(env, sf, a, t):
-    """Whole intercept steps from the agent position ``sf`` at step ``t`` to target ``a``'s
-    belief mean (``-1``: the target is faster than the agent)."""
-    mission = env.mission
-    m = env.means[a]
-    x, y = mean_position_at(m, t * mission.time_step)
+def intercept_from(mission, agent_x, agent_y, mean, elapsed):
+    """Whole intercept steps from ``(agent_x, agent_y)`` to the belief mean ``mean`` predicted
+    ``elapsed`` s ahead (``-1``: the target is faster than the agent)."""
+    x, y = mean_position_at(mean, elapsed)
     return intercept_steps(
-        sf[0],
-        sf[1],
+        agent_x,
+        agent_y,
         x,
         y,
-        m[2],
-        m[3],
+        mean[2],
+        mean[3],
         mission.speed,
         mission.time_step,
         mission.footprint_radius,
     )
 
 
+@numba.njit(cache=True)
+def intercept_of(env, sf, a, t):
+    """Whole intercept steps from the agent position ``sf`` at step ``t`` to target ``a``'s
+    belief mean (``-1``: the target is faster than the agent)."""
+    return intercept_from(env.mission, sf[0], sf[1], env.means[a], t * env.mission.time_step)
+
+
+@numba.njit(cache=True)
+def subtask_feasible(mission, means, stays, a, mask, last, agent_x, agent_y, elapsed, left):
+    """Whether action index ``a`` (`hptrack.subtasks.ActionTable`) can be flown with ``left``
+    whole steps of budget: the one feasibility rule of the MDP, the planner and the sub-task
+    environment.
+
+    A dwell (``stays``: the dwell lengths in steps) needs a target just found (``last >= 0``)
+    and ends strictly before the budget. A target needs to be in the action list (bitmask
+    ``mask``); the target just found is followed; any other must be interceptable strictly
+    before the budget ends from the agent at ``(agent_x, agent_y)`` m, its belief mean (row of
+    ``means``) predicted ``elapsed`` s ahead, and slower than the agent unless the agent is
+    already over it."""
+    if left <= 0:
+        return False
+    n = means.shape[0]
+    if is_dwell_index(n, a):
+        return last >= 0 and stays[dwell_number(n, a)] < left
+    if not (mask >> a) & 1:
+        return False
+    if a == last:
+        return True
+    m = means[a]
+    steps = intercept_from(mission, agent_x, agent_y, m, elapsed)
+    return reachable_before_budget(steps, left) and (
+        steps > 0 or math.hypot(m[2], m[3]) < mission.speed
+    )
+
+
 @numba.njit(cache=True, inline="always")
 def is_dwell(env, a):
-    """Whether action ``a`` is a dwell (`dwell_action` and after)."""
-    return a >= dwell_action(env.means.shape[0])
+    """Whether action ``a`` is a dwell (`hptrack.subtasks.is_dwell_index`)."""
+    return is_dwell_index(env.means.shape[0], a)
 
 
 @numba.njit(cache=True, inline="always")
 def dwell_length(env, a):
     """Steps of dwell action ``a``."""
-    return env.stay_steps[a - dwell_action(env.means.shape[0])]
+    return env.stay_steps[dwell_number(env.means.shape[0], a)]
 
 
 @numba.njit(cache=True)
 def is_available(env, state, a):
-    """Whether target ``a`` is an action of the state: in the action list and either followed
-    (``a`` was just found) or interceptable strictly before the end of the budget; or, for
-    the dwell, whether it is (the MDP has one, a target was just found, and the dwell ends
-    before the budget)."""
+    """Whether ``a`` is an action of the state (`subtask_feasible` at the state's step)."""
     si, sf = state[0], state[1]
     t = si[I_STEP]
-    if t >= env.n_steps:
-        return False
-    if is_dwell(env, a):
-        return si[I_LAST] >= 0 and dwell_length(env, a) < env.n_steps - t
-    if not (si[I_MASK] >> a) & 1:
-        return False
-    if a == si[I_LAST]:
-        return True
-    return reachable_before_budget(intercept_of(env, sf, a, t), env.n_steps - t)
+    return subtask_feasible(
+        env.mission,
+        env.means,
+        env.stay_steps,
+        a,
+        si[I_MASK],
+        si[I_LAST],
+        sf[0],
+        sf[1],
+        t * env.mission.time_step,
+        env.n_steps - t,
+    )
 
 
 @numba.njit(cache=True)

@@ -76,17 +76,11 @@ from hptrack.sim.record import EpisodeRecord
 
 
 def plan_json(plan: CurrentPlan | None, target_ids: tuple[str, ...]) -> dict[str, Any] | None:
-    """The sub-task of ``plan`` for the log, with target names: ``{"target": id, "since_step":
-    k, "p_find": p}`` (a pursuit), ``{"follow": id, ...}`` or ``{"dwell": id, ...}``; ``None``
-    without a sub-task."""
+    """The sub-task of ``plan`` for the log (`hptrack.subtasks.Subtask.to_json`, targets
+    named by id); ``None`` without a sub-task."""
     if plan is None or plan.subtask is None:
         return None
-    sub = plan.subtask
-    key = {"pursue": "target", "follow": "follow", "dwell": "dwell"}[sub.kind]
-    out: dict[str, Any] = {key: target_ids[sub.target], "since_step": sub.since_step}
-    if sub.p_find is not None:
-        out["p_find"] = sub.p_find
-    return out
+    return plan.subtask.to_json(target_ids)
 
 
 class MissionController:

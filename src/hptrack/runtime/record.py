@@ -100,7 +100,7 @@ class MissionHistory:
             target_ids=self.mission.target_ids,
             time_step=tau,
             sensor_diameter=self.mission.sensor_diameter,
-            agent_path=agent_path,
+            agent_paths=agent_path,
             true_states=np.asarray(truth)[: last + 1],
             belief_steps=np.asarray(steps),
             belief_means=means,

@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from hptrack.interface import Planner, TruthReader
+from hptrack.interface import Planner, TruthReader, vehicle_waypoints
 from hptrack.scenario.model import Scenario
 from hptrack.sim.record import EpisodeRecord
 from hptrack.sim.step import World
@@ -44,14 +44,14 @@ def run_episode(
     n, n_steps = mission.n_targets, mission.n_steps
     stored = sorted(set(range(0, n_steps + 1, belief_stride)) | {n_steps})
     store_at = {k: j for j, k in enumerate(stored)}
-    agent_path = np.empty((n_steps + 1, 2))
+    agent_paths = np.empty((n_steps + 1, mission.n_vehicles, 2))
     true_states = np.empty((n_steps + 1, n, 4))
     detections = np.zeros((n_steps + 1, n), dtype=bool)
     belief_means = np.empty((len(stored), n, 4))
     belief_covs = np.empty((len(stored), n, 4, 4))
 
     def store(k: int) -> None:
-        agent_path[k], true_states[k], detections[k] = world.agent, world.truth, world.seen
+        agent_paths[k], true_states[k], detections[k] = world.agents, world.truth, world.seen
         if k in store_at:
             belief_means[store_at[k]] = world.means
             belief_covs[store_at[k]] = world.covariances
@@ -63,10 +63,8 @@ def run_episode(
     for k in range(1, n_steps + 1):
         if reader is not None:
             reader.see_truth(world.truth.copy())
-        waypoint = np.asarray(planner.act(observation), dtype=float)
-        if waypoint.shape != (2,) or not np.all(np.isfinite(waypoint)):
-            raise ValueError(f"planner {planner.name!r} returned an invalid waypoint {waypoint!r}")
-        world.step(float(waypoint[0]), float(waypoint[1]))
+        waypoint = vehicle_waypoints(planner.act(observation), mission.n_vehicles, planner.name)
+        world.step(float(waypoint[0, 0]), float(waypoint[0, 1]))
         store(k)
         observation = world.observation()
         if on_step is not None:
@@ -77,7 +75,7 @@ def run_episode(
         target_ids=mission.target_ids,
         time_step=mission.time_step,
         sensor_diameter=mission.sensor_diameter,
-        agent_path=agent_path,
+        agent_paths=agent_paths,
         true_states=true_states,
         belief_steps=np.asarray(stored),
         belief_means=belief_means,

@@ -5,42 +5,23 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hptrack.jsonout import json_text
 from hptrack.models.beliefs import position_logdet
+from hptrack.subtasks import read_subtasks
 
-PLANNED_ACTIONS = ("plan_after_find", "plan_after_miss", "plan_after_dwell")
-"""Sub-task log entries holding the next planned action: a target index, or ``n`` the dwell."""
+if TYPE_CHECKING:
+    from hptrack.experiments.store import EpisodeKey
 
 
 def subtasks_with_ids(entries: list[dict], target_ids: tuple[str, ...]) -> list[dict]:
-    """A planner's sub-task log (indices into ``target_ids``, as planners keep it) naming
-    targets by id: ``target_index`` becomes ``target``, ``follow`` and ``dwell`` hold ids, and a
-    planned action is an id, ``"dwell"`` (action ``n``), ``"dwell j"`` (action ``n + j``, the
-    ``j``-th dwell length) or ``None``."""
-    n = len(target_ids)
-    out = []
-    for entry in entries:
-        named = {}
-        for key, value in entry.items():
-            if key == "target_index":
-                named["target"] = target_ids[value]
-            elif key in ("follow", "dwell"):
-                named[key] = None if value is None else target_ids[value]
-            elif key in PLANNED_ACTIONS and value is not None:
-                named[key] = (
-                    target_ids[value]
-                    if value < n
-                    else "dwell"
-                    if value == n
-                    else f"dwell {value - n}"
-                )
-            else:
-                named[key] = value
-        out.append(named)
-    return out
+    """A planner's sub-task log (indices into ``target_ids``, as planners keep it; any shape
+    `hptrack.subtasks.Subtask.from_json` reads, older ones included) in the one JSON shape,
+    naming targets by id."""
+    return [entry.to_json(target_ids) for entry in read_subtasks(entries, target_ids)]
 
 
 @dataclass
@@ -53,7 +34,9 @@ class EpisodeRecord:
         target_ids: target names, ``(n,)``.
         time_step: ``tau``, s.
         sensor_diameter: ``w``, m.
-        agent_path: ``(K+1, 2)`` agent positions at steps ``0..K``, m.
+        agent_paths: ``(K+1, m, 2)`` the vehicles' positions at steps ``0..K``, m (a
+            ``(K+1, 2)`` path given here is one vehicle's; `agent_path` is the first
+            vehicle's).
         true_states: ``(K+1, n, 4)`` true target states.
         belief_steps: ``(M,)`` the steps at which beliefs were stored (a stride, last step kept).
         belief_means: ``(M, n, 4)``.
@@ -68,7 +51,7 @@ class EpisodeRecord:
     target_ids: tuple[str, ...]
     time_step: float
     sensor_diameter: float
-    agent_path: np.ndarray
+    agent_paths: np.ndarray
     true_states: np.ndarray
     belief_steps: np.ndarray
     belief_means: np.ndarray
@@ -76,6 +59,21 @@ class EpisodeRecord:
     detections: np.ndarray
     per_target_logdet: np.ndarray
     info: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.agent_paths.ndim == 2:
+            self.agent_paths = self.agent_paths[:, None, :]
+
+    @property
+    def agent_path(self) -> np.ndarray:
+        """``(K+1, 2)`` the first vehicle's positions, m (the one vehicle of every planner
+        today)."""
+        return self.agent_paths[:, 0]
+
+    @property
+    def n_vehicles(self) -> int:
+        """``m``, the vehicles flown."""
+        return self.agent_paths.shape[1]
 
     @property
     def uncertainty(self) -> float:
@@ -131,7 +129,7 @@ class EpisodeRecord:
             np.savez_compressed(
                 fh,
                 meta=np.array(json_text(meta)),
-                agent_path=self.agent_path,
+                agent_paths=self.agent_paths,
                 true_states=self.true_states,
                 belief_steps=self.belief_steps,
                 belief_means=self.belief_means,
@@ -142,10 +140,13 @@ class EpisodeRecord:
 
     @classmethod
     def load(cls, path: str | Path) -> EpisodeRecord:
-        """Read a record written by `save`."""
+        """Read a record written by `save` (also by an older hptrack, whose file holds one
+        vehicle's ``agent_path``)."""
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
             arrays = {k: data[k] for k in data.files if k != "meta"}
+        if "agent_path" in arrays:
+            arrays["agent_paths"] = arrays.pop("agent_path")
         return cls(
             planner=meta["planner"],
             seed=meta["seed"],
@@ -155,3 +156,18 @@ class EpisodeRecord:
             info=meta["info"],
             **arrays,
         )
+
+
+@dataclass(frozen=True)
+class EpisodeRow:
+    """One finished episode as a results store keeps it
+    (`hptrack.experiments.store.ResultStore`): its key, ``U``, the never-observed ``U`` of
+    the same scenario, the number of detection steps, the wall time (s) and planner
+    metadata."""
+
+    key: EpisodeKey
+    uncertainty: float
+    never_observed: float
+    detections: int
+    wall_time_s: float
+    info: dict

@@ -164,7 +164,8 @@ class World:
     Attributes (read them, do not write them):
         mission: the mission facts.
         step_index: current step ``k``.
-        agent: ``(2,)`` agent position, m.
+        agents: ``(m, 2)`` the vehicles' positions, m (``m = 1``: the scenario's agent).
+        agent: ``(2,)`` the first vehicle's position, m (a view of ``agents``).
         truth: ``(n, 4)`` true target states.
         truth_motion: how they move (`hptrack.models.truth_motion`; random parameters such
             as turn rates drawn after the initial states, from the same stream).
@@ -188,7 +189,8 @@ class World:
         truth_rng = np.random.default_rng(truth_seq)
         self.truth = np.ascontiguousarray(initial_true_states(scenario, truth_rng))
         self.truth_motion = scenario.truth_motion_model(truth_rng)
-        self.agent = np.array(scenario.agent.position, dtype=float)
+        self.agents = np.array([scenario.agent.position], dtype=float)
+        self.agent = self.agents[0]
         self.means = np.ascontiguousarray(scenario.means())
         self.covariances = np.ascontiguousarray(scenario.covariances())
         self.q = np.ascontiguousarray(mission.process_noise, dtype=float)
@@ -280,7 +282,7 @@ class World:
 
     def observation(self) -> Observation:
         """What a planner sees now (read-only copies)."""
-        arrays = [self.agent.copy(), self.means.copy(), self.covariances.copy(), self.seen.copy()]
+        arrays = [self.agents.copy(), self.means.copy(), self.covariances.copy(), self.seen.copy()]
         for a in arrays:
             a.flags.writeable = False
         return Observation(self.step_index, self.time, self.remaining_budget, *arrays)

@@ -22,6 +22,7 @@ from matplotlib.patches import Circle, Ellipse
 from hptrack.interface import InputError
 from hptrack.models.beliefs import position_logdet
 from hptrack.sim.record import EpisodeRecord
+from hptrack.subtasks import read_subtasks
 from hptrack.viz.mission import ellipse_axes, target_color
 
 log = logging.getLogger(__name__)
@@ -81,8 +82,8 @@ def subtask_at(
     ``"hover"``, or ``""`` without a log) and the index of the target in focus (``-1`` for
     none).
     """
-    entries = info.get("subtasks") or []
-    starts = [e["start_step"] for e in entries]
+    entries = read_subtasks(info.get("subtasks") or [], target_ids)
+    starts = [e.start_step for e in entries]
     labels, focus = [], np.full(len(steps), -1, dtype=np.int64)
     for f, step in enumerate(steps):
         j = bisect.bisect_right(starts, int(step)) - 1
@@ -90,23 +91,20 @@ def subtask_at(
             labels.append("")
             continue
         entry = entries[j]
-        if "target_index" in entry:
-            focus[f] = entry["target_index"]
-            tid = target_ids[entry["target_index"]]
-            end = entry.get("end_step")
-            labels.append(
-                f"pursued {tid}: {entry.get('outcome', 'ended')}"
-                if end is not None and step >= end
-                else f"pursuing {tid}"
-            )
-        elif entry.get("follow") is not None:
-            focus[f] = entry["follow"]
-            labels.append(f"following {target_ids[entry['follow']]}")
-        elif "dwell" in entry:
-            focus[f] = entry["dwell"]
-            labels.append(f"dwelling on {target_ids[entry['dwell']]}")
-        else:
+        if entry.target is None:
             labels.append("hover")
+            continue
+        focus[f] = entry.target
+        tid = target_ids[entry.target]
+        if entry.kind == "pursue":
+            ended = entry.end_step is not None and step >= entry.end_step
+            labels.append(
+                f"pursued {tid}: {entry.outcome or 'ended'}" if ended else f"pursuing {tid}"
+            )
+        elif entry.kind == "follow":
+            labels.append(f"following {tid}")
+        else:
+            labels.append(f"dwelling on {tid}")
     return labels, focus
 
 

@@ -25,7 +25,7 @@ from hptrack.viz.style import (
 )
 
 if TYPE_CHECKING:
-    from hptrack.experiments.store import EpisodeRow
+    from hptrack.sim.record import EpisodeRow
 
 
 PLANNER_COLORS = ("#4C72B0", "#DD8452", "#55A868", "#C44E52", "#8172B3", "#937860", "#DA8BC3")
