@@ -10,6 +10,7 @@ from hptrack.envs import ObservationLayout, action_waypoint
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.scenario import AgentSpec, Scenario, random_scenario
 from hptrack.sim.episode import run_episode
+from hptrack.subtasks import read_subtasks
 
 
 class ReplayPlanner:
@@ -171,18 +172,16 @@ def test_subtask_env_replaying_the_tree_search_gives_its_mission(scenario):
     env = gym.make("hptrack/SubtaskTracking-v0", n_targets=n, max_targets=n + 1).unwrapped
     env.reset(options={"scenario": scenario})
     outcomes, truncated = [], False
-    for entry in record.info["subtasks"]:
-        if "follow" in entry:  # follow the last found target, or hover (a padding slot)
-            action = n if entry["follow"] is None else entry["follow"]
-        else:
-            action = entry["target_index"]
+    for entry in read_subtasks(record.info["subtasks"], record.target_ids):
+        # pursue or follow the target; hover: a padding slot, step by step
+        action = n if entry.kind == "hover" else entry.target
         _, _, _, truncated, info = env.step(action)
         while action == n and not truncated:
             _, _, _, truncated, info = env.step(action)
         sub = info["subtask"]
-        assert sub["start_step"] == entry["start_step"]
-        if "outcome" in entry:
-            assert (sub["outcome"], sub["end_step"]) == (entry["outcome"], entry["end_step"])
+        assert sub["start_step"] == entry.start_step and sub["kind"] == entry.kind
+        if entry.outcome is not None:
+            assert (sub["outcome"], sub["end_step"]) == (entry.outcome, entry.end_step)
         outcomes.append(sub["outcome"])
     assert truncated
     assert info["U"] == record.uncertainty

@@ -17,7 +17,7 @@ def test_a_coverage_subtask_runs_inside_one_step():
     sub = info["subtask"]
     assert not terminated and not truncated
     assert sub["outcome"] == "found" and info["detected"][0]
-    assert sub["target_index"] == 0 and sub["start_step"] == 0
+    assert sub["kind"] == "pursue" and sub["target"] == 0 and sub["start_step"] == 0
     assert sub["steps"] == env.world.step_index == sub["end_step"]
     assert sub["steps"] <= plan.total_steps
     assert sub["duration"] == pytest.approx(0.5 * sub["steps"])

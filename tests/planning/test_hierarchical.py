@@ -13,15 +13,23 @@ from hptrack.planning import hierarchical, subtask_search
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.scenario import random_scenario
 from hptrack.sim.episode import run_episode
+from hptrack.subtasks import read_subtasks
 
 
 def mcts(**options):
     return HierarchicalPlanner(MctsSettings(**options))
 
 
+def fresh_plan(record, entry):
+    """Whether the planner searched afresh as ``entry`` began: more searches at its start than
+    the one re-plan of a pursuit or a dwell (none for a follow)."""
+    searches = [s["step"] for s in record.info["searches"]].count(entry.start_step)
+    return searches > (entry.kind in ("pursue", "dwell"))
+
+
 def test_conditional_plan_is_followed_and_misses_leave_the_list():
     record = run_episode(random_scenario(3, seed=2, homogeneous=True), mcts(iterations=2000))
-    log = record.info["subtasks"]
+    log = read_subtasks(record.info["subtasks"], record.target_ids)
     assert len(log) >= 3
     assert len(record.info["searches"]) >= len(log)
     assert all(
@@ -29,17 +37,18 @@ def test_conditional_plan_is_followed_and_misses_leave_the_list():
         for s in record.info["searches"]
     )
     for done, nxt in zip(log, log[1:], strict=False):
-        if "outcome" not in done:
+        if done.outcome is None:
             break
-        planned = done["plan_after_find" if done["outcome"] == "found" else "plan_after_miss"]
-        nxt_target = nxt.get("target_index", nxt.get("follow"))
-        if planned is not None and nxt.get("start_step") == done["end_step"]:
-            if done["outcome"] == "missed":
-                assert nxt_target != done["target_index"]
-            assert nxt_target == planned or "follow" in nxt
-        if done["outcome"] == "found":
-            k = done["end_step"]
-            assert record.detections[k, done["target_index"]]
+        assert done.kind == "pursue" and nxt.start_step == done.end_step
+        planned = done.after_find if done.outcome == "found" else done.after_miss
+        if done.outcome == "missed":
+            assert nxt.target != done.target
+            assert planned is None or planned.kind == "pursue"
+        else:
+            assert record.detections[done.end_step, done.target]
+            assert planned is None or planned.kind in ("pursue", "follow")
+        # the plan is flown, or a fresh plan made when it can no longer be
+        assert nxt.action == planned or fresh_plan(record, nxt)
 
 
 def test_same_seed_same_mission():
@@ -193,8 +202,9 @@ def test_paper_search_follows_the_first_find_at_low_effort_and_the_max_backup_do
             record = run_episode(
                 scenario, mcts(iterations=2000, **options), belief_stride=scenario.n_steps
             )
-            follows = [e for e in record.info["subtasks"] if "follow" in e]
-            count += bool(follows and follows[0]["start_step"] < 0.6 * scenario.n_steps)
+            log = read_subtasks(record.info["subtasks"], record.target_ids)
+            follows = [e for e in log if e.kind == "follow"]
+            count += bool(follows and follows[0].start_step < 0.6 * scenario.n_steps)
         return count
 
     assert early_follows({"preset": "paper"}) >= 3
@@ -224,21 +234,20 @@ def test_dwell_follows_the_target_just_found_for_its_length_then_flies_the_plan(
     followed by the plan made for it, or a fresh plan if that one cannot be flown."""
     scenario = random_scenario(4, seed=1, homogeneous=True)
     record = run_episode(scenario, mcts(iterations=2000, preset="improved", dwell=10.0))
-    log = record.info["subtasks"]
-    dwells = [i for i, entry in enumerate(log) if "dwell" in entry]
+    log = read_subtasks(record.info["subtasks"], record.target_ids)
+    dwells = [i for i, entry in enumerate(log) if entry.kind == "dwell"]
     assert dwells, "the search never chose the dwell"
     for i in dwells:
         entry, before = log[i], log[i - 1]
-        assert entry["dwell"] == before.get("target_index", before.get("dwell"))
-        assert before.get("outcome", "found") == "found"
-        assert entry["start_step"] == before["end_step"]
-        if "end_step" in entry:
-            assert entry["end_step"] - entry["start_step"] == 20
+        assert entry.target == before.target and entry.parameter == 20
+        assert before.outcome in ("found", None)
+        assert entry.start_step == before.end_step
+        assert entry.after_miss is None
+        if entry.end_step is not None:
+            assert entry.end_step - entry.start_step == 20
             after = log[i + 1]
-            assert after["start_step"] == entry["end_step"]
-            planned = entry["plan_after_dwell"]
-            if planned is not None and planned < len(scenario.targets):
-                assert after.get("target_index", after.get("follow")) == planned
+            assert after.start_step == entry.end_step
+            assert after.action == entry.after_find or fresh_plan(record, after)
     again = run_episode(scenario, mcts(iterations=2000, preset="improved", dwell=10.0))
     assert again.uncertainty == record.uncertainty
     settings = MctsSettings(preset="improved", dwell=10.0)
@@ -287,11 +296,12 @@ def test_several_dwell_lengths_are_flown_each_for_its_own_length():
     as the plan chose it, and ``-o dwell=5,20`` means the same settings."""
     scenario = random_scenario(3, seed=1, homogeneous=True)
     record = run_episode(scenario, mcts(iterations=2000, preset="improved", dwell=[5.0, 20.0]))
-    dwells = [e for e in record.info["subtasks"] if "dwell" in e and "end_step" in e]
+    log = read_subtasks(record.info["subtasks"], record.target_ids)
+    dwells = [e for e in log if e.kind == "dwell" and e.end_step is not None]
     assert dwells, "the search never chose a dwell"
     for entry in dwells:
-        assert entry["dwell_steps"] in (10, 40)
-        assert entry["end_step"] - entry["start_step"] == entry["dwell_steps"]
+        assert entry.parameter in (10, 40)
+        assert entry.end_step - entry.start_step == entry.parameter
     parsed = MctsSettings.from_options("mcts", {"dwell": "5,20"})
     assert parsed.dwell == [5.0, 20.0]
     assert '"dwell":[5.0,20.0]' in parsed.canonical()
@@ -309,17 +319,14 @@ def test_a_kept_miss_leaves_the_target_available_to_the_planner():
     for miss in ("drop", "keep"):
         planner = mcts(iterations=500, preset="improved", miss=miss)
         record = run_episode(scenario, planner)
-        log = record.info["subtasks"]
-        missed = [e for e in log if e.get("outcome") == "missed"]
+        log = read_subtasks(record.info["subtasks"], record.target_ids)
+        missed = [e for e in log if e.outcome == "missed"]
         if miss == "keep":
             assert planner._available.all()
         for entry in missed:
-            later = [e for e in log if e.get("start_step", -1) >= entry["end_step"]]
-            again = [e for e in later if e.get("target_index") == entry["target_index"]]
-            if (
-                miss == "drop"
-                and not record.detections[entry["end_step"] :, entry["target_index"]].any()
-            ):
+            later = [e for e in log if e.start_step >= entry.end_step]
+            again = [e for e in later if e.kind == "pursue" and e.target == entry.target]
+            if miss == "drop" and not record.detections[entry.end_step :, entry.target].any():
                 assert not again
 
 

@@ -172,17 +172,43 @@ def test_the_planners_episode_info_is_stored_with_the_record():
 
 
 def test_the_json_summary_names_targets_by_id_in_the_subtask_log():
+    """The summary writes the one sub-task shape with targets by id, from the records
+    planners write and from the shapes older hptrack wrote (a planned index ``n``: a dwell)."""
     from hptrack.sim.record import subtasks_with_ids
+    from hptrack.subtasks import Subtask, SubtaskAction
 
-    log = [
+    older = [
         {"target_index": 1, "start_step": 0, "plan_after_find": 2, "plan_after_miss": None},
-        {"dwell": 1, "start_step": 9, "plan_after_dwell": 0},
+        {"dwell": 1, "start_step": 9, "dwell_steps": 4, "plan_after_dwell": 0, "end_step": 13},
         {"follow": 0, "start_step": 20},
         {"follow": None, "start_step": 30},
     ]
-    assert subtasks_with_ids(log, ("a", "b")) == [
-        {"target": "b", "start_step": 0, "plan_after_find": "dwell", "plan_after_miss": None},
-        {"dwell": "b", "start_step": 9, "plan_after_dwell": "a"},
-        {"follow": "a", "start_step": 20},
-        {"follow": None, "start_step": 30},
+    named = [
+        {
+            "kind": "pursue",
+            "target": "b",
+            "start_step": 0,
+            "plan_after_find": {"kind": "dwell", "target": "b"},
+        },
+        {
+            "kind": "dwell",
+            "target": "b",
+            "start_step": 9,
+            "parameter": 4,
+            "end_step": 13,
+            "plan_after_find": {"kind": "pursue", "target": "a"},
+        },
+        {"kind": "follow", "target": "a", "start_step": 20},
+        {"kind": "hover", "target": None, "start_step": 30},
     ]
+    assert subtasks_with_ids(older, ("a", "b")) == named
+    records = [
+        Subtask("pursue", 1, 0, p_find=0.5, after_find=SubtaskAction("dwell", 1, 4)),
+        Subtask("dwell", 1, 9, 4, end_step=13, after_find=SubtaskAction("pursue", 0)),
+    ]
+    as_json = [r.to_json() for r in records]
+    assert as_json[0]["target"] == 1 and as_json[0]["plan_after_find"]["parameter"] == 4
+    assert subtasks_with_ids(as_json, ("a", "b"))[1] == named[1]
+    assert [Subtask.from_json(e, ("a", "b")) for e in subtasks_with_ids(as_json, ("a", "b"))] == (
+        records
+    )

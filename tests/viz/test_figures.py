@@ -88,7 +88,7 @@ def test_mission_figure_says_what_it_shows(short_mission, tmp_path):
 
 def test_trajectories_share_limits_and_one_time_colour_bar(short_mission, tmp_path):
     _, record = short_mission
-    later = type(record)(**{**record.__dict__, "agent_path": record.agent_path + 500.0})
+    later = type(record)(**{**record.__dict__, "agent_paths": record.agent_paths + 500.0})
     fig = Figure(figsize=(10, 5))
     plot_trajectories(fig, [record, later], ["first", "second"])
     panels = [ax for ax in fig.axes if ax.get_title()]

@@ -288,7 +288,7 @@ def test_env_render_and_flight_figure_use_the_mission_figure(short_mission, tmp_
 
 def test_trajectories(short_mission):
     _, record = short_mission
-    later = type(record)(**{**record.__dict__, "agent_path": record.agent_path + 300.0})
+    later = type(record)(**{**record.__dict__, "agent_paths": record.agent_paths + 300.0})
     fig = Figure(figsize=(13, 7))
     plot_trajectories(fig, [record, later])
     assert _overlaps(fig) == []
