@@ -269,7 +269,7 @@ def _older_shape(entry: dict[str, Any], target_ids: Sequence[str]) -> Subtask:
         ValueError: an entry of none of these shapes.
     """
     n = len(target_ids)
-    start = entry.get("start_step", entry.get("since_step"))
+    start = int(entry.get("start_step", entry.get("since_step", 0)))
     common = {"end_step": entry.get("end_step"), "outcome": entry.get("outcome")}
     if "follow" in entry:
         target = _target_index(entry["follow"], target_ids)

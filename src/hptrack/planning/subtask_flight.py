@@ -73,6 +73,7 @@ class SubtaskFlight:
         self.start_step = observation.step
         self.coverage: CoverageSubtask | None = None
         if action.kind == "pursue":
+            assert action.target is not None  # a pursuit has a target
             self.coverage = CoverageSubtask.from_observation(observation, action.target, mission)
             self.record = self.coverage.record()
         else:
