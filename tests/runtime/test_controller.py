@@ -4,7 +4,7 @@ import time
 import numpy as np
 import pytest
 
-from hptrack.interface import CurrentPlan, Subtask
+from hptrack.interface import CurrentPlan, Subtask, SubtaskAction
 from hptrack.runtime.controller import MissionController, plan_json
 from hptrack.runtime.inputs import ControllerSettings
 from hptrack.runtime.worker import InlineRunner, ThreadedRunner
@@ -361,15 +361,36 @@ def test_the_current_sub_task_names_a_follow_a_dwell_and_a_pursuit():
     from hptrack.cli.flight import _subtask_text
 
     ids = ("t1", "t2")
-    dwell = CurrentPlan(Subtask("dwell", 1, 30), after_find=2)
-    assert plan_json(dwell, ids) == {"dwell": "t2", "since_step": 30}
+    dwell = CurrentPlan(Subtask("dwell", 1, 30, 8), after_find=SubtaskAction("pursue", 0))
+    assert plan_json(dwell, ids) == {
+        "kind": "dwell",
+        "target": "t2",
+        "start_step": 30,
+        "parameter": 8,
+    }
     assert _subtask_text(dwell, ids) == "dwell on t2 (since step 30)"
     follow = CurrentPlan(Subtask("follow", 0, 7))
     assert _subtask_text(follow, ids) == "follow t1 (since step 7)"
-    pursuit = CurrentPlan(Subtask("pursue", 0, 0, 0.5), 1, None)
-    assert plan_json(pursuit, ids) == {"target": "t1", "since_step": 0, "p_find": 0.5}
+    pursuit = CurrentPlan(Subtask("pursue", 0, 0, p_find=0.5), SubtaskAction("pursue", 1))
+    assert plan_json(pursuit, ids) == {
+        "kind": "pursue",
+        "target": "t1",
+        "start_step": 0,
+        "p_find": 0.5,
+    }
     assert _subtask_text(pursuit, ids) == "pursue t1 (since step 0, p_find 0.50)"
     assert plan_json(CurrentPlan(), ids) is None and _subtask_text(None, ids) == "-"
+    # the shapes older mission logs hold read as the same records
+    older = [
+        {"dwell": "t2", "since_step": 30},
+        {"follow": "t1", "since_step": 7},
+        {"target": "t1", "since_step": 0, "p_find": 0.5},
+    ]
+    assert [Subtask.from_json(e, ids) for e in older] == [
+        Subtask("dwell", 1, 30),
+        follow.subtask,
+        pursuit.subtask,
+    ]
 
 
 def test_the_controller_shows_the_hierarchical_planners_current_plan(flight_scenario):
@@ -379,7 +400,7 @@ def test_the_controller_shows_the_hierarchical_planners_current_plan(flight_scen
     ctrl.odometry(0.0, [0.0, 0.0])
     ctrl.setpoint(0.0)
     plan = ctrl.status()["plan"]
-    assert plan.subtask.kind == "pursue" and plan.subtask.since_step == 0
+    assert plan.subtask.kind == "pursue" and plan.subtask.start_step == 0
     assert 0.0 < plan.subtask.p_find <= 1.0
     first = next(r for r in ctrl.log.records if r["kind"] == "plan")
     assert first["subtask"] == plan_json(plan, flight_scenario.target_ids)

@@ -12,6 +12,7 @@ from hptrack.runtime.log import MissionLog
 from hptrack.runtime.replay import replay_log
 from hptrack.runtime.simulated import SimulatedFaults, run_simulated
 from hptrack.runtime.worker import ThreadedRunner
+from hptrack.subtasks import Subtask
 
 FAULTS = SimulatedFaults(
     detection_rate_hz=4.0,
@@ -61,6 +62,33 @@ def test_replay_reproduces_beliefs_and_decisions(mission_log):
     )
     np.testing.assert_array_equal(result.record.true_states, run.record.true_states)
     assert json.dumps(summary, allow_nan=False)
+
+
+def test_a_log_of_an_older_hptrack_replays(mission_log):
+    """A log whose plan records name their sub-task in the shape older hptrack wrote
+    (``{"target" | "follow" | "dwell": id, "since_step", "p_find"}``) replays the same, and
+    reads as the same sub-tasks."""
+    path, run = mission_log
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    ids = run.controller.mission.target_ids
+    new, old = [], []
+    for record in lines:
+        sub = record.get("subtask") if record.get("kind") == "plan" else None
+        if sub:
+            key = {"pursue": "target", "follow": "follow", "dwell": "dwell"}[sub["kind"]]
+            record["subtask"] = {key: sub["target"], "since_step": sub["start_step"]}
+            if "p_find" in sub:
+                record["subtask"]["p_find"] = sub["p_find"]
+            new.append(Subtask.from_json(sub, ids))
+            old.append(Subtask.from_json(record["subtask"], ids))
+    path.write_text("".join(json.dumps(r) + "\n" for r in lines))
+    result = replay_log(path)
+    assert result.summary["mismatches"] == 0, result.summary["first_mismatches"]
+    assert result.summary["U"] == run.uncertainty
+    assert len(old) > 10
+    assert [(s.kind, s.target, s.start_step, s.p_find) for s in old] == [
+        (s.kind, s.target, s.start_step, s.p_find) for s in new
+    ]
 
 
 def test_a_truncated_log_replays_up_to_where_it_ends(mission_log):
