@@ -208,6 +208,7 @@ def subtasks(path: Path, iterations: int, seed: int | None = None, options: str 
     from hptrack.registry import make_planner
     from hptrack.scenario.io import load_scenario
     from hptrack.sim.episode import run_episode
+    from hptrack.subtasks import read_subtasks
 
     scenario = load_scenario(path)
     ids = scenario.target_ids
@@ -220,12 +221,11 @@ def subtasks(path: Path, iterations: int, seed: int | None = None, options: str 
             seed=seed,
         )
         steps = [
-            (f"follow {ids[e['follow']]}" if e["follow"] is not None else "hover")
-            if "follow" in e
-            else f"{ids[e['target_index']]} {e.get('outcome', '')} (p_find {e['p_find']:.2f}, "
-            f"{e['intercept_time'] + e['expected_time']:.1f} s)"
-            for e in record.info["subtasks"]
-            if "follow" in e or "target_index" in e
+            f"{ids[e.target]} {e.outcome or ''} (p_find {e.p_find:.2f}, "
+            f"{e.intercept_time + e.expected_time:.1f} s)"
+            if e.kind == "pursue"
+            else ("hover" if e.target is None else f"{e.kind} {ids[e.target]}")
+            for e in read_subtasks(record.info["subtasks"], ids)
         ]
         print(f"{preset}: U = {record.uncertainty:.2f}; " + ", ".join(steps))
 

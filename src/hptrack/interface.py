@@ -202,7 +202,7 @@ def vehicle_waypoints(waypoints: Any, n_vehicles: int, planner: str) -> np.ndarr
     return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Observation:
     """The planner's view at one step (arrays are read-only copies).
 
@@ -210,8 +210,9 @@ class Observation:
         step: step index ``k`` (time ``k * tau``).
         time: elapsed time, s.
         remaining_budget: ``B - time``, s.
-        agent_positions: ``(m, 2)`` the vehicles' positions, m (a ``(2,)`` position given
-            here is one vehicle's; `agent_position` is the first vehicle's).
+        agent_positions: ``(m, 2)`` the vehicles' positions, m. A ``(2,)`` position, or the
+            keyword ``agent_position=``, gives one vehicle; `agent_position` reads the first
+            vehicle's.
         means: ``(n, 4)`` belief means (m, m/s).
         covariances: ``(n, 4, 4)`` belief covariances.
         detected: ``(n,)`` which targets were measured at this step (by any vehicle).
@@ -225,10 +226,34 @@ class Observation:
     covariances: np.ndarray
     detected: np.ndarray
 
-    def __post_init__(self) -> None:
-        positions = np.asarray(self.agent_positions)
-        if positions.shape == (2,):
-            object.__setattr__(self, "agent_positions", positions[None])
+    def __init__(
+        self,
+        step: int,
+        time: float,
+        remaining_budget: float,
+        agent_positions: np.ndarray | None = None,
+        means: np.ndarray | None = None,
+        covariances: np.ndarray | None = None,
+        detected: np.ndarray | None = None,
+        *,
+        agent_position: np.ndarray | None = None,
+    ) -> None:
+        if (agent_positions is None) == (agent_position is None):
+            raise TypeError("Observation takes agent_positions (m, 2) or agent_position (2,)")
+        if means is None or covariances is None or detected is None:
+            raise TypeError("Observation needs means, covariances and detected")
+        positions = np.asarray(agent_positions if agent_position is None else agent_position)
+        values = {
+            "step": step,
+            "time": time,
+            "remaining_budget": remaining_budget,
+            "agent_positions": positions[None] if positions.shape == (2,) else positions,
+            "means": means,
+            "covariances": covariances,
+            "detected": detected,
+        }
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
 
     @property
     def n_vehicles(self) -> int:
