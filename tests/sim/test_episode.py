@@ -109,6 +109,29 @@ def test_record_round_trip(tmp_path):
     assert loaded.summary() == record.summary()
     np.testing.assert_array_equal(loaded.belief_covariances, record.belief_covariances)
     np.testing.assert_array_equal(loaded.detections, record.detections)
+    assert loaded.agent_paths.shape == (1801, 1, 2) and loaded.n_vehicles == 1
+    np.testing.assert_array_equal(loaded.agent_path, record.agent_paths[:, 0])
+
+
+def test_a_record_an_older_hptrack_saved_still_loads(tmp_path):
+    """Older files hold one vehicle's ``agent_path`` (K+1, 2) and sub-tasks in older shapes."""
+    record = run_episode(random_scenario(2, seed=6), GreedyPlanner(), belief_stride=600)
+    record.info = {"subtasks": [{"target_index": 1, "start_step": 0, "plan_after_find": 0}]}
+    record.save(tmp_path / "new.npz")
+    with np.load(tmp_path / "new.npz") as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays["agent_path"] = arrays.pop("agent_paths")[:, 0]
+    np.savez_compressed(tmp_path / "old.npz", **arrays)
+    old = EpisodeRecord.load(tmp_path / "old.npz")
+    np.testing.assert_array_equal(old.agent_paths, record.agent_paths)
+    assert old.summary()["info"]["subtasks"] == [
+        {
+            "kind": "pursue",
+            "target": "t2",
+            "start_step": 0,
+            "plan_after_find": {"kind": "pursue", "target": "t1"},
+        }
+    ]
 
 
 def test_greedy_beats_stationary_on_average():
