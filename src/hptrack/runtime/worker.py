@@ -264,6 +264,8 @@ class PlannerWorker:
 
         def job() -> PlanOutcome:
             waypoint, error, elapsed = timed(call)
+            if waypoint is not None and np.shape(waypoint) == (1, 2):
+                waypoint = np.asarray(waypoint)[0]  # the one vehicle's, as (m, 2)
             if waypoint is not None and (
                 waypoint.shape != (2,) or not np.all(np.isfinite(waypoint))
             ):
