@@ -8,7 +8,6 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field
 
-from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.interface import (
     CurrentPlan,
     InputError,
@@ -17,8 +16,9 @@ from hptrack.interface import (
     Subtask,
     one_vehicle,
 )
-from hptrack.models.motion import predicted_positions
+from hptrack.planning.subtask_flight import SubtaskFlight
 from hptrack.settings import PlannerSettings
+from hptrack.subtasks import SubtaskAction
 
 
 class CoverageSettings(PlannerSettings):
@@ -35,7 +35,7 @@ class CoveragePlanner:
     """Pursue one target with coverage sub-tasks (name ``"coverage"``).
 
     While the target is measured the agent flies to its belief mean one step ahead (it keeps
-    seeing it); otherwise it runs a `CoverageSubtask`, planning
+    seeing it: a follow); otherwise it flies a pursuit (`SubtaskFlight`), planning
     a new one from the current belief when the last one was found or reached ``t_cutoff``
     without a detection.
     """
@@ -57,7 +57,8 @@ class CoveragePlanner:
             )
         self._index = mission.target_ids.index(target)
         self._mission = mission
-        self._subtask: CoverageSubtask | None = None
+        self._follow = SubtaskFlight(SubtaskAction("follow", self._index), observation, mission)
+        self._subtask: SubtaskFlight | None = None
         self._log: list[Subtask] = []
 
     def _close(self, observation: Observation, outcome: str) -> None:
@@ -69,13 +70,13 @@ class CoveragePlanner:
         i = self._index
         if observation.detected[i]:
             self._close(observation, "found")
-            return predicted_positions(observation.means[i], self._mission.time_step)
+            return self._follow.waypoint(observation)
         if self._subtask is not None and self._subtask.done(observation):
             self._close(observation, "missed")
         if self._subtask is None:
-            self._subtask = CoverageSubtask.from_observation(observation, i, self._mission)
-            self._log.append(self._subtask.record())
-        return self._subtask.next_waypoint(observation)
+            self._subtask = SubtaskFlight(SubtaskAction("pursue", i), observation, self._mission)
+            self._log.append(self._subtask.record)
+        return self._subtask.waypoint(observation)
 
     def current_plan(self) -> CurrentPlan:
         """The coverage sub-task being flown, if any."""
