@@ -481,7 +481,7 @@ def test_a_vehicle_that_never_enters_offboard_is_tried_three_times_then_given_up
     assert fly.returncode == 3, fly.stdout + fly.stderr
     out, err = " ".join(fly.stdout.split()), " ".join(fly.stderr.split())
     assert "the vehicle did not enter OFFBOARD in 3 attempts of 2 s" in err
-    assert "did not enter OFFBOARD within 2 s; the vehicle reports HOLD" in err
+    assert "did not enter OFFBOARD within 2 s; it reports HOLD" in err
     assert "starting it again (2 of 3)" in out and "starting it again (3 of 3)" in out
     assert "ended by" not in out and "offboard started" not in out
     # three offboard starts, then offboard stop (hold); the stub never left HOLD after take-off
@@ -513,7 +513,7 @@ def test_leaving_offboard_is_the_pilot_taking_over_and_nothing_more_is_commanded
         ("pilot took over", "none", "POSCTL")
     ]
     end = _records(log, "end")[0]
-    assert end["reason"] == "pilot took over" and 2.5 < end["time"] < BUDGET_S
+    assert end["reason"] == "pilot took over" and end["time"] < BUDGET_S / 2
     changes = [r["message"] for r in _records(log, "vehicle")]
     assert changes[-2:] == ["vehicle mode HOLD -> OFFBOARD", "vehicle mode OFFBOARD -> POSCTL"]
     _, summary = _replay(log, tmp_path)

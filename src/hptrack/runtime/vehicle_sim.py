@@ -313,6 +313,7 @@ class VehicleSim:
         self._takeoff_since: float | None = None  # when the take-off in progress began, s
         self._offboard_since: float | None = None
         self._sensors_ok = True
+        self._heartbeat_due = False
         self.stats = VehicleStats()
         self._start = time.monotonic()
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -342,7 +343,7 @@ class VehicleSim:
             self.stats.modes.append((self._now(), mode))
             self._say(f"mode {mode.upper()}{f' ({why})' if why else ''}")
             if self.stats.modes[1:]:
-                self._send_heartbeat()  # as PX4 does, the new mode shows at once
+                self._heartbeat_due = True  # as PX4 does, the new mode shows at once
         if mode != self.mode:
             self._mode_since = self._now()
         self.mode = mode
@@ -362,7 +363,7 @@ class VehicleSim:
     def _disarm(self, why: str) -> None:
         self.armed = False
         self._say(f"disarmed ({why})")
-        self._send_heartbeat()  # as PX4 does, the disarm shows at once
+        self._heartbeat_due = True  # as PX4 does, the disarm shows at once
 
     def _misbehave(self) -> None:
         """Apply `Misbehaviour`'s switches whose time has come."""
@@ -692,6 +693,9 @@ class VehicleSim:
                 if now >= next_status:
                     self._send_status()
                     next_status = now + 1.0
+                elif self._heartbeat_due:  # after the command's ACK, in the same loop
+                    self._send_heartbeat()
+                self._heartbeat_due = False
                 if now >= next_position:
                     self._send_position(int(now * 1000))
                     next_position = now + 1.0 / 30.0
