@@ -243,7 +243,7 @@ def test_replay_says_a_flight_that_never_started_never_started(
     assert result.code == 0, result.err
     out = " ".join(result.out.split())
     why = (
-        "take-off failed: the take-off failed: the vehicle disarmed at 3.1 m of 20 m"
+        "the take-off failed: the vehicle disarmed at 3.1 m of 20 m"
         if abort
         else "the log ends before offboard started"
     )

@@ -201,9 +201,15 @@ def stubs():
         vehicle.close()
 
 
-def _flying(scenario, stubs, on_event=None, **parameters):
+def _flying(scenario, stubs, on_event=None, misbehaviour=None, **parameters):
     """A stub armed in offboard at 10 m over its start, on a fake clock (no MAVLink)."""
-    vehicle = VehicleSim(scenario, detections_url=None, parameters=parameters, on_event=on_event)
+    vehicle = VehicleSim(
+        scenario,
+        detections_url=None,
+        parameters=parameters,
+        on_event=on_event,
+        misbehaviour=misbehaviour,
+    )
     stubs.append(vehicle)
     clock = FakeClock()
     vehicle._now = clock
@@ -377,18 +383,8 @@ def test_offboard_is_left_for_the_pilots_mode_after_the_time_asked(flight_scenar
     from hptrack.runtime.vehicle_sim import Misbehaviour
 
     events = []
-    vehicle = VehicleSim(
-        flight_scenario,
-        detections_url=None,
-        on_event=events.append,
-        misbehaviour=Misbehaviour(leave_offboard_after_s=2.0, leave_offboard_to="hold"),
-    )
-    stubs.append(vehicle)
-    clock = FakeClock()
-    vehicle._now = clock
-    vehicle.armed = True
-    vehicle.position[2] = -10.0
-    vehicle._set_mode("offboard")
+    bad = Misbehaviour(leave_offboard_after_s=2.0, leave_offboard_to="hold")
+    vehicle, clock = _flying(flight_scenario, stubs, events.append, bad)
     away = lambda t: (np.array([100.0, 0.0, -10.0]), np.zeros(3))  # noqa: E731
     _steps(vehicle, clock, 1.99, away)
     assert vehicle.mode == "offboard"

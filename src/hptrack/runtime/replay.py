@@ -59,7 +59,7 @@ def never_started(header: dict, records: list[dict]) -> str | None:
     abort = next((r for r in records if r.get("kind") == ABORT), None)
     if abort is None:
         return "the log ends before offboard started"
-    return f"{abort.get('reason')}: {abort.get('detail')}"
+    return str(abort.get("detail") or abort.get("reason"))
 
 
 @dataclass
