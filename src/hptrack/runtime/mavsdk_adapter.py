@@ -172,6 +172,8 @@ OFFBOARD_ATTEMPTS = 3
 """How many times ``fly`` starts offboard before giving up."""
 PILOT_TOOK_OVER = "pilot took over"
 """The end of a mission whose vehicle left OFFBOARD (a pilot's switch or a failsafe)."""
+LEFT_TO_PILOT = "left to the pilot"
+"""The action of that end: nothing is commanded."""
 FOLLOW_DISTANCE_M = 10.0
 """The vehicle farther than this from its reference ..., m."""
 FOLLOW_CLOSING_M_S = 0.5
@@ -218,7 +220,8 @@ class FlightResult:
             ``"offboard error"``, ``"pilot took over"``, ``"log failure"`` or
             ``"controller error"``.
         detail: one line with the figures.
-        action: ``"hold"``, ``"return to launch"`` or ``"none"`` (the pilot took over).
+        action: ``"hold"``, ``"return to launch"`` or ``"left to the pilot"`` (the
+            pilot took over: nothing commanded).
         confirmed: the flight mode telemetry reported after the switch, or ``None``.
         end: the controller's ``end`` record.
         setpoints_sent: offboard setpoints streamed.
@@ -750,7 +753,7 @@ class _Flight:
                 "t": self.mission_time(),
                 "reason": PILOT_TOOK_OVER,
                 "detail": detail,
-                "action": "none",
+                "action": LEFT_TO_PILOT,
                 "confirmed": mode,
             }
         )
@@ -758,7 +761,7 @@ class _Flight:
             f"the pilot took over: {detail}; hptrack commands nothing more, the vehicle is "
             f"in {mode}"
         )
-        return "none", mode
+        return LEFT_TO_PILOT, mode
 
 
 async def read_limits(system: Any) -> VehicleLimits:
