@@ -167,7 +167,7 @@ TAKEOFF_DONE_TOLERANCE_M = 1.0
 ends its take-off within ``NAV_MC_ALT_RAD``, 0.8 m by default), m."""
 OFFBOARD_CONFIRM_S = 2.0
 """How long ``fly`` streams setpoints after starting offboard for the vehicle to report
-OFFBOARD, s (PX4's heartbeat shows a mode change at once)."""
+OFFBOARD, s (a heartbeat once a second shows the change within about 1 s)."""
 OFFBOARD_ATTEMPTS = 3
 """How many times ``fly`` starts offboard before giving up."""
 PILOT_TOOK_OVER = "pilot took over"
