@@ -59,6 +59,19 @@ def test_replay_writes_the_figure_and_the_summary(flight_cli, flight_scenario, t
         (["fly", "{scenario}", "--log-max-mb", "0"], "--log-max-mb"),
         (["vehicle-sim", "{scenario}", "--param", "NOPE=1"], "--param 'NOPE=1'"),
         (["vehicle-sim", "{scenario}", "--gcs", "udpout://10.1.2.3:14550"], "loopback"),
+        (["vehicle-sim", "{scenario}", "--system-id", "0"], "--system-id must be an integer"),
+        (
+            ["vehicle-sim", "{scenario}", "--refuse-offboard", "maybe"],
+            "--refuse-offboard 'maybe': expected one of deny, ignore",
+        ),
+        (
+            ["vehicle-sim", "{scenario}", "--leave-offboard-after", "-1"],
+            "--leave-offboard-after must be a number in (0, 86400]",
+        ),
+        (
+            ["vehicle-sim", "{scenario}", "--takeoff-failure", "fire"],
+            "--takeoff-failure 'fire': expected one of disarm, sensors, posctl",
+        ),
         (["targets-sim", "{scenario}", "--mavlink", "udpin://{busy}"], "the port is in use"),
     ],
 )
@@ -192,3 +205,50 @@ def test_ctrl_c_ends_the_wait_for_the_autopilot_at_once(example_path, tmp_path):
     assert fly.returncode == 3, out + err
     assert "interrupted while waiting for the autopilot" in err
     assert stopped_after_s < 4.0  # not the 5 s between progress lines, nor the 120 s timeout
+
+
+@pytest.mark.parametrize("abort", [True, False])
+def test_replay_says_a_flight_that_never_started_never_started(
+    flight_cli, flight_scenario, tmp_path, abort
+):
+    """A ``fly`` log that ends before offboard (a failed take-off) replays to one line that
+    says so and why, with no U and no figure."""
+    from hptrack.runtime.controller import MissionController
+    from hptrack.runtime.worker import InlineRunner
+
+    path = tmp_path / "m.jsonl"
+    log = MissionLog(path)
+    controller = MissionController(
+        flight_scenario,
+        make_planner("greedy"),
+        seed=1,
+        log=log,
+        runner=InlineRunner(),
+        header={"source": "fly"},
+    )
+    controller.prepare([0.0, 0.0])
+    log.write({"kind": "status", "t": None, "message": "taking off to 20 m"})
+    if abort:
+        log.write(
+            {
+                "kind": "abort",
+                "t": None,
+                "reason": "take-off failed",
+                "detail": "the take-off failed: the vehicle disarmed at 3.1 m of 20 m",
+            }
+        )
+    controller.close()
+    log.close()
+    result = flight_cli("replay", path)
+    assert result.code == 0, result.err
+    out = " ".join(result.out.split())
+    why = (
+        "the take-off failed: the vehicle disarmed at 3.1 m of 20 m"
+        if abort
+        else "the log ends before offboard started"
+    )
+    assert f"the mission never started ({why})" in out
+    assert "ended by" not in out and "logged U" not in out
+    summary = json.loads(path.with_suffix(".summary.json").read_text())
+    assert summary["never_started"] == why and summary["U"] is None
+    assert summary["ended_by"] is None and not path.with_suffix(".png").exists()

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 pytest.importorskip("mavsdk")
 pytest.importorskip("pymavlink")
@@ -403,3 +404,181 @@ def test_a_log_that_cannot_be_written_at_all_stops_a_hold_rule_flight_before_arm
     assert "arming" not in result.out
     assert not log.exists()  # no empty file left behind
     assert "takeoff" not in [m["mode"] for m in _stop_stub(short_dry_run)["modes"]]
+
+
+def _fly_to_the_end(run, timeout_s=120):
+    """``fly`` on the dry run to its end; then the stub's statistics (the stub stopped)."""
+    try:
+        fly = subprocess.run(
+            [*run["fly"], "--log", str(run["log"])],
+            capture_output=True,
+            text=True,
+            timeout=timeout_s,
+        )
+        stats = _stop_stub(run)
+    finally:
+        _end(run["stub"])
+    return fly, stats
+
+
+def _replay(log, tmp_path):
+    summary_path = tmp_path / "replay.json"
+    replay = subprocess.run(
+        [*CLI, "replay", str(log), "--json", str(summary_path), "--plot", str(tmp_path / "r.png")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert replay.returncode == 0, replay.stderr
+    return " ".join(replay.stdout.split()), json.loads(summary_path.read_text())
+
+
+@pytest.mark.parametrize(
+    ("failure", "said"),
+    [
+        ("disarm", "the vehicle disarmed at"),
+        ("sensors", "the vehicle left TAKEOFF for LAND at"),
+        ("posctl", "the vehicle left TAKEOFF for POSCTL at"),
+    ],
+)
+def test_a_failed_take_off_ends_at_once_with_its_reason_and_replays_as_never_started(
+    tmp_path, example_path, failure, said
+):
+    """The stub fails its take-off 3 s in: ``fly`` ends then (not at its take-off timeout),
+    says why, commands nothing more, logs an ``abort`` record, and ``replay`` says the mission
+    never started."""
+    run = _start_dry_run(
+        tmp_path,
+        example_path,
+        SHORT_BUDGET_S,
+        ["--takeoff-failure", failure, "--takeoff-failure-after", "3"],
+    )
+    fly, stats = _fly_to_the_end(run)
+    assert fly.returncode == 3, fly.stdout + fly.stderr
+    err = " ".join(fly.stderr.split())
+    assert f"the take-off failed: {said}" in err and "s into the take-off" in err
+    assert "offboard never started" in err and "within 120 s" not in err
+    log = run["log"]
+    assert [(a["reason"], a["detail"]) for a in _records(log, "abort")] == [
+        ("take-off failed", err.split("error: ", 1)[1])
+    ]
+    changes = _records(log, "vehicle")
+    assert "vehicle armed" in [r["message"] for r in changes]
+    # the first mode reported may already be TAKEOFF (heartbeats come once a second)
+    modes = [r["flight_mode"] for r in changes if r["message"].startswith("vehicle mode")]
+    if failure == "disarm":
+        assert modes[-1] == "TAKEOFF" and changes[-1]["message"] == "vehicle disarmed"
+    else:
+        assert modes[-2:] == ["TAKEOFF", {"sensors": "LAND", "posctl": "POSCTL"}[failure]]
+    assert "MAV_CMD_DO_SET_MODE" not in stats["commands"]  # no offboard, no hold: hands off
+    assert "offboard" not in [m["mode"] for m in stats["modes"]]
+    out, summary = _replay(log, tmp_path)
+    assert f"the mission never started (the take-off failed: {said}" in out
+    assert summary["U"] is None and "ended by" not in out
+
+
+def test_a_vehicle_that_never_enters_offboard_is_tried_three_times_then_given_up(
+    tmp_path, example_path
+):
+    """The stub accepts offboard and stays in HOLD (as PX4 did in one run): ``fly`` starts it
+    three times, then gives up with one line before the mission starts."""
+    run = _start_dry_run(tmp_path, example_path, SHORT_BUDGET_S, ["--refuse-offboard", "ignore"])
+    fly, stats = _fly_to_the_end(run)
+    assert fly.returncode == 3, fly.stdout + fly.stderr
+    out, err = " ".join(fly.stdout.split()), " ".join(fly.stderr.split())
+    assert "the vehicle did not enter OFFBOARD in 3 attempts of 2 s" in err
+    assert "did not enter OFFBOARD within 2 s; it reports HOLD" in err
+    assert "starting it again (2 of 3)" in out and "starting it again (3 of 3)" in out
+    assert "ended by" not in out and "offboard started" not in out
+    # three offboard starts, then offboard stop (hold); the stub never left HOLD after take-off
+    assert stats["commands"]["MAV_CMD_DO_SET_MODE"] == 4
+    assert [m["mode"] for m in stats["modes"]] == ["hold", "takeoff", "hold"]
+    assert [a["reason"] for a in _records(run["log"], "abort")] == ["offboard refused"]
+    out, summary = _replay(run["log"], tmp_path)
+    assert "the mission never started (the vehicle did not enter OFFBOARD in 3" in out
+
+
+def test_leaving_offboard_is_the_pilot_taking_over_and_nothing_more_is_commanded(
+    tmp_path, example_path
+):
+    """The stub leaves offboard for POSCTL 3 s into the mission (a pilot's switch): ``fly``
+    ends at once, says the pilot took over, commands nothing, and exits with code 4."""
+    run = _start_dry_run(tmp_path, example_path, BUDGET_S, ["--leave-offboard-after", "3"])
+    fly, stats = _fly_to_the_end(run)
+    assert fly.returncode == 4, fly.stdout + fly.stderr
+    out = " ".join(fly.stdout.split())
+    assert "the pilot took over: the vehicle left OFFBOARD for POSCTL at mission time" in out
+    assert "hptrack commands nothing more, the vehicle is in POSCTL" in out
+    assert "ended by pilot took over" in out and "vehicle left to the pilot: POSCTL" in out
+    assert "vehicle mode OFFBOARD -> POSCTL" in out  # every mode change is said
+    assert stats["final_mode"] == "posctl"
+    assert stats["commands"]["MAV_CMD_DO_SET_MODE"] == 1  # offboard; no hold after it
+    log = run["log"]
+    safety = _records(log, "safety")
+    assert [(s["reason"], s["action"], s["confirmed"]) for s in safety] == [
+        ("pilot took over", "left to the pilot", "POSCTL")
+    ]
+    end = _records(log, "end")[0]
+    assert end["reason"] == "pilot took over" and end["time"] < BUDGET_S / 2
+    changes = [r["message"] for r in _records(log, "vehicle")]
+    assert changes[-2:] == ["vehicle mode HOLD -> OFFBOARD", "vehicle mode OFFBOARD -> POSCTL"]
+    _, summary = _replay(log, tmp_path)
+    assert summary["ended_by"] == "pilot took over" and summary["mismatches"] == 0
+
+
+def test_another_vehicle_on_the_port_is_refused_and_counted(tmp_path, example_path):
+    """A second stub (MAVLink system 2, 200 m away) joins ``fly``'s port once it flies system
+    1: its odometry never reaches the controller, it is said once and counted."""
+    run = _start_dry_run(tmp_path, example_path, SHORT_BUDGET_S)
+    data = yaml.safe_load(run["scenario"].read_text())
+    data["agent"]["position"] = [-200.0, -200.0]
+    elsewhere = tmp_path / "elsewhere.yaml"
+    elsewhere.write_text(yaml.safe_dump(data))
+    port = run["fly"][run["fly"].index("--connection") + 1].rsplit(":", 1)[1]
+    log = run["log"]
+    fly = subprocess.Popen(
+        [*run["fly"], "--log", str(log), "--planner", "greedy"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    other = None
+    try:
+        end = time.monotonic() + 90
+        while not (log.exists() and "flying MAVLink system 1" in log.read_text()):
+            assert time.monotonic() < end and fly.poll() is None, "fly never connected"
+            time.sleep(0.1)
+        other = subprocess.Popen(
+            [
+                *CLI,
+                "vehicle-sim",
+                str(elsewhere),
+                "--mavlink",
+                f"udpout://127.0.0.1:{port}",
+                "--system-id",
+                "2",
+                "--no-targets",
+                "--duration",
+                "150",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        out, err = fly.communicate(timeout=120)
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+            fly.wait()
+        if other is not None:
+            _end(other)
+        _end(run["stub"])
+    assert fly.returncode == 0, out + err
+    out = " ".join(out.split())
+    assert out.count("refusing odometry from MAVLink system 2 component 1") == 1
+    assert "this flight flies system 1 component 1 only" in out
+    assert "odometry messages refused from other MAVLink sources" in out
+    counts = [r for r in _records(log, "status") if "foreign_odometry" in r]
+    assert counts[-1]["foreign_odometry"]["system 2 component 1"] > 30  # 30 Hz for seconds
+    odometry = np.array([r["position"] for r in _records(log, "odometry") if r["accepted"]])
+    assert len(odometry) and np.hypot(*(odometry - [-200.0, -200.0]).T).min() > 100.0

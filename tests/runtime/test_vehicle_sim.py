@@ -1,6 +1,7 @@
 """The vehicle stub speaks PX4's protocol: a test plays the ground station with pymavlink."""
 
 import json
+import math
 import socket
 import threading
 import time
@@ -100,7 +101,8 @@ def test_the_stub_arms_takes_off_flies_offboard_and_detects(flight_scenario):
         assert gcs.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
         assert _heartbeat(gcs).base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         assert gcs.command(mavlink.MAV_CMD_NAV_TAKEOFF) == mavlink.MAV_RESULT_ACCEPTED
-        gcs.wait(lambda m: m.get_type() == "LOCAL_POSITION_NED" and m.z < -2.4, seconds=5.0)
+        # the take-off is over (TAKEOFF -> HOLD within 0.05 m): offboard now is not overridden
+        gcs.wait(lambda m: m.get_type() == "LOCAL_POSITION_NED" and m.z < -2.45, seconds=5.0)
         gcs.mav.param_request_read_send(1, 1, b"MPC_XY_VEL_MAX", -1)
         param = gcs.wait(lambda m: m.get_type() == "PARAM_VALUE")
         assert (param.param_id, param.param_value) == ("MPC_XY_VEL_MAX", 12.0)
@@ -199,9 +201,15 @@ def stubs():
         vehicle.close()
 
 
-def _flying(scenario, stubs, on_event=None, **parameters):
+def _flying(scenario, stubs, on_event=None, misbehaviour=None, **parameters):
     """A stub armed in offboard at 10 m over its start, on a fake clock (no MAVLink)."""
-    vehicle = VehicleSim(scenario, detections_url=None, parameters=parameters, on_event=on_event)
+    vehicle = VehicleSim(
+        scenario,
+        detections_url=None,
+        parameters=parameters,
+        on_event=on_event,
+        misbehaviour=misbehaviour,
+    )
     stubs.append(vehicle)
     clock = FakeClock()
     vehicle._now = clock
@@ -299,3 +307,144 @@ def test_take_off_spools_up_ramps_and_climbs_at_mpc_tko_speed(flight_scenario, s
     assert 15.0 < reached < 17.0
     assert vehicle.mode == "hold" and abs(vehicle.position[2] + 20.0) < 0.06
     assert len(track)
+
+
+def _taking_off(scenario, stubs, misbehaviour=None, events=None):
+    """A stub armed and taking off to 5 m quickly, on a fake clock (no MAVLink but its own
+    loopback port)."""
+    sink = _udp_socket()
+    vehicle = VehicleSim(
+        scenario,
+        f"udpout://127.0.0.1:{sink.getsockname()[1]}",
+        detections_url=None,
+        parameters={"MIS_TAKEOFF_ALT": 5.0, "COM_SPOOLUP_TIME": 0.2, "MPC_TKO_RAMP_T": 0.2},
+        on_event=None if events is None else events.append,
+        misbehaviour=misbehaviour,
+    )
+    stubs.append(vehicle)
+    sink.close()
+    clock = FakeClock()
+    vehicle._now = clock
+    vehicle.armed = True
+    vehicle._set_mode("takeoff")
+    return vehicle, clock
+
+
+def test_the_take_off_ends_by_a_takeoff_to_hold_change_and_overrides_an_early_offboard(
+    flight_scenario, stubs
+):
+    """As PX4: the take-off ends in HOLD (its AUTO_LOITER) at the take-off altitude; offboard
+    entered in mid-climb is overridden by that change."""
+    events = []
+    vehicle, clock = _taking_off(flight_scenario, stubs, events=events)
+    _steps(vehicle, clock, 2.0)
+    assert vehicle.mode == "takeoff" and 0.5 < -vehicle.position[2] < 4.0
+    vehicle._last_setpoint = clock.t
+    vehicle._set_mode("offboard")
+    hover = np.array([0.0, 0.0, -5.0]) + vehicle.home * [1, 1, 0]
+    _steps(vehicle, clock, 6.0, lambda t: (hover, np.zeros(3)))
+    assert vehicle.mode == "hold" and -vehicle.position[2] == pytest.approx(5.0, abs=0.06)
+    assert "LOITER overrides offboard" in events[-1]
+    vehicle._set_mode("offboard")  # after the take-off, offboard stays
+    _steps(vehicle, clock, 3.0, lambda t: (hover, np.zeros(3)))
+    assert vehicle.mode == "offboard"
+
+
+@pytest.mark.parametrize(
+    ("failure", "mode", "armed", "said"),
+    [
+        ("disarm", "takeoff", False, "disarmed (in mid-climb"),
+        ("sensors", "land", True, "sensors lost"),
+        ("posctl", "posctl", True, "a pilot switched to position mode"),
+    ],
+)
+def test_a_take_off_fails_as_asked(flight_scenario, stubs, failure, mode, armed, said):
+    from hptrack.runtime.vehicle_sim import Misbehaviour
+
+    events = []
+    bad = Misbehaviour(takeoff_failure=failure, takeoff_failure_after_s=1.5)
+    vehicle, clock = _taking_off(flight_scenario, stubs, bad, events)
+    _steps(vehicle, clock, 1.49)
+    assert vehicle.mode == "takeoff" and vehicle.armed and vehicle._sensors_ok
+    _steps(vehicle, clock, 0.02)
+    assert (vehicle.mode, vehicle.armed) == (mode, armed)
+    assert said in events[-1]
+    height = -vehicle.position[2]
+    _steps(vehicle, clock, 3.0)
+    if failure == "disarm":  # it falls: on the ground within sqrt(2 h / g) s
+        assert vehicle.position[2] == vehicle.home[2] and height > 0.1
+    elif failure == "sensors":  # no estimate: it descends and sends no position
+        assert not vehicle._sensors_ok and -vehicle.position[2] < height
+    else:  # the pilot's position mode holds where it was
+        assert -vehicle.position[2] == pytest.approx(height, abs=0.05)
+
+
+def test_offboard_is_left_for_the_pilots_mode_after_the_time_asked(flight_scenario, stubs):
+    from hptrack.runtime.vehicle_sim import Misbehaviour
+
+    events = []
+    bad = Misbehaviour(leave_offboard_after_s=2.0, leave_offboard_to="hold")
+    vehicle, clock = _flying(flight_scenario, stubs, events.append, bad)
+    away = lambda t: (np.array([100.0, 0.0, -10.0]), np.zeros(3))  # noqa: E731
+    _steps(vehicle, clock, 1.99, away)
+    assert vehicle.mode == "offboard"
+    _steps(vehicle, clock, 0.02, away)
+    assert vehicle.mode == "hold" and "a pilot switched modes" in events[-1]
+    _steps(vehicle, clock, 10.0, away)  # setpoints go on; the pilot's mode stays
+    assert vehicle.mode == "hold" and np.hypot(*vehicle.velocity[:2]) < 0.01
+
+
+def _command_long(system, command, *params):
+    params = list(params) + [0.0] * (7 - len(params))
+    return mavlink.MAVLink_command_long_message(system, 1, command, 0, *params)
+
+
+@pytest.mark.parametrize("refusal", ["deny", "ignore"])
+def test_offboard_is_refused_as_asked_and_commands_for_another_system_are_ignored(
+    flight_scenario, stubs, refusal
+):
+    from hptrack.runtime.vehicle_sim import Misbehaviour
+
+    gcs = GroundStation()
+    vehicle = VehicleSim(
+        flight_scenario,
+        f"udpout://127.0.0.1:{gcs.port}",
+        detections_url=None,
+        misbehaviour=Misbehaviour(refuse_offboard=refusal),
+        system_id=3,
+    )
+    stubs.append(vehicle)
+    vehicle.armed = True
+    vehicle._set_mode("hold")
+    vehicle._last_setpoint = vehicle._now()
+    offboard = (
+        mavlink.MAV_CMD_DO_SET_MODE,
+        mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        PX4_MAIN_MODE["offboard"],
+    )
+    vehicle._handle(_command_long(1, *offboard))  # addressed to system 1: not this one
+    assert vehicle.stats.commands == {}
+    vehicle._handle(_command_long(3, *offboard))
+    ack = gcs.wait(lambda m: m.get_type() == "COMMAND_ACK")
+    assert (ack.get_srcSystem(), ack.command) == (3, mavlink.MAV_CMD_DO_SET_MODE)
+    expected = {"deny": mavlink.MAV_RESULT_DENIED, "ignore": mavlink.MAV_RESULT_ACCEPTED}
+    assert ack.result == expected[refusal] and vehicle.mode == "hold"
+    gcs.sock.close()
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"refuse_offboard": "maybe"}, "refuse_offboard 'maybe': expected one of deny, ignore"),
+        ({"leave_offboard_to": "land"}, "leave_offboard_to 'land': expected one of posctl, hold"),
+        ({"takeoff_failure": "fire"}, "takeoff_failure 'fire': expected one of disarm, sensors"),
+        ({"leave_offboard_after_s": -1.0}, "leave_offboard_after_s must be a number in (0,"),
+        ({"takeoff_failure_after_s": math.nan}, "takeoff_failure_after_s must be a number"),
+    ],
+)
+def test_misbehaviours_are_checked(changes, message):
+    from hptrack.runtime.vehicle_sim import Misbehaviour
+
+    with pytest.raises(ValueError) as err:
+        Misbehaviour(**changes)
+    assert str(err.value).startswith(message)

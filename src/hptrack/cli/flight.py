@@ -43,7 +43,11 @@ re-plan takes well under the default 1 s deadline on a 2-core machine, and a rep
 it exactly)."""
 
 EXIT_ABORTED = 3
-"""Exit code of a flight that could not start or ended early for safety."""
+"""Exit code of a flight that could not start (a failed take-off, offboard never entered...)
+or ended early for safety."""
+EXIT_PILOT = 4
+"""Exit code of a flight whose vehicle left OFFBOARD during the mission (a pilot or a failsafe
+took over)."""
 
 
 def _controller_settings(deadline: float, stale_after: float) -> Any:
@@ -242,6 +246,7 @@ def fly(
     from hptrack.runtime.links import bind_check, check_connection
     from hptrack.runtime.log import MissionLog
     from hptrack.runtime.mavsdk_adapter import (
+        PILOT_TOOK_OVER,
         FlightError,
         FlightOptions,
         VehicleLimits,
@@ -325,6 +330,17 @@ def fly(
             f"{end.get('time', 0.0):.1f} s; {result.setpoints_sent} setpoints "
             f"({result.setpoint_rate_hz:.1f} Hz, largest gap {result.max_setpoint_gap_s:.2f} s)"
             + (f"; logging stopped: {result.log_stopped}" if result.log_stopped else "")
+            + (
+                f"; {sum(result.foreign_odometry.values())} odometry messages refused from "
+                f"other MAVLink sources"
+                if result.foreign_odometry
+                else ""
+            )
+            + (
+                f"; {result.follow_warnings} not-following warnings"
+                if result.follow_warnings
+                else ""
+            )
         ),
         highlight=False,
         soft_wrap=True,
@@ -334,6 +350,8 @@ def fly(
         sys.exit(1)
     if result.reason == "interrupted":
         sys.exit(130)
+    if result.reason == PILOT_TOOK_OVER:
+        sys.exit(EXIT_PILOT)
     if result.reason != "budget":
         sys.exit(EXIT_ABORTED)
 
@@ -377,6 +395,13 @@ def _parameters(pairs: list[str] | None) -> dict[str, float]:
     return out
 
 
+def _misbehaviour_flags(message: str) -> str:
+    """A `Misbehaviour` message with its field named as the ``vehicle-sim`` option."""
+    field_name = message.split(" ", 1)[0]
+    flag = "--" + field_name.removesuffix("_s").replace("_", "-")
+    return flag + message[len(field_name) :]
+
+
 def vehicle_sim(
     scenario_path: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario YAML file.")],
     mavlink: Annotated[str, typer.Option(help="Where MAVSDK listens (loopback).")] = (
@@ -417,6 +442,31 @@ def vehicle_sim(
             help="Write what the vehicle saw (setpoints, modes, detections) as JSON at exit."
         ),
     ] = None,
+    system_id: Annotated[int, typer.Option(help="Its MAVLink system id (PX4's MAV_SYS_ID).")] = 1,
+    refuse_offboard: Annotated[
+        str | None,
+        typer.Option(
+            help="Refuse offboard: deny (the command is denied) or ignore (accepted, the mode "
+            "stays)."
+        ),
+    ] = None,
+    leave_offboard_after: Annotated[
+        float | None,
+        typer.Option(help="Leave offboard this long after entering it (a pilot's switch), s."),
+    ] = None,
+    leave_offboard_to: Annotated[
+        str, typer.Option(help="The mode it then switches to: posctl or hold.")
+    ] = "posctl",
+    takeoff_failure: Annotated[
+        str | None,
+        typer.Option(
+            help="Fail the take-off: disarm (motors stop), sensors (no position, failsafe "
+            "LAND) or posctl (a pilot switches to position mode)."
+        ),
+    ] = None,
+    takeoff_failure_after: Annotated[
+        float, typer.Option(help="That long after the take-off began, s.")
+    ] = 2.0,
 ) -> None:
     """A MAVLink vehicle stub for dry runs: a quadrotor that flies as PX4 does (take-off,
     position loop, speed and acceleration limits, offboard-loss failsafe, parameters) and
@@ -429,7 +479,20 @@ def vehicle_sim(
         _positive(detection_rate, "--detection-rate", 0.0, 1000.0)
     parameters = _parameters(param)
     check_output_path(stats, "--stats")
-    from hptrack.runtime.vehicle_sim import VehicleSim
+    if not 1 <= system_id <= 255:
+        raise InputError(f"--system-id must be an integer in [1, 255], got {system_id}")
+    from hptrack.runtime.vehicle_sim import Misbehaviour, VehicleSim
+
+    try:
+        misbehaviour = Misbehaviour(
+            refuse_offboard=refuse_offboard,
+            leave_offboard_after_s=leave_offboard_after,
+            leave_offboard_to=leave_offboard_to,
+            takeoff_failure=takeoff_failure,
+            takeoff_failure_after_s=takeoff_failure_after,
+        )
+    except ValueError as err:
+        raise InputError(_misbehaviour_flags(str(err))) from None
 
     def on_event(text: str) -> None:
         console.print(escape(f"vehicle stub {text}"), highlight=False)
@@ -443,6 +506,8 @@ def vehicle_sim(
         gcs_url=gcs,
         parameters=parameters,
         on_event=on_event,
+        system_id=system_id,
+        misbehaviour=misbehaviour,
     )
     stop = threading.Event()
     previous = {
@@ -560,6 +625,16 @@ def replay(
     result = replay_log(log_path)
     summary = result.summary
     write_json(json_path, summary)
+    if summary["never_started"] is not None:
+        console.print(
+            escape(
+                f"{log_path}: the mission never started ({summary['never_started']}); "
+                f"{summary['records']} records, nothing flown to replay; summary {json_path}"
+            ),
+            highlight=False,
+            soft_wrap=True,
+        )
+        return
     save_mission_figure(result.record, str(plot))
     table = Table(
         title=escape(

@@ -1,9 +1,11 @@
 """The mission log: JSON lines, one record per event or decision, flushed as each is written.
 
 Every record is a JSON object with ``kind`` (``header`` first, then ``odometry``,
-``detection``, ``tick``, ``plan``, ``late``, ``mode``, ``end``, and the adapters' ``status`` and
-``safety``), ``t`` the mission time in s where it has one, ``wall`` the wall-clock time (Unix
-s) when it was written, and ``seq`` its line number from 0. Non-finite numbers of rejected
+``detection``, ``tick``, ``plan``, ``late``, ``mode``, ``end``, and the adapters' ``status``,
+``safety``, ``vehicle`` (a change of the vehicle's flight mode or arming), ``foreign`` (the first
+odometry from another MAVLink source) and ``abort`` (why a mission never started)), ``t`` the
+mission time in s where it has one, ``wall`` the wall-clock time (Unix s) when it was written,
+and ``seq`` its line number from 0. Non-finite numbers of rejected
 inputs are written as the strings ``"nan"``, ``"inf"``, ``"-inf"`` so that every line is strict
 JSON. `read_log` reads a log back; a last line cut short by a crash or a kill is dropped
 and reported, so a log always replays up to where it ends.
@@ -60,6 +62,13 @@ def log_array(value: Any) -> np.ndarray:
             return np.full(len(parts), math.nan)
     return np.array(log_float(value))
 
+
+ABORT = "abort"
+"""Kind of the record an adapter writes when its mission could not start (``reason``, a short
+name, and ``detail``, one line)."""
+MISSION_START_MESSAGE = "offboard started: mission time 0"
+"""The message of the ``status`` record a flight writes when its mission starts (a ``fly`` log
+without it never started)."""
 
 LOG_STOPPED = "log stopped"
 """Kind of the last line a file log writes when it stops at its size limit."""

@@ -7,12 +7,22 @@ build the mission controller with them (the caller decides the planned speed); h
 its first tick (it compiles or loads its kernels then) and, meanwhile, arm and take off to the
 mission altitude if asked (else the vehicle must already be armed and in the air); wait for the
 first plan; send a first setpoint (where the vehicle is, at the mission altitude) and start
-offboard mode. Mission time 0 is that moment. Then, until the budget's end: telemetry
-(``position_velocity_ned``) feeds `odometry`,
+offboard mode. Mission time 0 is that moment. Then, until the budget's end: the vehicle's
+``LOCAL_POSITION_NED`` feeds `odometry`,
 detections arriving as JSON lines on a UDP port feed ``detection``, and the controller's
 reference position and planned velocity are streamed at ``setpoint_rate_hz`` as offboard
 position setpoints with velocity feed-forward (converted to NED by
 `enu_to_ned`), so that PX4 flies the planned speed.
+
+The vehicle's mode and arming are watched throughout, and every change is logged (``vehicle``
+records) and said. The take-off is done when PX4 leaves TAKEOFF for HOLD (its AUTO_LOITER) at
+the altitude; a disarm, a mode change, or a lost position during the take-off ends it at once
+(`FlightError`, exit code 3, an ``abort`` record). Offboard counts as started only once the
+vehicle reports OFFBOARD (`OFFBOARD_ATTEMPTS` tries of `OFFBOARD_CONFIRM_S`); leaving OFFBOARD
+during the mission is a pilot (or a failsafe) taking over: the mission ends at once and nothing
+more is commanded. A vehicle that does not move towards its reference is warned of
+(`FOLLOW_DISTANCE_M`). The flight locks onto the MAVLink system and component ids of the
+autopilot found at connection; odometry from any other source is refused and counted.
 
 Safe ends: the budget's end, Ctrl-C (or SIGTERM), a lost link (no telemetry for
 ``lost_link_s``), a setpoint beyond ``max_distance_m`` from home (the vehicle's position at the
@@ -34,6 +44,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import json
 import logging
 import math
 import signal
@@ -50,6 +61,7 @@ from mavsdk import LogLevel, log_subscribe
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.exceptions import MavsdkConnectionError
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError
+from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 from mavsdk.asyncio.plugins.offboard import (
     OffboardAsync,
     OffboardError,
@@ -64,7 +76,7 @@ from hptrack.runtime.controller import MissionController
 from hptrack.runtime.frames import enu_to_ned, ned_to_enu
 from hptrack.runtime.intake import DetectionIntake, IntakeLimits
 from hptrack.runtime.links import connection_problem
-from hptrack.runtime.log import MissionLog
+from hptrack.runtime.log import ABORT, MISSION_START_MESSAGE, MissionLog
 from hptrack.runtime.network import (
     Refusal,
     enlarge_receive_buffer,
@@ -150,6 +162,28 @@ class FlightOptions:
 WAIT_PROGRESS_S = 5.0
 """How often ``fly`` says it is still waiting for the autopilot, s (at least twice in a shorter
 wait)."""
+TAKEOFF_DONE_TOLERANCE_M = 1.0
+"""A take-off that ends (TAKEOFF -> HOLD) at most this below the mission altitude is done (PX4
+ends its take-off within ``NAV_MC_ALT_RAD``, 0.8 m by default), m."""
+OFFBOARD_CONFIRM_S = 2.0
+"""How long ``fly`` streams setpoints after starting offboard for the vehicle to report
+OFFBOARD, s (a heartbeat once a second shows the change within about 1 s)."""
+OFFBOARD_ATTEMPTS = 3
+"""How many times ``fly`` starts offboard before giving up."""
+PILOT_TOOK_OVER = "pilot took over"
+"""The end of a mission whose vehicle left OFFBOARD (a pilot's switch or a failsafe)."""
+LEFT_TO_PILOT = "left to the pilot"
+"""The action of that end: nothing is commanded."""
+FOLLOW_DISTANCE_M = 10.0
+"""The vehicle farther than this from its reference ..., m."""
+FOLLOW_CLOSING_M_S = 0.5
+"""... and closing on it slower than this, m/s ..."""
+FOLLOW_PERSIST_S = 3.0
+"""... for this long is not following, s: ``fly`` warns (console and log)."""
+FOLLOW_WARN_EVERY_S = 10.0
+"""At most one not-following warning in this long, s."""
+AUTOPILOT_COMPONENT = 1
+"""MAVLink's ``MAV_COMP_ID_AUTOPILOT1``: the component flown when the system has several."""
 
 
 @dataclass(frozen=True)
@@ -168,8 +202,13 @@ class VehicleLimits:
 
 
 class FlightError(Exception):
-    """The mission could not start (no autopilot, no position, arming refused...); the
-    message is one line."""
+    """The mission could not start (no autopilot, no position, arming refused, a failed
+    take-off, offboard never entered...); the message is one line, ``reason`` a short name
+    (``"take-off failed"``, ``"offboard refused"``, ``"could not start"``...)."""
+
+    def __init__(self, message: str, reason: str = "could not start") -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 @dataclass
@@ -178,9 +217,11 @@ class FlightResult:
 
     Attributes:
         reason: ``"budget"``, ``"interrupted"``, ``"lost link"``, ``"geofence"``,
-            ``"offboard error"``, ``"log failure"`` or ``"controller error"``.
+            ``"offboard error"``, ``"pilot took over"``, ``"log failure"`` or
+            ``"controller error"``.
         detail: one line with the figures.
-        action: ``"hold"`` or ``"return to launch"``.
+        action: ``"hold"``, ``"return to launch"`` or ``"left to the pilot"`` (the
+            pilot took over: nothing commanded).
         confirmed: the flight mode telemetry reported after the switch, or ``None``.
         end: the controller's ``end`` record.
         setpoints_sent: offboard setpoints streamed.
@@ -189,6 +230,8 @@ class FlightResult:
         intake: the detection intake's counts (lines received, handled, dropped by reason).
         log_stopped: why the mission log stopped growing, or ``None``.
         error: the traceback of a controller error.
+        foreign_odometry: odometry messages refused from other MAVLink sources, by source.
+        follow_warnings: how many times the vehicle was said not to follow its reference.
     """
 
     reason: str
@@ -202,6 +245,8 @@ class FlightResult:
     intake: dict = field(default_factory=dict)
     log_stopped: str | None = None
     error: str | None = None
+    foreign_odometry: dict[str, int] = field(default_factory=dict)
+    follow_warnings: int = 0
 
 
 @dataclass
@@ -209,6 +254,7 @@ class _Vehicle:
     """What telemetry last said."""
 
     position_ned: np.ndarray | None = None
+    velocity_ned: np.ndarray = field(default_factory=lambda: np.zeros(3))
     received_at: float = -math.inf
     flight_mode: Any = None
     armed: bool = False
@@ -287,11 +333,17 @@ class _Flight:
         self.early: list[dict] = []
         self.intake: DetectionIntake | None = None
         self.log_failure_said = False
+        self.system_id: int | None = None
+        self.component_id: int | None = None
+        self.foreign: dict[str, int] = {}
+        self.not_following_since: float | None = None
+        self.follow_warned_at = -math.inf
+        self.follow_warnings = 0
 
-    def say(self, message: str, *, show: bool = True, **fields: Any) -> None:
-        """Log ``message`` as a ``status`` record with ``fields``, and show it unless not
-        ``show``."""
-        record = {"kind": "status", "t": self.mission_time(), "message": message, **fields}
+    def say(self, message: str, *, show: bool = True, kind: str = "status", **fields: Any) -> None:
+        """Log ``message`` as a ``kind`` record (``status`` unless told) with ``fields``, and
+        show it unless not ``show``."""
+        record = {"kind": kind, "t": self.mission_time(), "message": message, **fields}
         if self.controller is None:  # the log starts with the controller's header
             self.early.append({**record, "said_at_unix_s": time.time()})
         else:
@@ -339,24 +391,84 @@ class _Flight:
             self.stop.set()
 
     # --- inputs ---------------------------------------------------------------------------
-    async def watch_position(self, telemetry: TelemetryAsync) -> None:
-        async for pv in telemetry.subscribe_position_velocity_ned():
+    def refuse_source(self, system_id: int, component_id: int) -> None:
+        """Count a position message from another MAVLink source; say the first one."""
+        source = f"system {system_id} component {component_id}"
+        self.foreign[source] = self.foreign.get(source, 0) + 1
+        if self.foreign[source] == 1:
+            self.say(
+                f"refusing odometry from MAVLink {source} (another vehicle on "
+                f"{self.options.connection}?): this flight flies system {self.system_id} "
+                f"component {self.component_id} only",
+                kind="foreign",
+                system_id=system_id,
+                component_id=component_id,
+            )
+
+    async def watch_position(self, direct: MavlinkDirectAsync) -> None:
+        """The locked vehicle's ``LOCAL_POSITION_NED`` into the controller; another
+        component's is refused."""
+        async for msg in direct.subscribe_message("LOCAL_POSITION_NED"):
             now = time.monotonic()
-            ned = np.array([pv.position.north_m, pv.position.east_m, pv.position.down_m])
+            if (msg.system_id, msg.component_id) != (self.system_id, self.component_id):
+                self.refuse_source(msg.system_id, msg.component_id)
+                continue
+            try:
+                fields = json.loads(msg.fields_json)
+                ned = np.array([float(fields[k]) for k in ("x", "y", "z")])
+                velocity = np.array([float(fields[k]) for k in ("vx", "vy", "vz")])
+            except (ValueError, KeyError, TypeError):
+                continue
             self.vehicle.position_ned, self.vehicle.received_at = ned, now
+            self.vehicle.velocity_ned = velocity
             if self.mono0 is not None:
                 east, north, _ = ned_to_enu(*ned)
                 t = now - self.mono0
                 self._guard(lambda t=t, p=(east, north): self.controller.odometry(t, p))
 
+    async def watch_other_systems(self, mavsdk: Mavsdk) -> None:
+        """Count the position messages of every other system on the connection (checked
+        once a second)."""
+        watched: dict[int, asyncio.Task] = {}
+
+        async def count(system: Any) -> None:
+            async for msg in MavlinkDirectAsync(system).subscribe_message("LOCAL_POSITION_NED"):
+                self.refuse_source(msg.system_id, msg.component_id)
+
+        try:
+            while True:
+                for system in await mavsdk.get_systems():
+                    system_id = await system.get_system_id()
+                    if system_id != self.system_id and system_id not in watched:
+                        watched[system_id] = asyncio.create_task(count(system))
+                await asyncio.sleep(1.0)
+        finally:
+            for task in watched.values():
+                task.cancel()
+
     async def watch_state(self, telemetry: TelemetryAsync) -> None:
         async def modes() -> None:
             async for mode in telemetry.subscribe_flight_mode():
-                self.vehicle.flight_mode = mode
+                previous, self.vehicle.flight_mode = self.vehicle.flight_mode, mode
+                if mode != previous:
+                    was = "" if previous is None else f"{previous.name} -> "
+                    self.say(
+                        f"vehicle mode {was}{mode.name}",
+                        kind="vehicle",
+                        flight_mode=mode.name,
+                        armed=self.vehicle.armed,
+                    )
 
         async def armed() -> None:
             async for value in telemetry.subscribe_armed():
-                self.vehicle.armed = bool(value)
+                previous, self.vehicle.armed = self.vehicle.armed, bool(value)
+                if self.vehicle.armed != previous:
+                    self.say(
+                        f"vehicle {'armed' if value else 'disarmed'}",
+                        kind="vehicle",
+                        flight_mode=getattr(self.vehicle.flight_mode, "name", None),
+                        armed=self.vehicle.armed,
+                    )
 
         async def in_air() -> None:
             async for value in telemetry.subscribe_in_air():
@@ -420,25 +532,95 @@ class _Flight:
         east, north, _ = ned_to_enu(*self.vehicle.position_ned)
         return np.array([east, north])
 
+    def height_m(self) -> float:
+        """The vehicle's height above the local origin, m."""
+        return float(-self.vehicle.position_ned[2])
+
+    def check_following(self, t: float, reference: np.ndarray) -> None:
+        """Warn (console and log, at most every `FOLLOW_WARN_EVERY_S`) when the vehicle has
+        been farther than `FOLLOW_DISTANCE_M` from its ``reference`` (ENU, m) and closing on
+        it slower than `FOLLOW_CLOSING_M_S` for `FOLLOW_PERSIST_S` at mission time ``t``."""
+        gap = np.asarray(reference, dtype=float) - self.position_enu()
+        distance = float(np.hypot(*gap))
+        east, north, _ = ned_to_enu(*self.vehicle.velocity_ned)
+        closing = float(np.dot([east, north], gap) / distance) if distance > 0 else 0.0
+        if distance <= FOLLOW_DISTANCE_M or closing >= FOLLOW_CLOSING_M_S:
+            self.not_following_since = None
+            return
+        if self.not_following_since is None:
+            self.not_following_since = t
+        lasting = t - self.not_following_since
+        if lasting >= FOLLOW_PERSIST_S and t - self.follow_warned_at >= FOLLOW_WARN_EVERY_S:
+            self.follow_warned_at = t
+            self.follow_warnings += 1
+            self.say(
+                f"warning: the vehicle is not moving towards its reference: {distance:.1f} m "
+                f"away, closing at {closing:.1f} m/s for {lasting:.1f} s (vehicle in "
+                f"{self.mode_name()})",
+                warning="not following",
+                distance_m=distance,
+                closing_m_s=closing,
+            )
+
+    async def start_offboard(self, offboard: OffboardAsync, first: tuple[Any, Any]) -> None:
+        """Start offboard, streaming the ``first`` setpoint, until the vehicle reports
+        OFFBOARD (`OFFBOARD_ATTEMPTS` tries of `OFFBOARD_CONFIRM_S`).
+
+        Raises:
+            FlightError: it never entered OFFBOARD (offboard stopped, the vehicle holds).
+        """
+        period = 1.0 / self.options.setpoint_rate_hz
+        why = ""
+        for attempt in range(1, OFFBOARD_ATTEMPTS + 1):
+            try:
+                await offboard.start()
+                why = (
+                    f"it accepted offboard but did not enter OFFBOARD within "
+                    f"{OFFBOARD_CONFIRM_S:g} s"
+                )
+            except OffboardError as err:
+                why = plain_error(err, "switching to offboard", "it stays where it is")
+                why = why[0].lower() + why[1:].rstrip(".")
+            deadline = time.monotonic() + OFFBOARD_CONFIRM_S
+            while time.monotonic() < deadline and not self.stop.is_set():
+                if self.vehicle.flight_mode == FlightMode.OFFBOARD:
+                    return
+                with contextlib.suppress(OffboardError):
+                    await offboard.set_position_velocity_ned(*first)
+                await asyncio.sleep(period)
+            if self.vehicle.flight_mode == FlightMode.OFFBOARD:
+                return
+            if self.stop.is_set():
+                break
+            if attempt < OFFBOARD_ATTEMPTS:
+                self.say(
+                    f"offboard not entered ({why}; the vehicle reports {self.mode_name()}); "
+                    f"starting it again ({attempt + 1} of {OFFBOARD_ATTEMPTS})"
+                )
+        with contextlib.suppress(OffboardError):
+            await offboard.stop()
+        if self.stop.is_set():
+            raise FlightError("interrupted before the mission started", reason="interrupted")
+        raise FlightError(
+            f"the vehicle did not enter OFFBOARD in {OFFBOARD_ATTEMPTS} attempts of "
+            f"{OFFBOARD_CONFIRM_S:g} s ({why}; it reports {self.mode_name()}); offboard "
+            "stopped, the vehicle was told to hold; look at its messages in a ground station",
+            reason="offboard refused",
+        )
+
     async def fly(self, system: Any) -> tuple[str, str]:
         """Stream setpoints until a safe end; returns its ``(reason, detail)``."""
         options, controller = self.options, self.controller
         offboard = OffboardAsync(system)
         home = self.home = self.position_enu()
         n, e, d = enu_to_ned(home[0], home[1], options.altitude_m)
-        await offboard.set_position_velocity_ned(
-            PositionNedYaw(n, e, d, 0.0), VelocityNedYaw(0.0, 0.0, 0.0, 0.0)
-        )
-        try:
-            await offboard.start()
-        except OffboardError as err:
-            return "offboard error", plain_error(
-                err, "switching to offboard", f"the vehicle stays in {self.mode_name()}"
-            )
+        first = (PositionNedYaw(n, e, d, 0.0), VelocityNedYaw(0.0, 0.0, 0.0, 0.0))
+        await offboard.set_position_velocity_ned(*first)
+        await self.start_offboard(offboard, first)
         self.unix0 = time.time()  # first: the intake's thread stamps lines once mono0 is set
         self.mono0 = time.monotonic()
         self.say(
-            "offboard started: mission time 0",
+            MISSION_START_MESSAGE,
             unix_time=self.unix0,
             home=home,
             altitude_m=options.altitude_m,
@@ -458,6 +640,11 @@ class _Flight:
                 return "interrupted", "Ctrl-C or a termination signal"
             if self.log_failed():
                 return "log failure", f"the mission log stopped ({self.log.stopped})"
+            if self.vehicle.flight_mode != FlightMode.OFFBOARD:
+                return PILOT_TOOK_OVER, (
+                    f"the vehicle left OFFBOARD for {self.mode_name()} at mission time "
+                    f"{t:.1f} s (a pilot or a failsafe took over)"
+                )
             link_age = now - self.vehicle.received_at
             if link_age > options.lost_link_s:
                 return "lost link", (
@@ -476,6 +663,7 @@ class _Flight:
                     f"setpoint {distance:.0f} m from home, beyond --max-distance "
                     f"{options.max_distance_m:g} m"
                 )
+            self.check_following(t, setpoint.reference)
             x, y = setpoint.reference
             n, e, d = enu_to_ned(x, y, options.altitude_m)
             v_n, v_e, _ = enu_to_ned(setpoint.velocity[0], setpoint.velocity[1], 0.0)
@@ -506,6 +694,8 @@ class _Flight:
             self.controller.finish(self.mission_time() or 0.0, reason)
         if self.home is not None:
             self.on_status(self.status(self.mission_time(), self.home))
+        if reason == PILOT_TOOK_OVER:
+            return self.leave_to_pilot(detail)
         rtl = self.options.return_to_launch
         action, wanted = (
             ("return to launch", (FlightMode.RETURN_TO_LAUNCH, FlightMode.LAND))
@@ -552,6 +742,26 @@ class _Flight:
             else error or f"the vehicle did not confirm {action}; it last reported {mode}"
         )
         return action, mode if confirmed else None
+
+    def leave_to_pilot(self, detail: str) -> tuple[str, str | None]:
+        """End a mission whose vehicle left OFFBOARD: command nothing (the pilot or the
+        failsafe has it; MAVSDK stops its setpoints by itself), log and say so."""
+        mode = getattr(self.vehicle.flight_mode, "name", None)
+        self.log.write(
+            {
+                "kind": "safety",
+                "t": self.mission_time(),
+                "reason": PILOT_TOOK_OVER,
+                "detail": detail,
+                "action": LEFT_TO_PILOT,
+                "confirmed": mode,
+            }
+        )
+        self.on_message(
+            f"the pilot took over: {detail}; hptrack commands nothing more, the vehicle is "
+            f"in {mode}"
+        )
+        return LEFT_TO_PILOT, mode
 
 
 async def read_limits(system: Any) -> VehicleLimits:
@@ -606,10 +816,12 @@ async def fly_mission(
             except MavsdkConnectionError as err:
                 raise InputError(connection_problem(options.connection, str(err))) from None
             system = await _first_autopilot(mavsdk, flight)
+            await _lock_ids(flight, system)
             telemetry = TelemetryAsync(system)
             tasks = [
-                asyncio.create_task(flight.watch_position(telemetry)),
+                asyncio.create_task(flight.watch_position(MavlinkDirectAsync(system))),
                 asyncio.create_task(flight.watch_state(telemetry)),
+                asyncio.create_task(flight.watch_other_systems(mavsdk)),
             ]
             if not await flight.wait_for(
                 lambda: flight.vehicle.position_ned is not None, options.connect_timeout_s
@@ -652,6 +864,15 @@ async def fly_mission(
                 raise FlightError(
                     "the vehicle is not armed and in the air; pass --takeoff to arm and take off"
                 )
+            elif not await flight.wait_for(
+                lambda: flight.vehicle.flight_mode != FlightMode.TAKEOFF,
+                options.takeoff_timeout_s,
+            ):
+                raise FlightError(
+                    f"the vehicle was still taking off after {options.takeoff_timeout_s:g} s; "
+                    "offboard never started",
+                    reason="take-off failed",
+                )
             if not await flight.wait_for(
                 lambda: (
                     controller.first_plan(0.0) is not None or controller.planner_error is not None
@@ -684,10 +905,17 @@ async def fly_mission(
                 )
             try:
                 reason, detail = await flight.fly(system)
+            except FlightError:
+                raise
             except Exception:  # noqa: BLE001 - end safely first, report after
                 flight.error = traceback.format_exc()
                 reason, detail = "controller error", flight.error.strip().splitlines()[-1]
             flown_s = flight.mission_time()
+            flight.say(
+                f"odometry refused from other MAVLink sources: {sum(flight.foreign.values())}",
+                show=False,
+                foreign_odometry=flight.foreign,
+            )
             flight.say(
                 f"{flight.sent} setpoints sent in {flown_s:.1f} s, largest gap "
                 f"{flight.max_gap_s:.3f} s",
@@ -699,6 +927,10 @@ async def fly_mission(
             intake.stop()
             _say_intake(flight, intake, drops_before, kernel_drops(sock))
             action, confirmed = await flight.safe_end(system, reason, detail)
+        except FlightError as err:
+            if flight.controller is not None:  # the log has its header: say why it ends
+                log.write({"kind": ABORT, "t": None, "reason": err.reason, "detail": str(err)})
+            raise
         finally:
             if intake is not None:
                 intake.stop()
@@ -724,6 +956,26 @@ async def fly_mission(
         intake.counts(),
         log.stopped,
         flight.error,
+        dict(flight.foreign),
+        flight.follow_warnings,
+    )
+
+
+async def _lock_ids(flight: _Flight, system: Any) -> None:
+    """Lock the flight onto the system id of the autopilot found and its autopilot
+    component (`AUTOPILOT_COMPONENT` when it has several)."""
+    flight.system_id = await system.get_system_id()
+    components = await system.component_ids()
+    flight.component_id = (
+        AUTOPILOT_COMPONENT
+        if AUTOPILOT_COMPONENT in components or not components
+        else components[0]
+    )
+    flight.say(
+        f"flying MAVLink system {flight.system_id} component {flight.component_id} "
+        "(odometry from any other source is refused)",
+        system_id=flight.system_id,
+        component_id=flight.component_id,
     )
 
 
@@ -801,17 +1053,59 @@ async def _take_off(flight: _Flight, system: Any) -> None:
             plain_error(err, step, f"the vehicle reports {flight.mode_name()}")
         ) from None
 
-    def high_enough() -> bool:
-        return -flight.vehicle.position_ned[2] >= options.altitude_m - 0.5
-
-    if not await flight.wait_for(high_enough, options.takeoff_timeout_s):
-        with contextlib.suppress(ActionError):
-            await action.hold()
+    failure = await _watch_take_off(flight)
+    if failure is not None:
+        if failure.endswith("(switched to hold)"):
+            with contextlib.suppress(ActionError):
+                await action.hold()
         raise FlightError(
-            f"the vehicle did not reach {options.altitude_m:g} m within "
-            f"{options.takeoff_timeout_s:g} s (switched to hold)"
+            f"the take-off failed: {failure}; offboard never started",
+            reason="interrupted" if failure.startswith("interrupted") else "take-off failed",
         )
-    flight.say(f"at {options.altitude_m:g} m")
+    flight.say(
+        f"take-off done: {flight.mode_name()} at {flight.height_m():.1f} m",
+        altitude_m=flight.height_m(),
+    )
+
+
+async def _watch_take_off(flight: _Flight) -> str | None:
+    """Wait for the take-off's end (TAKEOFF -> HOLD within `TAKEOFF_DONE_TOLERANCE_M` of the
+    altitude); ``None`` when it is done, else why it failed, at once: a disarm, a mode other
+    than HOLD after TAKEOFF (or HOLD too low), no position for ``lost_link_s``, Ctrl-C, or the
+    take-off timeout."""
+    options, vehicle = flight.options, flight.vehicle
+    began = time.monotonic()
+    armed_seen = taking_off_seen = False
+    while True:
+        now = time.monotonic()
+        height = flight.height_m()
+        mode = vehicle.flight_mode
+        where = (
+            f"at {height:.1f} m of {options.altitude_m:g} m, {now - began:.1f} s into the take-off"
+        )
+        armed_seen = armed_seen or vehicle.armed
+        taking_off_seen = taking_off_seen or mode == FlightMode.TAKEOFF
+        high = height >= options.altitude_m - TAKEOFF_DONE_TOLERANCE_M
+        if flight.stop.is_set():
+            return f"interrupted {where} (switched to hold)"
+        if not vehicle.armed and (armed_seen or taking_off_seen):
+            return f"the vehicle disarmed {where}"
+        if now - vehicle.received_at > options.lost_link_s:
+            return (
+                f"no position from the vehicle for {now - vehicle.received_at:.1f} s {where} "
+                "(its sensors or the link failed)"
+            )
+        if mode == FlightMode.HOLD and high:
+            return None
+        if taking_off_seen and mode != FlightMode.TAKEOFF:
+            return f"the vehicle left TAKEOFF for {flight.mode_name()} {where}"
+        if now - began > options.takeoff_timeout_s:
+            return (
+                f"the vehicle did not end its take-off at {options.altitude_m:g} m within "
+                f"{options.takeoff_timeout_s:g} s (it reports {flight.mode_name()} {where}) "
+                "(switched to hold)"
+            )
+        await asyncio.sleep(0.05)
 
 
 def run_flight(

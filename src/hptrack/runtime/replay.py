@@ -30,7 +30,15 @@ from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation,
 from hptrack.registry import make_planner, planner_settings
 from hptrack.runtime.controller import MissionController
 from hptrack.runtime.inputs import ControllerSettings
-from hptrack.runtime.log import MissionLog, check_record, log_array, log_float, read_log
+from hptrack.runtime.log import (
+    ABORT,
+    MISSION_START_MESSAGE,
+    MissionLog,
+    check_record,
+    log_array,
+    log_float,
+    read_log,
+)
 from hptrack.runtime.worker import ReplayRunner
 from hptrack.scenario.io import format_validation_error, parse_scenario
 from hptrack.sim.record import EpisodeRecord
@@ -41,6 +49,19 @@ MAX_REPLAY_ITERATIONS = 10**8
 plans): minutes to hours at 1e4 to 1e5 a second; a log that asks for more is refused."""
 
 
+def never_started(header: dict, records: list[dict]) -> str | None:
+    """Why the flight of a ``fly`` log never started its mission (its ``abort`` record's
+    detail, or that the log ends before), or ``None`` when it started (or is no flight)."""
+    if header.get("source") != "fly" or any(
+        r.get("kind") == "status" and r.get("message") == MISSION_START_MESSAGE for r in records
+    ):
+        return None
+    abort = next((r for r in records if r.get("kind") == ABORT), None)
+    if abort is None:
+        return "the log ends before offboard started"
+    return str(abort.get("detail") or abort.get("reason"))
+
+
 @dataclass
 class ReplayResult:
     """A replayed mission.
@@ -48,7 +69,9 @@ class ReplayResult:
     Attributes:
         controller: the replaying controller (its own log in memory).
         record: the mission (true target states where the log has them, else NaN).
-        summary: JSON-ready summary (``U``, the logged ``U``, mismatches, counts, ends).
+        summary: JSON-ready summary (``U``, the logged ``U``, mismatches, counts, ends;
+            ``never_started`` says why a flight's mission never started, and its ``U``,
+            ``ended_by`` and ``time`` are then ``None``).
     """
 
     controller: MissionController
@@ -263,8 +286,11 @@ def replay_log(path: str | Path) -> ReplayResult:
         "adapter": [
             {k: v for k, v in r.items() if k not in ("seq",)}
             for r in adapter
-            if r["kind"] == "safety"
+            if r["kind"] in ("safety", ABORT)
         ],
     }
+    summary["never_started"] = never_started(header, records)
+    if summary["never_started"] is not None:
+        summary.update(U=None, ended_by=None, time=None, per_target_logdet={})
     controller.close()
     return ReplayResult(controller, record, summary)

@@ -21,7 +21,16 @@ Flight as PX4 flies it:
   the airframe's top speed (the SIH quadrotor's drag holds it near 10 m/s at its 45 degree tilt
   limit), reached with at most ``MPC_ACC_HOR``;
 * offboard is refused unless setpoints are streaming, and left for HOLD when they stop for
-  ``COM_OF_LOSS_T`` (PX4's offboard-loss failsafe, also when ``hptrack fly`` dies).
+  ``COM_OF_LOSS_T`` (PX4's offboard-loss failsafe, also when ``hptrack fly`` dies);
+* the take-off ends by a TAKEOFF -> HOLD mode change (PX4's AUTO_LOITER, which MAVSDK reports as
+  HOLD); offboard entered during the take-off is overridden by that change, as PX4 was seen
+  doing;
+* it speaks as MAVLink system ``system_id``, component ``component_id``, and obeys only
+  commands and setpoints addressed to it (so two stubs can share a port).
+
+`Misbehaviour` makes it misbehave as a real vehicle may: refuse offboard (deny it, or accept
+it and stay where it is), leave offboard after a while (a pilot switching to POSCTL or HOLD),
+or fail its take-off (disarm, lose its sensors, or be switched out of TAKEOFF).
 
 Every mode change is reported through ``on_event`` (the CLI prints it). The scenario's targets
 are simulated and detected by `TargetDetector`, the component
@@ -80,8 +89,6 @@ accelerations m/s^2, gains 1/s, times s, altitudes m, tilt degrees."""
 AIRFRAME_SPEED_M_S = 10.0
 """Top horizontal speed of PX4's SIH quadrotor (its drag at the 45 degree tilt limit), m/s."""
 
-_SYSTEM_ID = 1
-_COMPONENT_ID = mavlink.MAV_COMP_ID_AUTOPILOT1
 _SENSORS = (
     mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
     | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
@@ -97,6 +104,52 @@ _STREAM_S = 0.5
 """Offboard is accepted only with a setpoint received within this, s (PX4 wants >= 2 Hz)."""
 _VELOCITY_IGNORED = 0b111000
 """``type_mask`` bits of ``SET_POSITION_TARGET_LOCAL_NED`` that ignore vx, vy, vz."""
+
+
+OFFBOARD_REFUSALS = ("deny", "ignore")
+"""How `Misbehaviour` refuses offboard: ``"deny"`` (``COMMAND_ACK`` denied) or
+``"ignore"`` (accepted, and the mode stays)."""
+LEAVE_OFFBOARD_MODES = ("posctl", "hold")
+"""The modes `Misbehaviour` leaves offboard for (a pilot's switch)."""
+TAKEOFF_FAILURES = ("disarm", "sensors", "posctl")
+"""How `Misbehaviour` fails a take-off: ``"disarm"`` (the motors stop, it falls),
+``"sensors"`` (its estimator fails: no more local position, health bits cleared, and PX4's
+failsafe LAND), ``"posctl"`` (a pilot switches to POSCTL mid-climb)."""
+
+
+@dataclass(frozen=True)
+class Misbehaviour:
+    """Switches that make the stub misbehave as a real vehicle may (all off by default).
+
+    Attributes:
+        refuse_offboard: ``None``, or how offboard is refused (`OFFBOARD_REFUSALS`).
+        leave_offboard_after_s: leave offboard this long after first entering it, s.
+        leave_offboard_to: the mode it then switches to (`LEAVE_OFFBOARD_MODES`).
+        takeoff_failure: ``None``, or how the take-off fails (`TAKEOFF_FAILURES`).
+        takeoff_failure_after_s: that long after the take-off began, s.
+    """
+
+    refuse_offboard: str | None = None
+    leave_offboard_after_s: float | None = None
+    leave_offboard_to: str = "posctl"
+    takeoff_failure: str | None = None
+    takeoff_failure_after_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        """Raises `ValueError` (one line naming the field and the value) for an unknown
+        choice or a time that is not a positive number."""
+        for name, value, allowed in (
+            ("refuse_offboard", self.refuse_offboard, (None, *OFFBOARD_REFUSALS)),
+            ("leave_offboard_to", self.leave_offboard_to, LEAVE_OFFBOARD_MODES),
+            ("takeoff_failure", self.takeoff_failure, (None, *TAKEOFF_FAILURES)),
+        ):
+            if value not in allowed:
+                choices = ", ".join(str(a) for a in allowed if a is not None)
+                raise ValueError(f"{name} {str(value)[:40]!r}: expected one of {choices}")
+        for name in ("leave_offboard_after_s", "takeoff_failure_after_s"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and 0.0 < value <= 86400.0):
+                raise ValueError(f"{name} must be a number in (0, 86400], got {value}")
 
 
 def _custom_mode(mode: str) -> int:
@@ -208,6 +261,9 @@ class VehicleSim:
         airframe_speed_m_s: the airframe's top horizontal speed, m/s.
         parameters: PX4 parameters that differ from `PX4_PARAMETERS`.
         on_event: called with one line at each mode change and failsafe.
+        system_id: its MAVLink system id (PX4's ``MAV_SYS_ID``, 1 by default).
+        component_id: its MAVLink component id (1, the autopilot's, by default).
+        misbehaviour: how it misbehaves (`Misbehaviour`; default not at all).
 
     Raises:
         InputError: a malformed or non-loopback address.
@@ -224,6 +280,9 @@ class VehicleSim:
         airframe_speed_m_s: float = AIRFRAME_SPEED_M_S,
         parameters: dict[str, float] | None = None,
         on_event: Callable[[str], None] | None = None,
+        system_id: int = 1,
+        component_id: int = mavlink.MAV_COMP_ID_AUTOPILOT1,
+        misbehaviour: Misbehaviour | None = None,
     ) -> None:
         self.scenario = scenario
         self.mission = scenario.mission_spec()
@@ -249,12 +308,18 @@ class VehicleSim:
         self._hold = self.position.copy()
         self._last_setpoint: float = -math.inf
         self._params = {**PX4_PARAMETERS, **(parameters or {})}
+        self.system_id, self.component_id = system_id, component_id
+        self.misbehaviour = misbehaviour or Misbehaviour()
+        self._takeoff_since: float | None = None  # when the take-off in progress began, s
+        self._offboard_since: float | None = None
+        self._sensors_ok = True
+        self._heartbeat_due = False
         self.stats = VehicleStats()
         self._start = time.monotonic()
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", 0))
         self._sock.setblocking(False)
-        self._mav = mavlink.MAVLink(self, srcSystem=_SYSTEM_ID, srcComponent=_COMPONENT_ID)
+        self._mav = mavlink.MAVLink(self, srcSystem=system_id, srcComponent=component_id)
         self._mav.robust_parsing = True
 
     # --- link -------------------------------------------------------------------------------
@@ -278,16 +343,50 @@ class VehicleSim:
             self.stats.modes.append((self._now(), mode))
             self._say(f"mode {mode.upper()}{f' ({why})' if why else ''}")
             if self.stats.modes[1:]:
-                self._send_heartbeat()  # as PX4 does, the new mode shows at once
+                self._heartbeat_due = True  # as PX4 does, the new mode shows at once
         if mode != self.mode:
             self._mode_since = self._now()
         self.mode = mode
+        if mode == "takeoff":
+            self._takeoff_since = self._now()
+        elif mode != "offboard":  # offboard in mid-climb leaves the take-off pending
+            self._takeoff_since = None
+        if mode == "offboard" and self._offboard_since is None:
+            self._offboard_since = self._now()
         if mode == "offboard" and self.stats.mission_started_at is None:
             self.stats.mission_started_at = self._now()
             if self._detector is not None:
                 self._detector.start(time.time())
-        if mode in ("hold", "takeoff"):
+        if mode in ("hold", "takeoff", "posctl"):
             self._hold = self.position.copy()
+
+    def _disarm(self, why: str) -> None:
+        self.armed = False
+        self._say(f"disarmed ({why})")
+        self._heartbeat_due = True  # as PX4 does, the disarm shows at once
+
+    def _misbehave(self) -> None:
+        """Apply `Misbehaviour`'s switches whose time has come."""
+        bad, now = self.misbehaviour, self._now()
+        if (
+            bad.takeoff_failure is not None
+            and self.mode == "takeoff"
+            and now - self._mode_since >= bad.takeoff_failure_after_s
+        ):
+            if bad.takeoff_failure == "disarm":
+                self._disarm("in mid-climb: motors stopped")
+            elif bad.takeoff_failure == "sensors":
+                self._sensors_ok = False
+                self._set_mode("land", "failsafe: sensors lost, no position estimate")
+            else:
+                self._set_mode("posctl", "a pilot switched to position mode")
+        if (
+            bad.leave_offboard_after_s is not None
+            and self.mode == "offboard"
+            and self._offboard_since is not None
+            and now - self._offboard_since >= bad.leave_offboard_after_s
+        ):
+            self._set_mode(bad.leave_offboard_to, "a pilot switched modes")
 
     def _receive(self) -> None:
         for _ in range(1000):
@@ -313,12 +412,19 @@ class VehicleSim:
                     if msg.type_mask & _VELOCITY_IGNORED
                     else np.array([msg.vx, msg.vy, msg.vz], dtype=float)
                 )
-                if np.all(np.isfinite(values)) and np.all(np.isfinite(velocity)):
+                if (
+                    np.all(np.isfinite(values))
+                    and np.all(np.isfinite(velocity))
+                    and msg.target_system in (0, self.system_id)
+                ):
                     self._target, self._target_velocity = values, velocity
                     self._last_setpoint = self._now()
                     self.stats.setpoint_times.append(self._last_setpoint)
         elif kind in ("COMMAND_LONG", "COMMAND_INT"):
-            if msg.target_system in (0, _SYSTEM_ID) and msg.target_component in (0, _COMPONENT_ID):
+            if msg.target_system in (0, self.system_id) and msg.target_component in (
+                0,
+                self.component_id,
+            ):
                 self._command(msg)
         elif kind == "PARAM_SET":
             name = _param_name(msg.param_id)
@@ -362,7 +468,9 @@ class VehicleSim:
             if arm and not self.armed:
                 self.stats.armed_at = self._now()
                 self._say("armed")
-            self.armed = arm
+                self.armed = True
+            elif not arm and self.armed:
+                self._disarm("commanded")
             self._ack(cmd, accepted)
         elif cmd == mavlink.MAV_CMD_DO_SET_MODE:
             mode = _mode_of(int(msg.param2), int(msg.param3))
@@ -373,6 +481,12 @@ class VehicleSim:
                 self._ack(cmd, denied)
             elif mode in ("takeoff", "offboard") and not self.armed:
                 self._ack(cmd, denied)
+            elif mode == "offboard" and self.misbehaviour.refuse_offboard == "deny":
+                self._say("offboard refused (refuse_offboard deny)")
+                self._ack(cmd, denied)
+            elif mode == "offboard" and self.misbehaviour.refuse_offboard == "ignore":
+                self._say(f"offboard accepted, but it stays in {self.mode.upper()}")
+                self._ack(cmd, accepted)
             else:
                 self._set_mode(mode, "commanded")
                 self._ack(cmd, accepted)
@@ -450,8 +564,9 @@ class VehicleSim:
 
     def _send_status(self) -> None:
         self._send_heartbeat()
+        healthy = _SENSORS if self._sensors_ok else 0
         self._mav.sys_status_send(
-            _SENSORS, _SENSORS, _SENSORS, 100, 16000, 500, 90, 0, 0, 0, 0, 0, 0
+            _SENSORS, _SENSORS, healthy, 100, 16000, 500, 90, 0, 0, 0, 0, 0, 0
         )
         landed = (
             mavlink.MAV_LANDED_STATE_IN_AIR
@@ -462,6 +577,8 @@ class VehicleSim:
         self._send_home()
 
     def _send_position(self, boot_ms: int) -> None:
+        if not self._sensors_ok:  # no estimate, no position (as PX4)
+            return
         n, e, d = self.position.tolist()
         vn, ve, vd = self.velocity.tolist()
         self._mav.local_position_ned_send(boot_ms, n, e, d, vn, ve, vd)
@@ -503,9 +620,13 @@ class VehicleSim:
         if dt <= 0.0:
             return
         p = self._params
-        if not self.armed:
-            self.velocity = np.zeros(3)
+        if not self.armed:  # on the ground it stays; in the air it falls
+            self.velocity[:2] = 0.0
+            falling = self.position[2] < self.home[2]
+            self.velocity[2] = self.velocity[2] + 9.81 * dt if falling else 0.0
+            self.position[2] = min(self.home[2], self.position[2] + self.velocity[2] * dt)
             return
+        self._misbehave()
         if self.mode == "offboard" and self._now() - self._last_setpoint > p["COM_OF_LOSS_T"]:
             self._set_mode(
                 "hold", f"offboard lost: no setpoint for {p['COM_OF_LOSS_T']:g} s, failsafe"
@@ -520,13 +641,18 @@ class VehicleSim:
         change = _limit(command - self.velocity[:2], p["MPC_ACC_HOR"] * dt)
         self.velocity[:2] += change
         # vertical: the take-off profile, else a proportional climb or descent within limits
+        takeoff_left = self.position[2] - (self.home[2] - p["MIS_TAKEOFF_ALT"])
         if self.mode == "takeoff":
             climb = self._takeoff_climb_rate()
-            if self.position[2] - (self.home[2] - p["MIS_TAKEOFF_ALT"]) < 0.05:
+            if takeoff_left < 0.05:
                 self._set_mode("hold", "take-off altitude reached")
                 climb = 0.0
             self.velocity[2] = -climb
         else:
+            if self._takeoff_since is not None and takeoff_left < 0.05:
+                # the take-off's end switches to LOITER even out of offboard
+                self._set_mode("hold", "take-off altitude reached: LOITER overrides offboard")
+                goal, feed_forward = self._goal()
             self.velocity[2] = float(
                 np.clip(goal[2] - self.position[2], -p["MPC_Z_VEL_MAX_UP"], p["MPC_Z_VEL_MAX_DN"])
             )
@@ -567,6 +693,9 @@ class VehicleSim:
                 if now >= next_status:
                     self._send_status()
                     next_status = now + 1.0
+                elif self._heartbeat_due:  # after the command's ACK, in the same loop
+                    self._send_heartbeat()
+                self._heartbeat_due = False
                 if now >= next_position:
                     self._send_position(int(now * 1000))
                     next_position = now + 1.0 / 30.0
