@@ -46,11 +46,13 @@ EXIT_ABORTED = 3
 """Exit code of a flight that could not start or ended early for safety."""
 
 
-def _controller_settings(deadline: float, stale_after: float) -> Any:
+def _controller_settings(deadline: float, stale_after: float, keep_lag: bool = True) -> Any:
     from hptrack.runtime.inputs import ControllerSettings
 
     try:
-        return ControllerSettings(planner_deadline_s=deadline, stale_odometry_s=stale_after)
+        return ControllerSettings(
+            planner_deadline_s=deadline, stale_odometry_s=stale_after, keep_lag=keep_lag
+        )
     except ValidationError as err:
         message = format_validation_error(err).replace("planner_deadline_s", "--deadline")
         raise InputError(message.replace("stale_odometry_s", "--stale-after")) from None
@@ -205,6 +207,15 @@ def fly(
     stale_after: Annotated[
         float, typer.Option(help="Hold when odometry is older than this, s.")
     ] = 1.0,
+    keep_lag: Annotated[
+        bool,
+        typer.Option(
+            "--keep-lag/--no-keep-lag",
+            help="Start each leg the vehicle's lag ahead of it, as the last leg's reference was "
+            "(PX4 flies about 0.8 of its velocity setpoint); --no-keep-lag starts every leg at "
+            "the odometry.",
+        ),
+    ] = True,
     lost_link: Annotated[
         float, typer.Option(help="End the mission after this long without telemetry, s.")
     ] = 3.0,
@@ -222,7 +233,7 @@ def fly(
     controller, detections as JSON lines over UDP, a safe end in hold (or return)."""
     check_seed(seed)
     _positive(log_max_mb, "--log-max-mb", 0.01, 1e7)
-    settings = _controller_settings(deadline, stale_after)
+    settings = _controller_settings(deadline, stale_after, keep_lag)
     if planner_entry(planner).reads_truth:
         raise InputError(
             f"--planner {planner}: it reads the true target states, which no flight has; "
@@ -415,6 +426,13 @@ def vehicle_sim(
             help="Write what the vehicle saw (setpoints, modes, detections) as JSON at exit."
         ),
     ] = None,
+    velocity_tracking: Annotated[
+        float | None,
+        typer.Option(
+            help="The share of its velocity setpoint the vehicle flies (default PX4's SIH "
+            "quadrotor's, 0.8; 1 for an ideal velocity loop)."
+        ),
+    ] = None,
 ) -> None:
     """A MAVLink vehicle stub for dry runs: a quadrotor that flies as PX4 does (take-off,
     position loop, speed and acceleration limits, offboard-loss failsafe, parameters) and
@@ -441,6 +459,7 @@ def vehicle_sim(
         gcs_url=gcs,
         parameters=parameters,
         on_event=on_event,
+        **({} if velocity_tracking is None else {"velocity_tracking": velocity_tracking}),
     )
     stop = threading.Event()
     previous = {

@@ -41,7 +41,7 @@ from hptrack.interface import InputError
 from hptrack.jsonout import json_text
 from hptrack.settings import digest_of
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS episodes (
     planner TEXT NOT NULL,
@@ -147,6 +147,7 @@ MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
     2: _migrate_2_to_3,
     3: _adding({"mcts": {"miss": "drop"}}),  # the sub-task MDP's miss rule
     4: _adding({"mcts": {"passes": "ignore"}}),  # ... and its credit of passes
+    5: _adding({"mcts": {"readmit": False}}),  # the planner's re-admission of missed targets
 }
 """Layout version -> the step that makes a database of that layout one of the next."""
 

@@ -69,6 +69,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "dwell": 0.0,
         "miss": "drop",
         "passes": "ignore",
+        "readmit": False,
     },
     "improved": {
         "backup": "max",
@@ -80,6 +81,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "dwell": 0.0,
         "miss": "drop",
         "passes": "ignore",
+        "readmit": False,
     },
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
@@ -139,6 +141,11 @@ class MctsSettings(PlannerSettings):
         passes: ``"ignore"`` (the paper): the MDP credits a sub-task with its own target
             only; ``"credit"``: also with the other targets its flight passes over
             (`hptrack.planning.subtask_mdp`).
+        readmit: with ``miss="drop"``, when no target is left to pursue and none is being
+            followed, the missed targets re-enter the action list with the beliefs the misses
+            left (predicted to now) and the planner searches again, instead of the vehicle
+            staying where it is; ``False`` (the paper): it stays. On by default in ``hptrack
+            fly``.
         threads: independent trees searched in parallel and merged (root parallelism), each
             with the effort above; 1 (the paper's single tree) unless the machine has spare
             cores.
@@ -163,6 +170,7 @@ class MctsSettings(PlannerSettings):
     dwell: DwellLength | list[DwellLength] | None = None
     miss: Literal["drop", "keep"] | None = None
     passes: Literal["ignore", "credit"] | None = None
+    readmit: bool | None = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
@@ -353,6 +361,23 @@ class HierarchicalPlanner:
             }
         )
 
+    def _search_afresh(self, observation: Observation, last_found: int | None) -> int | None:
+        """The best action of a new search, or ``None`` if no target is left or no time."""
+        if self._available.any() and observation.remaining_budget > 0:
+            return self._search(observation, last_found=last_found).best_action
+        return None
+
+    def _readmit(self, step: int) -> bool:
+        """With ``readmit``: the missed targets back in the action list at ``step``; whether
+        there were any."""
+        if not self.settings.readmit or self._available.all():
+            return False
+        self._readmitted.append(
+            {"step": step, "targets": np.flatnonzero(~self._available).tolist()}
+        )
+        self._available[:] = True
+        return True
+
     def _next(self, observation: Observation, planned: int | None, last_found: int | None) -> None:
         """Carry on after a sub-task: follow, dwell, start the planned target, or plan
         afresh."""
@@ -364,10 +389,9 @@ class HierarchicalPlanner:
         else:
             feasible = planned == last_found or self._feasible(observation, planned)
         if not feasible:
-            if self._available.any() and observation.remaining_budget > 0:
-                planned = self._search(observation, last_found=last_found).best_action
-            else:
-                planned = None
+            planned = self._search_afresh(observation, last_found)
+            if planned is None and last_found is None and self._readmit(observation.step):
+                planned = self._search_afresh(observation, last_found)
         if planned is None or (planned == last_found):
             self._follow = last_found
             self._subtask = None
@@ -396,6 +420,7 @@ class HierarchicalPlanner:
         self._stay_steps = stay_steps(mission.time_step, self.settings.dwell)
         self._log: list[dict] = []
         self._searches: list[dict] = []
+        self._readmitted: list[dict] = []
         self._next(observation, None, None)
 
     def act(self, observation: Observation) -> np.ndarray:
@@ -436,9 +461,13 @@ class HierarchicalPlanner:
 
     def episode_info(self) -> dict:
         """The sub-tasks flown (plan, estimate, outcome; a planned action ``n`` is the dwell),
-        every search's effort, the settings."""
-        return {
+        every search's effort, the settings (and, with ``readmit``, when the missed targets
+        re-entered the action list)."""
+        info = {
             "settings": self.settings.as_json(),
             "subtasks": self._log,
             "searches": self._searches,
         }
+        if self.settings.readmit:
+            info["readmitted"] = self._readmitted
+        return info
