@@ -29,6 +29,7 @@ from hptrack.cli.common import (
     check_seed,
     console,
     error_console,
+    planner_options,
     planner_settings_for,
     write_json,
 )
@@ -44,6 +45,27 @@ it exactly)."""
 
 EXIT_ABORTED = 3
 """Exit code of a flight that could not start or ended early for safety."""
+
+
+FLIGHT_MCTS_OPTIONS = {"readmit": True}
+"""``mcts`` options that ``fly`` sets unless given (or ``preset=paper`` is): a vehicle never
+idles while targets are unmeasured."""
+
+
+def flight_planner_settings(
+    planner: str, pairs: list[str] | None, iterations: int | None, time_limit: float | None
+) -> Any:
+    """The settings ``fly`` flies ``planner`` with: the ``-o`` options and effort flags, with
+    `FLY_ITERATIONS` and `FLIGHT_MCTS_OPTIONS` for ``mcts`` where they are not given."""
+    if planner == "mcts":
+        if iterations is None and time_limit is None:
+            iterations = FLY_ITERATIONS
+        given = planner_options(pairs, (planner,))[planner]
+        if given.get("preset") != "paper":
+            options = FLIGHT_MCTS_OPTIONS.items()
+            extra = [f"mcts.{k}={json.dumps(v)}" for k, v in options if k not in given]
+            pairs = [*extra, *(pairs or [])]
+    return planner_settings_for((planner,), pairs, iterations, time_limit)[planner]
 
 
 def _controller_settings(deadline: float, stale_after: float, keep_lag: bool = True) -> Any:
@@ -240,9 +262,7 @@ def fly(
             "it runs in hptrack simulate and benchmark only"
         )
     scenario = load_scenario(scenario_path)
-    if iterations is None and time_limit is None and planner == "mcts":
-        iterations = FLY_ITERATIONS
-    planner_settings = planner_settings_for((planner,), option, iterations, time_limit)[planner]
+    planner_settings = flight_planner_settings(planner, option, iterations, time_limit)
     if log_path is None:
         log_path = Path(f"hptrack-flight-{time.strftime('%Y%m%d-%H%M%S')}.jsonl")
     check_output_path(log_path, "--log")
@@ -308,9 +328,22 @@ def fly(
                 "flight": options.as_json(),
                 "vehicle_limits": limits.__dict__,
                 "scenario_agent_speed": scenario.agent.speed,
+                "warm_up_s": warm_up_s,
             },
         )
 
+    from hptrack.runtime.warm_up import warm_up_flight
+
+    on_message(
+        "compiling or loading every kernel the flight can need before arming (hptrack warm-up "
+        "does it ahead)"
+    )
+    try:
+        warm_up_s = warm_up_flight(scenario, planner, planner_settings)
+    except KeyboardInterrupt:
+        error_console.print("[bold red]error:[/] interrupted before connecting; nothing was flown")
+        sys.exit(130)
+    on_message(f"kernels ready in {warm_up_s:.1f} s")
     # the file is created at the header, once the vehicle is connected
     log = MissionLog(log_path, max_bytes=round(log_max_mb * 1e6), keep_records=False)
     try:
