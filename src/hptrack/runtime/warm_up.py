@@ -26,8 +26,9 @@ WARM_UP_SEEDS = 2
 """Missions flown per planner (each its own seed, so that finds and misses both happen)."""
 WARM_UP_BUDGET_S = 60.0
 """The warm-up's missions are at most this long, s."""
-WARM_UP_EXTRA = {"n_targets": 4, "seed": 0}
-"""The random scenario (`random_scenario`) flown besides the flight's own."""
+WARM_UP_EXTRA = (4, 0)
+"""Targets and seed of the random scenario (`random_scenario`) flown besides the flight's
+own."""
 WARM_UP_FAULTS = SimulatedFaults(planner_slow_probability=0.1, planner_slow_delay_s=1.5)
 """One call in ten slower than the default 1 s deadline: the greedy fallback flies too."""
 
@@ -40,7 +41,7 @@ def warm_up_flight(
     ``seed, seed + 1, ...``; returns the wall time it took, s."""
     started = time.perf_counter()
     short = scenario.model_copy(update={"budget": min(scenario.budget, WARM_UP_BUDGET_S)})
-    missions = [short] * WARM_UP_SEEDS + [random_scenario(**WARM_UP_EXTRA)]
+    missions = [short] * WARM_UP_SEEDS + [random_scenario(*WARM_UP_EXTRA)]
     for k, mission in enumerate(missions):
         run_simulated(mission, make_planner(planner, settings), seed + k, faults=WARM_UP_FAULTS)
     return time.perf_counter() - started
