@@ -9,7 +9,8 @@ vehicle's callbacks of the interpreter.
 kind of sub-task (pursuits, finds, misses, follows) and, through planner calls made slower than
 the deadline, the greedy fallback all run. Kernels compile per argument type, not per value,
 so these missions warm them for any scenario; in the same process they then stay in memory,
-and the compile cache (`hptrack._numba_cache`) keeps them for the next one.
+and the compile cache on disk, which every checkout of the same code shares, keeps them for
+the next one.
 """
 
 from __future__ import annotations
