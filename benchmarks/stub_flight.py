@@ -2,7 +2,8 @@
 flies 0.8 of its velocity setpoint, as PX4's SIH quadrotor does) and ``hptrack fly --takeoff
 --altitude 20`` on loopback, one variant after another. For each flight it prints, from the
 mission log and the stub's statistics: how long after reaching the take-off altitude offboard
-started, the first plan's compute time, the flown speed on straight legs (median, lowest,
+started (and how long the take-off and the warm-up before it took), the first plan's compute
+time, the flown speed on straight legs (median, lowest,
 highest; from the odometry), the sub-tasks flown and how often the pursued target changed, the
 detections accepted per target, late plans and fallbacks, and ``U``.
 
@@ -34,8 +35,8 @@ VARIANTS: dict[str, tuple[list[str], list[str]]] = {
     "no-keep-lag": (["--no-keep-lag"], []),
     "ideal-stub": (["--no-keep-lag"], ["--velocity-tracking", "1"]),
     "sharp": (["-o", "mcts.estimator=sharp", "-o", "mcts.miss=keep"], []),
-    "sharp-no-commit": (
-        ["-o", "mcts.estimator=sharp", "-o", "mcts.miss=keep", "-o", "mcts.switch_margin=0"],
+    "sharp-no-keep-lag": (
+        ["-o", "mcts.estimator=sharp", "-o", "mcts.miss=keep", "--no-keep-lag"],
         [],
     ),
 }
@@ -97,12 +98,14 @@ def subtasks(records: list[dict]) -> list[str]:
     return out
 
 
-def summary(records: list[dict], stats: dict) -> dict:
-    """The figures of one flight (module docstring)."""
+def summary(records: list[dict], header: dict) -> dict:
+    """The figures of one flight (module docstring), from its mission log."""
     status = [r for r in records if r["kind"] == "status"]
     walls = {}
     for r in status:
         message = r.get("message", "")
+        if message.startswith("taking off to "):
+            walls["takeoff"] = r["wall"]
         if message.startswith("at ") and message.endswith(" m"):
             walls["altitude"] = r["wall"]
         if message.startswith("offboard started"):
@@ -117,16 +120,14 @@ def summary(records: list[dict], stats: dict) -> dict:
     end = next((r for r in records if r["kind"] == "end"), {})
     flown = subtasks(records)
     targets = [s.split()[1] for s in flown if s != "none"]
-    modes = stats.get("modes", [])
-    takeoff = next((m["t"] for m in modes if m["mode"] == "takeoff"), None)
-    done = next(
-        (m["t"] for m in modes if m["mode"] == "hold" and takeoff and m["t"] > takeoff), None
-    )
+
+    def between(start: str, end: str) -> float | None:
+        return walls[end] - walls[start] if start in walls and end in walls else None
+
     return {
-        "offboard_after_altitude_s": (
-            walls["offboard"] - walls["altitude"] if len(walls) == 2 else None
-        ),
-        "takeoff_to_hold_s": done - takeoff if takeoff and done else None,
+        "warm_up_s": header.get("warm_up_s"),
+        "takeoff_s": between("takeoff", "altitude"),
+        "offboard_after_altitude_s": between("altitude", "offboard"),
         "first_plan_s": None if first is None else first["compute_s"],
         "straight_legs": len(speeds),
         "straight_speed_median_m_s": float(np.median(speeds)) if speeds else None,
@@ -163,8 +164,8 @@ def fly_once(
         fly = subprocess.run(command, capture_output=True, text=True, timeout=budget + 900, env=env)
     finally:
         flood.end_process(run["stub"])
-    stats = json.loads(run["stats"].read_text()) if run["stats"].exists() else {}
-    out = summary(read_log(run["log"]).records, stats)
+    log = read_log(run["log"])
+    out = summary(log.records, log.header)
     out.update(variant=variant, seed=seed, cold=cold, exit_code=fly.returncode)
     return out
 

@@ -1,6 +1,6 @@
 """``hptrack warm-up`` compiles every kernel a flight can need: after it, a new process flies
-simulated missions with faults (other seeds, finds, misses, re-admitted targets, late plans and
-the fallback, detections with their own noise) without compiling anything."""
+simulated missions with faults (other scenarios and seeds, late plans and the fallback, delayed
+and reordered detections, bad input) without compiling anything."""
 
 import os
 import subprocess
@@ -29,7 +29,13 @@ faults = SimulatedFaults(
     bad_input_rate_hz=2.0,
 )
 settings = flight_planner_settings("mcts", None, None, None)
-for scenario, seed in ((load_scenario({example!r}), 7), (random_scenario(3, seed=4), 8)):
+missions = (
+    (load_scenario({example!r}), 7),
+    (random_scenario(3, seed=4), 8),
+    (random_scenario(6, seed=9, homogeneous=True), 3),
+    (random_scenario(2, seed=1), 2),
+)
+for scenario, seed in missions:
     run_simulated(scenario, make_planner("mcts", settings), seed, faults=faults)
 print(len(compiled), sorted(set(compiled))[:5])
 """
