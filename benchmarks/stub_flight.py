@@ -81,20 +81,19 @@ def straight_leg_speeds(
 
 
 def subtasks(records: list[dict]) -> list[str]:
-    """The sub-tasks flown, in order (``"pursue p1"``, ``"follow p2"``...), from the flown
-    plans."""
+    """The sub-tasks flown, in order (``"pursue p1"``, ``"follow p1"``...), from the flown
+    plans: a new one at each change of kind, target or start step."""
     out: list[str] = []
+    last = None
     for r in records:
         if r["kind"] == "plan" and r["status"] == "ok" and not r.get("after_end"):
-            sub = r["subtask"]
-            name = (
-                "none"
-                if sub is None
-                else next(f"{k} {sub[k]}" for k in ("target", "follow", "dwell") if k in sub)
-            )
-            name = name.replace("target", "pursue")
-            if not out or out[-1] != name:
-                out.append(name)
+            sub = r["subtask"] or {}
+            kind = next((k for k in ("target", "follow", "dwell") if k in sub), None)
+            key = (kind, sub.get(kind), sub.get("since_step"))
+            if key != last:
+                name = "none" if kind is None else f"{kind} {sub[kind]}"
+                out.append(name.replace("target", "pursue"))
+                last = key
     return out
 
 
