@@ -39,6 +39,11 @@ VARIANTS: dict[str, tuple[list[str], list[str]]] = {
         ["-o", "mcts.estimator=sharp", "-o", "mcts.miss=keep", "--no-keep-lag"],
         [],
     ),
+    "sharp-commit": (["-o", "mcts.estimator=sharp", "-o", "mcts.miss=keep", "-o", "commit=5"], []),
+    "sharp-no-keep-lag-commit": (
+        ["-o", "mcts.estimator=sharp", "-o", "mcts.miss=keep", "-o", "commit=5", "--no-keep-lag"],
+        [],
+    ),
 }
 """``fly`` and ``vehicle-sim`` arguments of each variant."""
 

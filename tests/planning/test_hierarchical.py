@@ -82,6 +82,7 @@ def test_mcts_beats_greedy_on_twenty_three_target_scenarios():
         ("root_split", "uneven", "option root_split must be 'even' or 'weighted', got 'uneven'"),
         ("dwell", -5, "planner 'mcts': option dwell must be >= 0, got -5"),
         ("readmit", "maybe", "planner 'mcts': option readmit must be true or false, got 'maybe'"),
+        ("commit", -1, "planner 'mcts': option commit must be >= 0, got -1"),
     ],
 )
 def test_invalid_settings_are_refused_naming_planner_option_and_value(option, value, message):
@@ -108,7 +109,7 @@ def test_settings_default_effort_and_identity():
     assert (timed.iterations, timed.time_limit) == (None, 1.0)
     assert default.preset == "improved"  # the default since the quality-against-time benchmark
     assert default.canonical() == (
-        '{"backup":"max","common_rollouts":false,"dwell":0.0,"estimator":"paper",'
+        '{"backup":"max","commit":0.0,"common_rollouts":false,"dwell":0.0,"estimator":"paper",'
         '"exploration":0.5,"iterations":100000,"max_weight":1.0,"miss":"drop",'
         '"passes":"ignore","readmit":false,"rollout":"uniform","rollout_epsilon":0.1,'
         '"root_split":"even","threads":1,"time_limit":null}'
@@ -359,6 +360,33 @@ def test_after_both_misses_the_paper_stays_and_readmit_pursues_the_missed_target
     assert third["start_step"] == step and third["target_index"] in (0, 1)
     assert len(_still_steps(again)) < 10  # only at the end, when no pursuit fits the budget
     assert again.detections.any() and again.uncertainty < paper.uncertainty
+
+
+def test_commit_pursues_a_target_missed_early_again_instead_of_switching():
+    scenario = _wrong_priors()
+    free = run_episode(scenario, mcts(iterations=500, estimator="sharp", miss="keep"))
+    log = free.info["subtasks"]
+    switches = [
+        (a, b)
+        for a, b in zip(log, log[1:], strict=False)
+        if a.get("outcome") == "missed" and b.get("start_step") == a["end_step"]
+    ]
+    early = [
+        (a, b)
+        for a, b in switches
+        if (a["end_step"] - a["start_step"]) * 0.5 < 10.0
+        and b.get("target_index") not in (None, a["target_index"])
+    ]
+    assert early  # without commitment the plan switches targets right after early misses
+    held = run_episode(scenario, mcts(iterations=500, estimator="sharp", miss="keep", commit=10.0))
+    log = held.info["subtasks"]
+    for a, b in zip(log, log[1:], strict=False):
+        if a.get("outcome") == "missed" and b.get("start_step") == a["end_step"]:
+            if (a["end_step"] - a["start_step"]) * 0.5 < 10.0 and "target_index" in b:
+                switch = a["plan_after_miss"] not in (None, a["target_index"])
+                assert b["target_index"] == a["target_index"]
+                assert b.get("committed", False) == switch
+    assert any(e.get("committed") for e in log)
 
 
 def test_credited_passes_fly_end_to_end_and_name_themselves():

@@ -147,7 +147,7 @@ MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
     2: _migrate_2_to_3,
     3: _adding({"mcts": {"miss": "drop"}}),  # the sub-task MDP's miss rule
     4: _adding({"mcts": {"passes": "ignore"}}),  # ... and its credit of passes
-    5: _adding({"mcts": {"readmit": False}}),  # the planner's re-admission of missed targets
+    5: _adding({"mcts": {"readmit": False, "commit": 0.0}}),  # re-admission, commitment
 }
 """Layout version -> the step that makes a database of that layout one of the next."""
 

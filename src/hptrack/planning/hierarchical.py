@@ -70,6 +70,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "miss": "drop",
         "passes": "ignore",
         "readmit": False,
+        "commit": 0.0,
     },
     "improved": {
         "backup": "max",
@@ -82,6 +83,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "miss": "drop",
         "passes": "ignore",
         "readmit": False,
+        "commit": 0.0,
     },
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
@@ -146,6 +148,10 @@ class MctsSettings(PlannerSettings):
             left (predicted to now) and the planner searches again, instead of the vehicle
             staying where it is; ``False`` (the paper): it stays. On by default in ``hptrack
             fly``.
+        commit: s; with ``miss="keep"``, a pursuit that misses sooner than this after it began
+            is followed by a new pursuit of the same target, not by the planned switch to
+            another (hysteresis against a target change at every tick when the vehicle cannot
+            keep up with its plan); 0 (the paper): the plan is followed.
         threads: independent trees searched in parallel and merged (root parallelism), each
             with the effort above; 1 (the paper's single tree) unless the machine has spare
             cores.
@@ -171,6 +177,7 @@ class MctsSettings(PlannerSettings):
     miss: Literal["drop", "keep"] | None = None
     passes: Literal["ignore", "credit"] | None = None
     readmit: bool | None = None
+    commit: Annotated[float | None, Field(ge=0.0, le=1e6)] = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
@@ -378,6 +385,17 @@ class HierarchicalPlanner:
         self._available[:] = True
         return True
 
+    def _committed(
+        self, observation: Observation, subtask: CoverageSubtask, planned: int | None
+    ) -> bool:
+        """With ``commit``: whether a pursuit missed sooner than ``commit`` s after it began
+        goes on with its own target (still in the action list) instead of the planned switch
+        to another."""
+        target = subtask.target_index
+        switch = planned is not None and planned != target and planned < self._mission.n_targets
+        begun_s = (observation.step - subtask.start_step) * self._mission.time_step
+        return switch and bool(self._available[target]) and begun_s < self.settings.commit - 1e-9
+
     def _next(self, observation: Observation, planned: int | None, last_found: int | None) -> None:
         """Carry on after a sub-task: follow, dwell, start the planned target, or plan
         afresh."""
@@ -432,9 +450,11 @@ class HierarchicalPlanner:
             self._log[-1].update(outcome="found" if found else "missed", end_step=observation.step)
             if not found and self.settings.miss == "drop":
                 self._available[target] = False
-            self._next(
-                observation, self._plan[0] if found else self._plan[1], target if found else None
-            )
+            planned = self._plan[0] if found else self._plan[1]
+            committed = not found and self._committed(observation, subtask, planned)
+            self._next(observation, target if committed else planned, target if found else None)
+            if committed:
+                self._log[-1]["committed"] = True
         if self._dwell_end is not None and observation.step >= self._dwell_end:
             target = self._follow
             self._follow = self._dwell_end = None
