@@ -267,14 +267,17 @@ def test_the_reference_leaves_the_odometry_at_the_planned_speed(flight_scenario)
     assert [r["speed_m_s"] for r in ctrl.log.records if r["kind"] == "plan"] == [8.0, 8.0]
 
 
+class East(Recorder):
+    """Steps one step (4 m) east of the agent."""
+
+    def act(self, observation):
+        return observation.agent_position + np.array([4.0, 0.0])
+
+
 @pytest.mark.parametrize("keep_lag", [True, False])
 def test_a_new_leg_keeps_the_vehicles_lag_up_to_one_step_or_starts_at_the_odometry(
     flight_scenario, keep_lag
 ):
-    class East(Recorder):
-        def act(self, observation):
-            return observation.agent_position + np.array([4.0, 0.0])
-
     ctrl, _ = _controller(flight_scenario, planner=East(), keep_lag=keep_lag)
     ctrl.odometry(0.0, [0.0, 0.0])
     ctrl.setpoint(0.0)  # the reference reaches (4, 0) at 0.5 s; the vehicle lags
@@ -290,10 +293,6 @@ def test_a_new_leg_keeps_the_vehicles_lag_up_to_one_step_or_starts_at_the_odomet
 
 
 def test_a_leg_after_a_hold_starts_at_the_odometry(flight_scenario):
-    class East(Recorder):
-        def act(self, observation):
-            return observation.agent_position + np.array([4.0, 0.0])
-
     ctrl, _ = _controller(flight_scenario, planner=East())
     ctrl.odometry(0.0, [0.0, 0.0])
     ctrl.setpoint(0.0)
