@@ -38,10 +38,13 @@ def free_udp_port() -> int:
         return sock.getsockname()[1]
 
 
-def start_dry_run(workdir: Path, example: Path, budget: float, stub_args=()) -> dict:
+def start_dry_run(
+    workdir: Path, example: Path, budget: float, stub_args=(), env: dict | None = None
+) -> dict:
     """A copy of ``example`` with ``budget`` (s) in ``workdir``, free ports, and the vehicle
-    stub running; returns the scenario, the ``fly`` command (without ``--log``), the stub's
-    process, its statistics file, the log path and the detection port."""
+    stub running (with ``env`` as its environment, default this one's); returns the scenario,
+    the ``fly`` command (without ``--log``), the stub's process, its statistics file, the log
+    path and the detection port."""
     data = yaml.safe_load(example.read_text())
     data["budget"] = budget
     scenario = workdir / "flight.yaml"
@@ -66,6 +69,7 @@ def start_dry_run(workdir: Path, example: Path, budget: float, stub_args=()) -> 
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        env=env,
     )
     fly = [
         *CLI,

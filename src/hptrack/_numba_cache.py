@@ -9,6 +9,12 @@ base is ``$HPTRACK_CACHE_DIR``, else ``$NUMBA_CACHE_DIR/hptrack``, else the user
 (``~/.cache/hptrack`` on Linux), else, if that cannot be written (a read-only home), one in the
 system's temporary directory. Directories of other hashes unused for `KEEP_DAYS` are removed.
 
+Inside it, each kernel is cached under its module's folder relative to the package
+(`PackageLocator`), not under numba's hash of the folder's absolute path: every checkout or
+install of the same sources shares one cache, so a fresh clone loads what another compiled. The
+same hash means the same kernel sources (and what they import), so what one loads is what it
+would compile; numba still checks each kernel's own file by its content.
+
 ``hptrack/__init__.py`` imports this module first: numba chooses a kernel's cache directory when
 the kernel is defined. It imports no numerics: it sets ``NUMBA_CACHE_DIR`` (and
 ``HPTRACK_CACHE_DIR`` to the base, so that child processes key their own sources under the same
@@ -25,6 +31,7 @@ from __future__ import annotations
 
 import atexit
 import hashlib
+import importlib.machinery
 import logging
 import os
 import re
@@ -33,7 +40,9 @@ import stat
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
+from types import ModuleType
 
 PACKAGE = Path(__file__).parent
 KEEP_DAYS = 30.0
@@ -183,8 +192,89 @@ def cache_directory(root: Path = PACKAGE) -> Path | None:
     return base / name
 
 
+class PackageLocator:
+    """Numba's cache locator for the package's own kernels: ``NUMBA_CACHE_DIR/<the module's
+    folder relative to the package>`` (module docstring); numba asks it first (`configure`), and
+    falls back to its own locators for any other file."""
+
+    def __init__(self, py_func: object, py_file: str, directory: Path) -> None:
+        self._py_file = py_file
+        self._lineno = py_func.__code__.co_firstlineno  # type: ignore[attr-defined]
+        self._directory = directory
+
+    @classmethod
+    def from_function(cls, py_func: object, py_file: str) -> PackageLocator | None:
+        """A locator for ``py_func`` if it is defined in a file of this package and numba
+        caches in a directory, else ``None`` (numba's next locator)."""
+        base = os.environ.get("NUMBA_CACHE_DIR")
+        numba = sys.modules.get("numba")
+        if numba is not None:
+            base = numba.config.CACHE_DIR or None
+        try:
+            folder = Path(py_file).resolve().parent.relative_to(PACKAGE.resolve())
+        except (OSError, ValueError):  # not one of ours (a test's kernel, a notebook's)
+            return None
+        if not base or not Path(py_file).is_file():
+            return None
+        locator = cls(py_func, py_file, Path(base, "hptrack", *folder.parts))
+        try:
+            locator.ensure_cache_path()
+        except OSError:
+            return None
+        return locator
+
+    def ensure_cache_path(self) -> None:
+        """Create the folder (private) and check that it can be written."""
+        _make_private(self._directory)
+        with tempfile.TemporaryFile(dir=self._directory):
+            pass
+
+    def get_cache_path(self) -> str:
+        return str(self._directory)
+
+    def get_source_stamp(self) -> str:
+        """The kernel's file by content (numba's own stamp, which a copy keeps)."""
+        return hashlib.sha256(Path(self._py_file).read_bytes()).hexdigest()
+
+    def get_disambiguator(self) -> str:
+        return str(self._lineno)
+
+
+def _use_package_locator(caching: object) -> None:
+    """Put `PackageLocator` first among numba's cache locators (module
+    ``numba.core.caching``)."""
+    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl  # type: ignore[attr-defined]
+    if PackageLocator not in impl._locator_classes:
+        impl._locator_classes.insert(0, PackageLocator)
+
+
+class _AfterCachingImport:
+    """An import hook that hands ``numba.core.caching`` to `_use_package_locator` as soon as
+    numba imports it, so that ``import hptrack`` itself imports no numerics."""
+
+    name = "numba.core.caching"
+
+    def find_spec(
+        self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
+    ) -> importlib.machinery.ModuleSpec | None:
+        if fullname != self.name:
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(fullname, path)
+        if spec is None or spec.loader is None:
+            return spec
+        run = spec.loader.exec_module
+
+        def exec_module(module: ModuleType) -> None:
+            run(module)
+            _use_package_locator(module)
+
+        spec.loader.exec_module = exec_module  # type: ignore[method-assign]
+        return spec
+
+
 def configure() -> None:
-    """Point numba's cache at `cache_directory` (kernels defined from now on)."""
+    """Point numba's cache at `cache_directory` (kernels defined from now on), each kernel under
+    its folder in the package (`PackageLocator`)."""
     directory = cache_directory()
     if directory is None:
         return
@@ -192,6 +282,10 @@ def configure() -> None:
     os.environ["NUMBA_CACHE_DIR"] = str(directory)
     if "numba" in sys.modules:
         sys.modules["numba"].config.CACHE_DIR = str(directory)
+    if "numba.core.caching" in sys.modules:
+        _use_package_locator(sys.modules["numba.core.caching"])
+    elif not any(isinstance(finder, _AfterCachingImport) for finder in sys.meta_path):
+        sys.meta_path.insert(0, _AfterCachingImport())
 
 
 configure()

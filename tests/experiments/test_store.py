@@ -64,7 +64,7 @@ def test_a_layout_2_database_is_migrated_with_every_result(layout_2):
     store.close()
     assert _raw(layout_2) == before  # every result unchanged, only identities rewritten
     with sqlite3.connect(layout_2) as db:
-        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 5
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 6
     for r in rows:
         text = r.key.planner_settings
         assert _rebuilt(r.key.planner, text) == text  # a full identity, as the code builds

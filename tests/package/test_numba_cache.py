@@ -64,6 +64,38 @@ def test_an_edit_of_a_called_kernel_reaches_the_caller_in_a_new_process(scratch,
     assert edited != directory
 
 
+def test_checkouts_of_the_same_sources_share_one_cache_and_others_do_not(scratch, tmp_path):
+    cache = tmp_path / "cache"
+    clone = tmp_path / "clone" / "src" / "hptrack"  # the same sources at another path
+    shutil.copytree(scratch, clone)
+    assert _run(scratch, cache)[:2] == (11.0, 0)  # compiled
+    value, hits, source, directory = _run(clone, cache)
+    assert Path(source).parent == clone
+    assert (value, hits) == (11.0, 1)  # loaded: numba's own locator would compile again
+    nbi = {p.relative_to(directory) for p in Path(directory).rglob("*.nbi")}
+    assert {p.parent for p in nbi} == {Path("hptrack/models"), Path("hptrack/planning")}
+    (clone / "models" / "_probe_inner.py").write_text(INNER.format(value="2.0"))
+    value, hits, _, edited = _run(clone, cache)  # an edited clone: its own directory
+    assert (value, hits) == (12.0, 0) and edited != directory
+    assert _run(scratch, cache)[:2] == (11.0, 1)  # and the original still loads its own
+
+
+def test_kernels_outside_the_package_keep_numbas_own_locator(tmp_path):
+    from numba.core.caching import UserProvidedCacheLocator
+
+    def kernel():
+        return 1
+
+    outside = tmp_path / "elsewhere.py"
+    outside.write_text("")
+    assert _numba_cache.PackageLocator.from_function(kernel, str(outside)) is None
+    assert _numba_cache.PackageLocator.from_function(kernel, "<ipython-input-1>") is None
+    inside = Path(hptrack.__file__).parent / "models" / "motion.py"
+    locator = _numba_cache.PackageLocator.from_function(kernel, str(inside))
+    assert Path(locator.get_cache_path()).parts[-2:] == ("hptrack", "models")
+    assert UserProvidedCacheLocator.from_function(kernel, str(outside)) is not None
+
+
 def test_the_key_covers_the_kernel_modules_and_what_they_import_only(scratch):
     before = _numba_cache.sources_digest(scratch)
     app = scratch / "cli" / "app.py"

@@ -1,9 +1,11 @@
 """The hierarchical planner in the simulator (paper Fig. 2, Sec. IV-C-4)."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from typer.testing import CliRunner
 
 from hptrack.baselines.greedy import GreedyPlanner
@@ -12,8 +14,11 @@ from hptrack.interface import InputError
 from hptrack.planning import hierarchical, subtask_search
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.scenario import random_scenario
+from hptrack.scenario.io import parse_scenario
 from hptrack.sim.episode import run_episode
 from hptrack.subtasks import read_subtasks
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "paper-flight.yaml"
 
 
 def mcts(**options):
@@ -85,6 +90,8 @@ def test_mcts_beats_greedy_on_twenty_three_target_scenarios():
         ("max_weight", 1.5, "planner 'mcts': option max_weight must be <= 1, got 1.5"),
         ("root_split", "uneven", "option root_split must be 'even' or 'weighted', got 'uneven'"),
         ("dwell", -5, "planner 'mcts': option dwell must be >= 0, got -5"),
+        ("readmit", "maybe", "planner 'mcts': option readmit must be true or false, got 'maybe'"),
+        ("commit", -1, "planner 'mcts': option commit must be >= 0, got -1"),
     ],
 )
 def test_invalid_settings_are_refused_naming_planner_option_and_value(option, value, message):
@@ -111,10 +118,10 @@ def test_settings_default_effort_and_identity():
     assert (timed.iterations, timed.time_limit) == (None, 1.0)
     assert default.preset == "improved"  # the default since the quality-against-time benchmark
     assert default.canonical() == (
-        '{"backup":"max","common_rollouts":false,"dwell":0.0,"estimator":"paper",'
+        '{"backup":"max","commit":0.0,"common_rollouts":false,"dwell":0.0,"estimator":"paper",'
         '"exploration":0.5,"iterations":100000,"max_weight":1.0,"miss":"drop",'
-        '"passes":"ignore","rollout":"uniform","rollout_epsilon":0.1,"root_split":"even","threads":1,'
-        '"time_limit":null}'
+        '"passes":"ignore","readmit":false,"rollout":"uniform","rollout_epsilon":0.1,'
+        '"root_split":"even","threads":1,"time_limit":null}'
     )
     assert default.digest() != timed.digest()
     assert MctsSettings.from_options("mcts", default.as_json()) == default
@@ -328,6 +335,68 @@ def test_a_kept_miss_leaves_the_target_available_to_the_planner():
             again = [e for e in later if e.kind == "pursue" and e.target == entry.target]
             if miss == "drop" and not record.detections[entry.end_step :, entry.target].any():
                 assert not again
+
+
+def _wrong_priors():
+    """The paper-flight example with both targets 40 m off their priors (north and south):
+    both pursuits miss."""
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["targets"][0]["truth"] = [30.5, 49.5, 3.0, 0.1]
+    data["targets"][1]["truth"] = [29.5, -50.5, 3.0, -0.1]
+    return parse_scenario(data, "wrong priors")
+
+
+def _still_steps(record):
+    """The steps after which the agent did not move."""
+    return np.flatnonzero(np.hypot(*np.diff(record.agent_path, axis=0).T) < 1e-9)
+
+
+def test_after_both_misses_the_paper_stays_and_readmit_pursues_the_missed_targets_again():
+    scenario = _wrong_priors()
+    paper = run_episode(scenario, mcts(iterations=500))
+    first, second = paper.info["subtasks"][:2]
+    assert (first["outcome"], second["outcome"]) == ("missed", "missed")
+    # the paper's miss rule: both targets left the action list, the vehicle stays to the end
+    assert "readmitted" not in paper.info and not paper.detections.any()
+    np.testing.assert_array_equal(_still_steps(paper), np.arange(second["end_step"], 120))
+    again = run_episode(scenario, mcts(iterations=500, readmit=True))
+    assert again.info["subtasks"][:2] == paper.info["subtasks"][:2]  # the same until then
+    step = second["end_step"]
+    assert again.info["readmitted"][0] == {"step": step, "targets": [0, 1]}
+    third = again.info["subtasks"][2]
+    assert third["start_step"] == step and third["kind"] == "pursue"
+    assert third["target"] in (0, 1)
+    assert len(_still_steps(again)) < 10  # only at the end, when no pursuit fits the budget
+    assert again.detections.any() and again.uncertainty < paper.uncertainty
+
+
+def _early_misses(log):
+    """The pairs (a pursuit missed within 10 s of its start, the pursuit that followed it)."""
+    return [
+        (a, b)
+        for a, b in zip(log, log[1:], strict=False)
+        if a.get("outcome") == "missed"
+        and b["start_step"] == a["end_step"]
+        and b["kind"] == "pursue"
+        and (a["end_step"] - a["start_step"]) * 0.5 < 10.0
+    ]
+
+
+def test_commit_pursues_a_target_missed_early_again_instead_of_switching():
+    scenario = _wrong_priors()
+    free = run_episode(scenario, mcts(iterations=500, estimator="sharp", miss="keep"))
+    # without commitment the plan switches targets right after early misses
+    assert any(b["target"] != a["target"] for a, b in _early_misses(free.info["subtasks"]))
+    assert "committed" not in free.info
+    held = run_episode(scenario, mcts(iterations=500, estimator="sharp", miss="keep", commit=10.0))
+    pairs = _early_misses(held.info["subtasks"])
+    assert pairs and all(b["target"] == a["target"] for a, b in pairs)
+    switches = [
+        a["end_step"]
+        for a, _ in pairs
+        if a.get("plan_after_miss", {}).get("target", a["target"]) != a["target"]
+    ]
+    assert switches and held.info["committed"] == switches
 
 
 def test_credited_passes_fly_end_to_end_and_name_themselves():

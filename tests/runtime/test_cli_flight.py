@@ -108,12 +108,28 @@ def test_fly_without_a_vehicle_says_what_it_waits_for_then_gives_a_hint_and_no_l
     assert result.code == 3, result.out + result.err
     out = " ".join(result.out.split())
     waiting = f"waiting for an autopilot on udpin://127.0.0.1:{port} (at most 2 s; Ctrl-C stops)"
-    assert out.startswith(waiting)  # said at once, before anything else
+    # first the kernels (the vehicle waits on the ground), then at once where it waits
+    assert out.startswith("compiling or loading every kernel the flight can need before arming")
+    ready = out.index("kernels ready in")
+    assert out[ready:].split(" s ", 1)[1].startswith(waiting)
     assert "still waiting for an autopilot" in out
     err = " ".join(result.err.split())
     assert f"no autopilot found on udpin://127.0.0.1:{port} within 2 s" in err
     assert "hptrack vehicle-sim SCENARIO" in err and "PX4 SITL" in err
     assert not log.exists()  # no empty log left behind
+
+
+def test_fly_re_admits_missed_targets_unless_told_otherwise_or_flying_the_paper():
+    from hptrack.cli.flight import FLY_ITERATIONS, flight_planner_settings
+
+    flown = flight_planner_settings("mcts", None, None, None)
+    assert flown.readmit is True and flown.iterations == FLY_ITERATIONS
+    assert flown.preset == "improved" and flown.miss == "drop"
+    assert flight_planner_settings("mcts", ["readmit=false"], None, None).readmit is False
+    assert flight_planner_settings("mcts", ["mcts.readmit=false"], None, None).readmit is False
+    paper = flight_planner_settings("mcts", ["preset=paper"], 500, None)
+    assert paper.readmit is False and paper.iterations == 500
+    assert not hasattr(flight_planner_settings("greedy", None, None, None), "readmit")
 
 
 def test_the_planned_speed_is_the_vehicles_limit_only_when_asked():
@@ -192,8 +208,9 @@ def test_ctrl_c_ends_the_wait_for_the_autopilot_at_once(example_path, tmp_path):
         text=True,
     )
     try:
-        first = fly.stdout.readline()  # said before any wait
-        assert first.startswith(f"waiting for an autopilot on udpin://127.0.0.1:{port}")
+        lines = [fly.stdout.readline() for _ in range(3)]  # the kernels, then where it waits
+        assert lines[1].startswith("kernels ready in")
+        assert lines[2].startswith(f"waiting for an autopilot on udpin://127.0.0.1:{port}")
         asked = time.monotonic()
         fly.send_signal(signal.SIGINT)
         out, err = fly.communicate(timeout=30)

@@ -258,10 +258,49 @@ def test_the_reference_leaves_the_odometry_at_the_planned_speed(flight_scenario)
     sp = ctrl.setpoint(0.25)
     np.testing.assert_allclose(sp.reference, [1.0 + 1.2, 2.0 + 1.6])
     np.testing.assert_array_equal(sp.position, [31.0, 42.0])
-    ctrl.odometry(0.5, [3.0, 4.0])  # tick 1: a new leg from this odometry
+    ctrl.odometry(0.5, [3.0, 4.0])  # tick 1: a new leg from this odometry...
     sp = ctrl.setpoint(0.5)
-    np.testing.assert_array_equal(sp.reference, [3.0, 4.0])
+    ahead = np.array([1.0 + 2.4, 2.0 + 3.2])  # ... shifted by the lag behind the last reference
+    np.testing.assert_allclose(sp.reference, ahead)
+    np.testing.assert_allclose(sp.position, [33.0, 44.0])  # the planner's waypoint
+    np.testing.assert_allclose(ctrl.setpoint(0.75).reference, ahead + [1.2, 1.6])
     assert [r["speed_m_s"] for r in ctrl.log.records if r["kind"] == "plan"] == [8.0, 8.0]
+
+
+class East(Recorder):
+    """Steps one step (4 m) east of the agent."""
+
+    def act(self, observation):
+        return observation.agent_position + np.array([4.0, 0.0])
+
+
+@pytest.mark.parametrize("keep_lag", [True, False])
+def test_a_new_leg_keeps_the_vehicles_lag_up_to_one_step_or_starts_at_the_odometry(
+    flight_scenario, keep_lag
+):
+    ctrl, _ = _controller(flight_scenario, planner=East(), keep_lag=keep_lag)
+    ctrl.odometry(0.0, [0.0, 0.0])
+    ctrl.setpoint(0.0)  # the reference reaches (4, 0) at 0.5 s; the vehicle lags
+    ctrl.odometry(0.5, [3.0, 0.0])
+    sp = ctrl.setpoint(0.5)
+    lag = 1.0 if keep_lag else 0.0
+    np.testing.assert_allclose(sp.reference, [3.0 + lag, 0.0])
+    np.testing.assert_allclose(ctrl.setpoint(0.75).reference, [5.0 + lag, 0.0])
+    np.testing.assert_allclose(ctrl.setpoint(0.75).velocity, [8.0, 0.0])
+    ctrl.odometry(1.0, [-3.0, 0.0])  # far behind: at most one step (4 m) is kept
+    sp = ctrl.setpoint(1.0)
+    np.testing.assert_allclose(sp.reference, [-3.0 + (4.0 if keep_lag else 0.0), 0.0])
+
+
+def test_a_leg_after_a_hold_starts_at_the_odometry(flight_scenario):
+    ctrl, _ = _controller(flight_scenario, planner=East())
+    ctrl.odometry(0.0, [0.0, 0.0])
+    ctrl.setpoint(0.0)
+    assert ctrl.setpoint(1.2).hold  # no odometry for 1.2 s: stale, hold
+    ctrl.odometry(1.3, [1.0, 0.0])
+    sp = ctrl.setpoint(1.5)  # tick 3 flies again, from the odometry
+    assert not sp.hold
+    np.testing.assert_allclose(sp.reference, [1.0, 0.0])
 
 
 def test_a_short_leg_stops_at_its_waypoint(flight_scenario):

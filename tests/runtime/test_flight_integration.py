@@ -48,6 +48,7 @@ _start_dry_run = _FLOOD.start_dry_run
 _end = _FLOOD.end_process
 _wait_for_offboard = _FLOOD.wait_for_offboard
 CLI = _FLOOD.CLI
+_straight_leg_speeds = _benchmark("stub_flight").straight_leg_speeds
 
 
 @pytest.fixture
@@ -87,33 +88,6 @@ def _records(path, kind):
     return [r for r in read_log(path).records if r["kind"] == kind]
 
 
-def _straight_leg_speeds(records, min_run_s=3.0, heading_tolerance_deg=3.0):
-    """``(planned, flown)`` speeds (m/s) between consecutive plans that continue a straight run
-    of at least ``min_run_s`` at full planned speed (the leg at least one step long, its heading
-    within the tolerance of the run's), flown speed from the odometry."""
-    odometry = np.array(
-        [[r["t"], *r["position"]] for r in records if r["kind"] == "odometry" and r["accepted"]]
-    )
-    ticks = {r["k"]: r for r in records if r["kind"] == "tick"}
-    plans = [r for r in records if r["kind"] == "plan" and r["status"] == "ok"]
-    out = []
-    run_start, run_heading = None, None
-    for plan, following in zip(plans, plans[1:], strict=False):
-        leg = np.asarray(plan["waypoint"]) - np.asarray(ticks[plan["k"]]["agent"])
-        heading = np.degrees(np.arctan2(leg[1], leg[0]))
-        full = np.hypot(*leg) >= plan["speed_m_s"] * 0.5
-        if not full or run_heading is None or abs(heading - run_heading) > heading_tolerance_deg:
-            run_start, run_heading = (plan["t"], heading) if full else (None, None)
-            continue
-        if plan["t"] - run_start < min_run_s:
-            continue
-        inside = odometry[(odometry[:, 0] >= plan["t"]) & (odometry[:, 0] <= following["t"])]
-        if len(inside) >= 2:
-            flown = np.hypot(*(inside[-1, 1:] - inside[0, 1:])) / (inside[-1, 0] - inside[0, 0])
-            out.append((plan["speed_m_s"], float(flown)))
-    return out
-
-
 def test_a_dry_run_plans_before_offboard_flies_the_planned_speed_ends_in_hold_and_replays(
     long_dry_run, tmp_path
 ):
@@ -147,11 +121,14 @@ def test_a_dry_run_plans_before_offboard_flies_the_planned_speed_ends_in_hold_an
     assert "waiting for the first plan" not in modes and "fallback" not in modes
     assert not _records(log, "late")
 
-    # flown speed within 10 % of the planned 8 m/s on straight legs
+    # on the PX4-like stub (0.8 of its velocity setpoint), the flown speed on straight legs is
+    # the planned 8 m/s within 10 % (the median); no leg is slower by more than 10 %, and none
+    # faster by more than 15 % (catching up with the lag of the acceleration from rest)
     straight = _straight_leg_speeds(records)
     assert len(straight) >= 3, straight
-    for planned, flown in straight:
-        assert flown == pytest.approx(planned, rel=0.10), straight
+    flown = np.array([f / p for p, f in straight])
+    assert np.median(flown) == pytest.approx(1.0, abs=0.10), straight
+    assert flown.min() >= 0.90 and flown.max() <= 1.15, straight
 
     # at least one target detected and its belief updated
     accepted = [r for r in _records(log, "detection") if r["accepted"]]

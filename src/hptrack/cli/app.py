@@ -335,7 +335,7 @@ def list_planners() -> None:
 
 
 def _register_commands() -> None:
-    from hptrack.cli import animate, benchmark, coverage, examples, flight, learn
+    from hptrack.cli import animate, benchmark, coverage, examples, flight, learn, warm_up
 
     animate.register(app)
     benchmark.register(app)
@@ -343,6 +343,7 @@ def _register_commands() -> None:
     examples.register(app)
     flight.register(app)
     learn.register(app)
+    warm_up.register(app)
 
 
 _register_commands()

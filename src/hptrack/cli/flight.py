@@ -29,6 +29,7 @@ from hptrack.cli.common import (
     check_seed,
     console,
     error_console,
+    planner_options,
     planner_settings_for,
     write_json,
 )
@@ -50,11 +51,34 @@ EXIT_PILOT = 4
 took over)."""
 
 
-def _controller_settings(deadline: float, stale_after: float) -> Any:
+FLIGHT_MCTS_OPTIONS = {"readmit": True}
+"""``mcts`` options that ``fly`` sets unless given (or ``preset=paper`` is): a vehicle never
+idles while targets are unmeasured."""
+
+
+def flight_planner_settings(
+    planner: str, pairs: list[str] | None, iterations: int | None, time_limit: float | None
+) -> Any:
+    """The settings ``fly`` flies ``planner`` with: the ``-o`` options and effort flags, with
+    `FLY_ITERATIONS` and `FLIGHT_MCTS_OPTIONS` for ``mcts`` where they are not given."""
+    if planner == "mcts":
+        if iterations is None and time_limit is None:
+            iterations = FLY_ITERATIONS
+        given = planner_options(pairs, (planner,))[planner]
+        if given.get("preset") != "paper":
+            options = FLIGHT_MCTS_OPTIONS.items()
+            extra = [f"mcts.{k}={json.dumps(v)}" for k, v in options if k not in given]
+            pairs = [*extra, *(pairs or [])]
+    return planner_settings_for((planner,), pairs, iterations, time_limit)[planner]
+
+
+def _controller_settings(deadline: float, stale_after: float, keep_lag: bool = True) -> Any:
     from hptrack.runtime.inputs import ControllerSettings
 
     try:
-        return ControllerSettings(planner_deadline_s=deadline, stale_odometry_s=stale_after)
+        return ControllerSettings(
+            planner_deadline_s=deadline, stale_odometry_s=stale_after, keep_lag=keep_lag
+        )
     except ValidationError as err:
         message = format_validation_error(err).replace("planner_deadline_s", "--deadline")
         raise InputError(message.replace("stale_odometry_s", "--stale-after")) from None
@@ -211,6 +235,15 @@ def fly(
     stale_after: Annotated[
         float, typer.Option(help="Hold when odometry is older than this, s.")
     ] = 1.0,
+    keep_lag: Annotated[
+        bool,
+        typer.Option(
+            "--keep-lag/--no-keep-lag",
+            help="Start each leg the vehicle's lag ahead of it, as the last leg's reference was "
+            "(PX4 flies about 0.8 of its velocity setpoint); --no-keep-lag starts every leg at "
+            "the odometry.",
+        ),
+    ] = True,
     lost_link: Annotated[
         float, typer.Option(help="End the mission after this long without telemetry, s.")
     ] = 3.0,
@@ -228,16 +261,14 @@ def fly(
     controller, detections as JSON lines over UDP, a safe end in hold (or return)."""
     check_seed(seed)
     _positive(log_max_mb, "--log-max-mb", 0.01, 1e7)
-    settings = _controller_settings(deadline, stale_after)
+    settings = _controller_settings(deadline, stale_after, keep_lag)
     if planner_entry(planner).reads_truth:
         raise InputError(
             f"--planner {planner}: it reads the true target states, which no flight has; "
             "it runs in hptrack simulate and benchmark only"
         )
     scenario = load_scenario(scenario_path)
-    if iterations is None and time_limit is None and planner == "mcts":
-        iterations = FLY_ITERATIONS
-    planner_settings = planner_settings_for((planner,), option, iterations, time_limit)[planner]
+    planner_settings = flight_planner_settings(planner, option, iterations, time_limit)
     if log_path is None:
         log_path = Path(f"hptrack-flight-{time.strftime('%Y%m%d-%H%M%S')}.jsonl")
     check_output_path(log_path, "--log")
@@ -304,9 +335,22 @@ def fly(
                 "flight": options.as_json(),
                 "vehicle_limits": limits.__dict__,
                 "scenario_agent_speed": scenario.agent.speed,
+                "warm_up_s": warm_up_s,
             },
         )
 
+    from hptrack.runtime.warm_up import warm_up_flight
+
+    on_message(
+        "compiling or loading every kernel the flight can need before arming (hptrack warm-up "
+        "does it ahead)"
+    )
+    try:
+        warm_up_s = warm_up_flight(scenario, planner, planner_settings)
+    except KeyboardInterrupt:
+        error_console.print("[bold red]error:[/] interrupted before connecting; nothing was flown")
+        sys.exit(130)
+    on_message(f"kernels ready in {warm_up_s:.1f} s")
     # the file is created at the header, once the vehicle is connected
     log = MissionLog(log_path, max_bytes=round(log_max_mb * 1e6), keep_records=False)
     try:
@@ -467,6 +511,13 @@ def vehicle_sim(
     takeoff_failure_after: Annotated[
         float, typer.Option(help="That long after the take-off began, s.")
     ] = 2.0,
+    velocity_tracking: Annotated[
+        float | None,
+        typer.Option(
+            help="The share of its velocity setpoint the vehicle flies (default PX4's SIH "
+            "quadrotor's, 0.8; 1 for an ideal velocity loop)."
+        ),
+    ] = None,
 ) -> None:
     """A MAVLink vehicle stub for dry runs: a quadrotor that flies as PX4 does (take-off,
     position loop, speed and acceleration limits, offboard-loss failsafe, parameters) and
@@ -508,6 +559,7 @@ def vehicle_sim(
         on_event=on_event,
         system_id=system_id,
         misbehaviour=misbehaviour,
+        **({} if velocity_tracking is None else {"velocity_tracking": velocity_tracking}),
     )
     stop = threading.Event()
     previous = {

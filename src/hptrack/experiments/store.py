@@ -42,7 +42,7 @@ from hptrack.jsonout import json_text
 from hptrack.settings import digest_of
 from hptrack.sim.record import EpisodeRow
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS episodes (
     planner TEXT NOT NULL,
@@ -148,6 +148,7 @@ MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
     2: _migrate_2_to_3,
     3: _adding({"mcts": {"miss": "drop"}}),  # the sub-task MDP's miss rule
     4: _adding({"mcts": {"passes": "ignore"}}),  # ... and its credit of passes
+    5: _adding({"mcts": {"readmit": False, "commit": 0.0}}),  # re-admission, commitment
 }
 """Layout version -> the step that makes a database of that layout one of the next."""
 

@@ -70,6 +70,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         "dwell": 0.0,
         "miss": "drop",
         "passes": "ignore",
+        "readmit": False,
+        "commit": 0.0,
     },
     "improved": {
         "backup": "max",
@@ -81,6 +83,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         "dwell": 0.0,
         "miss": "drop",
         "passes": "ignore",
+        "readmit": False,
+        "commit": 0.0,
     },
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
@@ -140,6 +144,15 @@ class MctsSettings(PlannerSettings):
         passes: ``"ignore"`` (the paper): the MDP credits a sub-task with its own target
             only; ``"credit"``: also with the other targets its flight passes over
             (`hptrack.planning.subtask_mdp`).
+        readmit: with ``miss="drop"``, when no target is left to pursue and none is being
+            followed, the missed targets re-enter the action list with the beliefs the misses
+            left (predicted to now) and the planner searches again, instead of the vehicle
+            staying where it is; ``False`` (the paper): it stays. On by default in ``hptrack
+            fly``.
+        commit: s; with ``miss="keep"``, a pursuit that misses sooner than this after it began
+            is followed by a new pursuit of the same target, not by the planned switch to
+            another (hysteresis against a target change at every tick when the vehicle cannot
+            keep up with its plan); 0 (the paper): the plan is followed.
         threads: independent trees searched in parallel and merged (root parallelism), each
             with the effort above; 1 (the paper's single tree) unless the machine has spare
             cores.
@@ -164,6 +177,8 @@ class MctsSettings(PlannerSettings):
     dwell: DwellLength | list[DwellLength] | None = None
     miss: Literal["drop", "keep"] | None = None
     passes: Literal["ignore", "credit"] | None = None
+    readmit: bool | None = None
+    commit: Annotated[float | None, Field(ge=0.0, le=1e6)] = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
@@ -316,16 +331,43 @@ class HierarchicalPlanner:
         after_find = self._table.action(self._plan[0], action.target)
         self._log.append(replace(flight.record, after_find=after_find, after_miss=after_miss))
 
+    def _search_afresh(self, observation: Observation, last_found: int | None) -> int | None:
+        """The best action of a new search, or ``None`` if no target is left or no time."""
+        if self._available.any() and observation.remaining_budget > 0:
+            return self._search(observation, last_found=last_found).best_action
+        return None
+
+    def _readmit(self, step: int) -> bool:
+        """With ``readmit``: the missed targets back in the action list at ``step``; whether
+        there were any."""
+        if not self.settings.readmit or self._available.all():
+            return False
+        self._readmitted.append(
+            {"step": step, "targets": np.flatnonzero(~self._available).tolist()}
+        )
+        self._available[:] = True
+        return True
+
+    def _committed(self, observation: Observation, missed: Subtask, planned: int | None) -> bool:
+        """With ``commit``: whether the pursuit ``missed``, ended sooner than ``commit`` s after
+        it began, goes on with its own target (still in the action list) instead of the planned
+        switch to another target."""
+        target = missed.target
+        assert target is not None  # a pursuit's
+        switch = planned is not None and planned != target and planned < self._mission.n_targets
+        begun_steps = observation.step - missed.start_step
+        commit_steps = self.settings.commit / self._mission.time_step
+        return switch and bool(self._available[target]) and begun_steps < commit_steps
+
     def _next(self, observation: Observation, planned: int | None, last_found: int | None) -> None:
         """Carry on after a sub-task: follow, dwell, start the planned target, or plan
         afresh."""
         if planned is None or not feasible(
             self._table, planned, self._mission, observation, self._available, last_found
         ):
-            if self._available.any() and observation.remaining_budget > 0:
-                planned = self._search(observation, last_found=last_found).best_action
-            else:
-                planned = None
+            planned = self._search_afresh(observation, last_found)
+            if planned is None and last_found is None and self._readmit(observation.step):
+                planned = self._search_afresh(observation, last_found)
         self._start(observation, planned, last_found)
 
     # --- Planner protocol ----------------------------------------------------------------
@@ -345,6 +387,8 @@ class HierarchicalPlanner:
         self._plan: tuple[int | None, int | None] = (None, None)
         self._log: list[Subtask] = []
         self._searches: list[dict] = []
+        self._readmitted: list[dict] = []
+        self._commitments: list[int] = []
         self._next(observation, None, None)
 
     def act(self, observation: Observation) -> np.ndarray:
@@ -361,6 +405,9 @@ class HierarchicalPlanner:
                 if not found and self.settings.miss == "drop":
                     self._available[target] = False
                 planned = self._plan[0] if found else self._plan[1]
+                if not found and self._committed(observation, self._log[-1], planned):
+                    self._commitments.append(observation.step)
+                    planned = target
                 self._next(observation, planned, target if found else None)
             else:
                 self._log[-1] = self._log[-1].ended(observation.step)
@@ -378,9 +425,16 @@ class HierarchicalPlanner:
 
     def episode_info(self) -> dict:
         """The sub-tasks flown (`hptrack.subtasks.Subtask.to_json`: action, estimate,
-        outcome, the actions planned after it), every search's effort, the settings."""
-        return {
+        outcome, the actions planned after it), every search's effort, the settings (and, with
+        ``readmit``, when the missed targets re-entered the action list; with ``commit``, the
+        steps at which a missed pursuit was followed by its own target instead of a switch)."""
+        info = {
             "settings": self.settings.as_json(),
             "subtasks": [entry.to_json() for entry in self._log],
             "searches": self._searches,
         }
+        if self.settings.readmit:
+            info["readmitted"] = self._readmitted
+        if self.settings.commit > 0.0:
+            info["committed"] = self._commitments
+        return info

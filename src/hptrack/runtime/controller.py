@@ -23,7 +23,9 @@ runs, further ticks are skipped. A call that is not back within the deadline is 
 and replaced at once by a fallback decision (greedy on the current beliefs), decided again at
 each tick until the planner answers; the late plan is logged, not flown. A call that fails holds
 the vehicle where it is until a later call succeeds. Each decision is flown as a `Leg`
-from the odometry of the moment it arrives, at the planned speed.
+from the odometry of the moment it arrives, at the planned speed, shifted by the vehicle's lag
+behind the reference it was flying (``keep_lag``), so that the lag a position loop needs to fly
+the planned speed is not lost at every decision.
 
 Bad input changes nothing; it is counted and logged with its reason: non-finite or malformed
 values, an unknown target id, an event before the start or after the end of the mission, a
@@ -73,6 +75,9 @@ from hptrack.runtime.worker import (
 )
 from hptrack.scenario.model import Scenario
 from hptrack.sim.record import EpisodeRecord
+
+FLYING = ("tracking", "fallback")
+"""The setpoint modes that fly a leg (the others hold)."""
 
 
 def plan_json(plan: CurrentPlan | None, target_ids: tuple[str, ...]) -> dict[str, Any] | None:
@@ -377,7 +382,7 @@ class MissionController:
             mode, detail = "fallback", "the planner is late: flying a greedy decision"
         else:
             mode, detail = "tracking", "flying the planner's waypoint"
-        hold = mode not in ("tracking", "fallback")
+        hold = mode not in FLYING
         if mode != self._mode:
             if self._odom is not None:
                 self._hold_at = self._odom[1].copy()
@@ -401,10 +406,15 @@ class MissionController:
         return Setpoint(self._waypoint.copy(), False, mode, detail, reference, velocity)
 
     def _fly(self, waypoint: np.ndarray, t: float) -> None:
-        """Make ``waypoint`` the decision flown from the latest odometry at time ``t``."""
+        """Make ``waypoint`` the decision flown from the latest odometry at time ``t``: a leg
+        shifted by the vehicle's lag behind the reference it was flying (`Leg.lag`), unless the
+        settings say otherwise or the vehicle was holding."""
         self._waypoint = waypoint
         start = self._hold_at if self._odom is None else self._odom[1]
-        self._leg = Leg(start.copy(), t, waypoint.copy(), self.mission.agent_speed)
+        lag = np.zeros(2)
+        if self.settings.keep_lag and self._leg is not None and self._mode in FLYING:
+            lag = self._leg.lag(t, start, self.mission.step_length)
+        self._leg = Leg(start + lag, t, waypoint + lag, self.mission.agent_speed)
 
     def _fall_back(self, t: float, why: str) -> None:
         """The fallback's decision on the beliefs at ``t`` from the latest odometry, flown at

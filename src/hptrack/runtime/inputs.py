@@ -39,6 +39,10 @@ class ControllerSettings(BaseModel):
         max_speed_factor: odometry implying a speed above this times the agent's speed is a
             jump and is refused.
         jump_slack_m: distance allowed on top of that speed (position noise), m.
+        keep_lag: a new decision's leg keeps the vehicle's lag behind the reference it was
+            flying (at most one step, ``v_a tau``), so that a position loop that flies less than
+            its velocity setpoint (PX4 flies about 0.8 of it) still flies the planned speed;
+            ``False``: every leg starts from the odometry.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
@@ -49,6 +53,7 @@ class ControllerSettings(BaseModel):
     planner_deadline_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 1.0
     max_speed_factor: Annotated[float, Field(ge=1.0, le=100.0)] = 2.0
     jump_slack_m: Annotated[float, Field(ge=0.0, le=1e4)] = 3.0
+    keep_lag: bool = True
 
 
 Problem = tuple[str, str]

@@ -17,9 +17,10 @@ Flight as PX4 flies it:
   ``MPC_TKO_SPEED`` over ``MPC_TKO_RAMP_T`` and slows in the last metres; then HOLD;
 * horizontal motion (offboard, hold, return): PX4's position loop, a commanded velocity
   ``v_ff + MPC_XY_P (p_sp - p)`` (``v_ff`` the setpoint's velocity when it carries one; the
-  approach no faster than a stop at the setpoint allows), capped at ``MPC_XY_VEL_MAX`` and at
-  the airframe's top speed (the SIH quadrotor's drag holds it near 10 m/s at its 45 degree tilt
-  limit), reached with at most ``MPC_ACC_HOR``;
+  approach no faster than a stop at the setpoint allows), capped at ``MPC_XY_VEL_MAX``; the
+  airframe flies `PX4_VELOCITY_TRACKING` (0.8) of that command, as the SIH quadrotor does, and
+  at most its top speed (its drag holds it near 10 m/s at its 45 degree tilt limit), reached
+  with at most ``MPC_ACC_HOR``; vertical commands are flown at the same share;
 * offboard is refused unless setpoints are streaming, and left for HOLD when they stop for
   ``COM_OF_LOSS_T`` (PX4's offboard-loss failsafe, also when ``hptrack fly`` dies);
 * the take-off ends by a TAKEOFF -> HOLD mode change (PX4's AUTO_LOITER, which MAVSDK reports as
@@ -54,6 +55,7 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from hptrack.interface import InputError
 from hptrack.runtime.frames import enu_to_ned, ned_to_enu
 from hptrack.runtime.network import udp_address
 from hptrack.runtime.targets import TargetDetector
@@ -88,6 +90,11 @@ accelerations m/s^2, gains 1/s, times s, altitudes m, tilt degrees."""
 
 AIRFRAME_SPEED_M_S = 10.0
 """Top horizontal speed of PX4's SIH quadrotor (its drag at the 45 degree tilt limit), m/s."""
+
+PX4_VELOCITY_TRACKING = 0.8
+"""The share of its velocity setpoint that PX4's SIH quadrotor flies in steady flight: about
+6.3-6.5 m/s on straight legs while PX4's own velocity setpoint was 8.1-8.5 m/s (PX4 main of
+early 2025); 1 is an ideal velocity loop."""
 
 _SENSORS = (
     mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
@@ -259,6 +266,8 @@ class VehicleSim:
         gcs_url: a second telemetry link, ``udpout://127.0.0.1:PORT`` (PX4's ground-station
             port is 14550), or ``None``.
         airframe_speed_m_s: the airframe's top horizontal speed, m/s.
+        velocity_tracking: the share of the commanded velocity the airframe flies (default
+            PX4's `PX4_VELOCITY_TRACKING`; 1 for an ideal velocity loop).
         parameters: PX4 parameters that differ from `PX4_PARAMETERS`.
         on_event: called with one line at each mode change and failsafe.
         system_id: its MAVLink system id (PX4's ``MAV_SYS_ID``, 1 by default).
@@ -280,10 +289,16 @@ class VehicleSim:
         airframe_speed_m_s: float = AIRFRAME_SPEED_M_S,
         parameters: dict[str, float] | None = None,
         on_event: Callable[[str], None] | None = None,
+        velocity_tracking: float = PX4_VELOCITY_TRACKING,
         system_id: int = 1,
         component_id: int = mavlink.MAV_COMP_ID_AUTOPILOT1,
         misbehaviour: Misbehaviour | None = None,
     ) -> None:
+        if not 0.0 < velocity_tracking <= 1.0:
+            raise InputError(
+                f"--velocity-tracking {velocity_tracking!r}: must be in (0, 1] (the share of "
+                "the commanded velocity the airframe flies)"
+            )
         self.scenario = scenario
         self.mission = scenario.mission_spec()
         self._links = [udp_address(mavlink_url, "--mavlink", loopback_only=True)]
@@ -295,6 +310,7 @@ class VehicleSim:
             self._detector = TargetDetector(scenario, detections_url, seed)
         self._rate = detection_rate_hz or 1.0 / self.mission.time_step
         self._airframe_speed = float(airframe_speed_m_s)
+        self._tracking = float(velocity_tracking)
         self._on_event = on_event or (lambda text: None)
         x, y = scenario.agent.position
         self.home = np.array(enu_to_ned(x, y, 0.0))
@@ -635,10 +651,10 @@ class VehicleSim:
         command = feed_forward[:2] + _approach(
             goal[:2] - self.position[:2], p["MPC_XY_P"], p["MPC_ACC_HOR"]
         )
-        command = _limit(command, min(p["MPC_XY_VEL_MAX"], self._airframe_speed))
+        flown = _limit(self._tracking * _limit(command, p["MPC_XY_VEL_MAX"]), self._airframe_speed)
         if self.mode == "takeoff":
-            command = np.zeros(2)
-        change = _limit(command - self.velocity[:2], p["MPC_ACC_HOR"] * dt)
+            flown = np.zeros(2)
+        change = _limit(flown - self.velocity[:2], p["MPC_ACC_HOR"] * dt)
         self.velocity[:2] += change
         # vertical: the take-off profile, else a proportional climb or descent within limits
         takeoff_left = self.position[2] - (self.home[2] - p["MIS_TAKEOFF_ALT"])
@@ -647,13 +663,13 @@ class VehicleSim:
             if takeoff_left < 0.05:
                 self._set_mode("hold", "take-off altitude reached")
                 climb = 0.0
-            self.velocity[2] = -climb
+            self.velocity[2] = -self._tracking * climb
         else:
             if self._takeoff_since is not None and takeoff_left < 0.05:
                 # the take-off's end switches to LOITER even out of offboard
                 self._set_mode("hold", "take-off altitude reached: LOITER overrides offboard")
                 goal, feed_forward = self._goal()
-            self.velocity[2] = float(
+            self.velocity[2] = self._tracking * float(
                 np.clip(goal[2] - self.position[2], -p["MPC_Z_VEL_MAX_UP"], p["MPC_Z_VEL_MAX_DN"])
             )
         self.position += self.velocity * dt
