@@ -107,7 +107,7 @@ def test_the_stub_arms_takes_off_flies_offboard_and_detects(flight_scenario):
         assert _heartbeat(gcs).base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         assert gcs.command(mavlink.MAV_CMD_NAV_TAKEOFF) == mavlink.MAV_RESULT_ACCEPTED
         # the take-off is over (TAKEOFF -> HOLD within 0.05 m): offboard now is not overridden
-        gcs.wait(lambda m: m.get_type() == "LOCAL_POSITION_NED" and m.z < -2.45, seconds=5.0)
+        gcs.wait(lambda m: m.get_type() == "LOCAL_POSITION_NED" and m.z < -2.45, seconds=10.0)
         gcs.mav.param_request_read_send(1, 1, b"MPC_XY_VEL_MAX", -1)
         param = gcs.wait(lambda m: m.get_type() == "PARAM_VALUE")
         assert (param.param_id, param.param_value) == ("MPC_XY_VEL_MAX", 12.0)
