@@ -23,9 +23,10 @@ from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
+from hptrack.models.belief_motion import BeliefMotion
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import Mission, mission_record
-from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
+from hptrack.models.motion import ProcessNoiseForm
 
 DEFAULT_MEASUREMENT_NOISE = 10.0
 """Default ``R = 10 I`` m^2 (sigma = 3.16 m per axis); the paper does not state ``R``."""
@@ -104,6 +105,9 @@ class MissionSpec:
         process_noise_form: which per-step ``Q`` (`hptrack.models.motion`).
         process_noise: ``(n,)`` per-target noise intensities ``q``, m^2/s^3.
         target_ids: the targets' names.
+        belief_motion: how the beliefs assume the targets move, a registered part of
+            `hptrack.models.belief_motion`; ``None``: constant velocity with
+            ``process_noise_form``.
     """
 
     time_step: float = 0.5
@@ -114,6 +118,7 @@ class MissionSpec:
     process_noise_form: ProcessNoiseForm = "continuous"
     process_noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     target_ids: tuple[str, ...] = ()
+    belief_motion: tuple | None = None
     record: Mission = field(init=False, repr=False)
     """The mission's constants as the compiled kernels take them (built and validated once,
     with the spec)."""
@@ -129,6 +134,7 @@ class MissionSpec:
             self.measurement_noise,
             self.process_noise,
             self.process_noise_form == "continuous",
+            self.belief_motion,
         )
         object.__setattr__(self, "measurement_noise", record.measurement_noise)
         object.__setattr__(self, "process_noise", record.process_noise)
@@ -155,9 +161,9 @@ class MissionSpec:
         return len(self.target_ids)
 
     @property
-    def motion(self) -> ConstantVelocityModel:
-        """The target motion model (``F``, ``Q`` form)."""
-        return ConstantVelocityModel(self.time_step, self.process_noise_form)
+    def motion(self) -> BeliefMotion:
+        """The beliefs' motion model (its numpy face)."""
+        return BeliefMotion(self.time_step, self.record.motion)
 
     @property
     def sensor(self) -> PositionMeasurementModel:

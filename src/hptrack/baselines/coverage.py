@@ -10,7 +10,6 @@ from pydantic import Field
 
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation, Subtask
-from hptrack.models.motion import predicted_positions
 from hptrack.settings import PlannerSettings
 
 
@@ -61,7 +60,9 @@ class CoveragePlanner:
         i = self._index
         if observation.detected[i]:
             self._close(observation, "found")
-            return predicted_positions(observation.means[i], self._mission.time_step)
+            return self._mission.motion.mean_positions(
+                observation.means[i], [self._mission.time_step]
+            )[0]
         if self._subtask is not None and self._subtask.done(observation):
             self._close(observation, "missed")
         if self._subtask is None:

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Literal
 import numba
 import numpy as np
 
+from hptrack.models.belief_motion import BeliefMotion
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.measurement import update_covariance
 from hptrack.models.mission import follow_tables, predict_covariance_on
@@ -54,10 +55,13 @@ CostKind = Literal["difference", "sum"]
 ``log det`` after each step, summed over the steps (original ARVI / A* papers)."""
 
 
-def mean_positions(means: np.ndarray, time_step: float, n_sub_steps: int) -> np.ndarray:
-    """Open-loop predicted mean positions ``(n_sub_steps + 1, n, 2)`` at sub-steps ``0..S``, m."""
-    t = time_step * np.arange(n_sub_steps + 1)
-    return predicted_positions(means[None, :, :], t[:, None])
+def mean_positions(means: np.ndarray, motion: BeliefMotion, n_sub_steps: int) -> np.ndarray:
+    """Open-loop predicted mean positions ``(n_sub_steps + 1, n, 2)`` at sub-steps ``0..S``
+    by the beliefs' ``motion``, m."""
+    t = motion.time_step * np.arange(n_sub_steps + 1)
+    if motion.straight:
+        return predicted_positions(means[None, :, :], t[:, None])
+    return np.stack([motion.mean_positions(m, t) for m in means], axis=1)
 
 
 @numba.njit(cache=True)

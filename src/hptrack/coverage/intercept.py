@@ -9,6 +9,12 @@ first be reached. With ``d = mean - agent`` the intercept time ``t`` is the smal
 
 whose only non-negative root exists for every ``d`` when ``|v_hat| < v_a``.
 
+Under a belief motion whose mean does not move in a straight line (random walk,
+Ornstein-Uhlenbeck: `hptrack.models.belief_motion`) the mean's path ``m(t)`` is the motion's
+prediction, its speed never above ``|v_hat|``, so ``|m(t) - agent| - v_a t`` falls strictly
+from ``|d|`` and is negative from ``|d| / (v_a - |v_hat|)`` on: its one root is found by
+bisection on that bracket (`path_intercept_time`). The agent flies straight to ``m(n tau)``.
+
 Time-step convention (shared by the sub-task, the tree search and the validation experiment):
 the simulator moves in whole steps of ``tau``, so the intercept takes ``n = ceil(t / tau)`` steps
 (with a 1e-9 slack against round-off). The agent flies straight at full speed towards the point
@@ -27,7 +33,17 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from hptrack.models.mission import STEP_TOLERANCE
+from hptrack.models.mission import (
+    STEP_TOLERANCE,
+    Mission,
+    mean_position_on,
+    mean_state_on,
+    moves_straight_on,
+)
+
+BISECTION_ROUNDS = 200
+"""Most halvings of the bracket of a curved intercept (`path_intercept_time`); it stops
+earlier at machine precision."""
 
 
 @numba.njit(cache=True)
@@ -109,6 +125,69 @@ def approach_step(
     return speed * tau * dx / length - vel_x * tau, speed * tau * dy / length - vel_y * tau
 
 
+@numba.njit(cache=True)
+def path_intercept_time(mission, agent_x, agent_y, mean, elapsed):
+    """Smallest ``t >= 0`` (s) with ``|m(elapsed + t) - agent| = v_a t`` for the mission's
+    predicted mean path ``m`` of the belief mean ``mean`` ``(4,)`` (module docstring), by
+    bisection; ``inf`` when the mean is not slower than the agent."""
+    x, y, vx, vy = mean_state_on(mission, mean, elapsed)
+    speed = mission.speed
+    slack = speed - math.hypot(vx, vy)
+    if slack <= 0.0:
+        return math.inf
+    distance = math.hypot(x - agent_x, y - agent_y)
+    if distance == 0.0:
+        return 0.0
+    lo, hi = 0.0, distance / slack
+    for _ in range(BISECTION_ROUNDS):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        mx, my = mean_position_on(mission, mean, elapsed + mid)
+        if math.hypot(mx - agent_x, my - agent_y) > speed * mid:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+@numba.njit(cache=True)
+def intercept_steps_on(mission, agent_x, agent_y, mean, elapsed):
+    """`intercept_steps` for the belief mean ``mean`` ``(4,)`` predicted ``elapsed`` s ahead
+    by the mission's motion (the closed form when it moves straight, else
+    `path_intercept_time`)."""
+    x, y, vx, vy = mean_state_on(mission, mean, elapsed)
+    tau, radius = mission.time_step, mission.footprint_radius
+    if moves_straight_on(mission):
+        return intercept_steps(agent_x, agent_y, x, y, vx, vy, mission.speed, tau, radius)
+    dx = x - agent_x
+    dy = y - agent_y
+    if dx * dx + dy * dy <= radius * radius:
+        return 0
+    t = path_intercept_time(mission, agent_x, agent_y, mean, elapsed)
+    if math.isinf(t):
+        return -1
+    return int(math.ceil(t / tau - STEP_TOLERANCE))
+
+
+@numba.njit(cache=True)
+def approach_step_on(mission, agent_x, agent_y, mean, elapsed, steps):
+    """`approach_step` for the belief mean ``mean`` predicted ``elapsed`` s ahead: the agent's
+    mean displacement per step relative to the predicted mean over an intercept flight of
+    ``steps`` steps, m (constant when the mean moves straight)."""
+    x, y, vx, vy = mean_state_on(mission, mean, elapsed)
+    tau = mission.time_step
+    if moves_straight_on(mission):
+        return approach_step(agent_x, agent_y, x, y, vx, vy, mission.speed, tau, steps)
+    if steps <= 0:
+        return 0.0, 0.0
+    ex, ey = mean_position_on(mission, mean, elapsed + steps * tau)
+    dx, dy = ex - agent_x, ey - agent_y
+    length = math.hypot(dx, dy)
+    step = mission.speed * tau
+    return step * dx / length - (ex - x) / steps, step * dy / length - (ey - y) / steps
+
+
 @dataclass(frozen=True, eq=False)
 class Intercept:
     """A planned intercept flight.
@@ -175,6 +254,43 @@ def plan_intercept(
     t = intercept_time(agent[0], agent[1], mean[0], mean[1], velocity[0], velocity[1], speed)
     steps = math.ceil(t / time_step - STEP_TOLERANCE)
     return Intercept(t, steps, mean + velocity * steps * time_step, time_step)
+
+
+def plan_intercept_on(agent_position: np.ndarray, mean: np.ndarray, mission: Mission) -> Intercept:
+    """`plan_intercept` of the belief mean ``mean`` ``(4,)`` moving by the ``mission``
+    record's motion (the closed form when it moves straight).
+
+    Raises:
+        ValueError: as `plan_intercept`.
+    """
+    mean = np.asarray(mean, dtype=float)
+    tau, diameter = mission.time_step, 2.0 * mission.footprint_radius
+    if bool(_moves_straight(mission)):
+        return plan_intercept(agent_position, mean[:2], mean[2:], mission.speed, tau, diameter)
+    agent = _finite_vector("agent_position", agent_position)
+    _finite_vector("mean_position", mean[:2])
+    target_speed = float(np.hypot(*_finite_vector("mean_velocity", mean[2:])))
+    if target_speed >= mission.speed:
+        raise ValueError(
+            f"the target's estimated speed {target_speed:g} m/s is not below the "
+            f"agent speed {mission.speed:g} m/s: the belief mean cannot be intercepted"
+        )
+    if np.hypot(*(mean[:2] - agent)) <= mission.footprint_radius:
+        return Intercept(0.0, 0, agent, tau)
+    t = float(path_intercept_time(mission, agent[0], agent[1], mean, 0.0))
+    steps = math.ceil(t / tau - STEP_TOLERANCE)
+    start = np.array(_mean_position(mission, mean, steps * tau))
+    return Intercept(t, steps, start, tau)
+
+
+@numba.njit(cache=True)
+def _moves_straight(mission):
+    return moves_straight_on(mission)
+
+
+@numba.njit(cache=True)
+def _mean_position(mission, mean, elapsed):
+    return mean_position_on(mission, mean, elapsed)
 
 
 def intercept_path(

@@ -33,11 +33,10 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from hptrack.coverage.intercept import intercept_steps
+from hptrack.coverage.intercept import intercept_steps_on
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.envs.tracking import MissionEnv, discrete_action
 from hptrack.models.mission import reachable_before_budget, steps_left
-from hptrack.models.motion import predicted_positions
 
 
 class SubtaskTrackingEnv(MissionEnv):
@@ -68,17 +67,7 @@ class SubtaskTrackingEnv(MissionEnv):
             mean = w.means[i]
             if math.hypot(mean[2], mean[3]) >= m.agent_speed:
                 continue
-            steps = intercept_steps(
-                w.agent[0],
-                w.agent[1],
-                mean[0],
-                mean[1],
-                mean[2],
-                mean[3],
-                m.agent_speed,
-                m.time_step,
-                m.sensor_radius,
-            )
+            steps = intercept_steps_on(m.record, w.agent[0], w.agent[1], mean, 0.0)
             mask[i] = reachable_before_budget(steps, left)
         if self.last_found is not None:
             mask[self.last_found] = True
@@ -94,7 +83,7 @@ class SubtaskTrackingEnv(MissionEnv):
     def _follow(self, i: int) -> None:
         w = self._world()
         while not w.done:
-            x, y = predicted_positions(w.means[i], w.mission.time_step)
+            x, y = w.mission.motion.mean_positions(w.means[i], [w.mission.time_step])[0]
             self._advance(float(x), float(y))
 
     def _cover(self, i: int) -> tuple[str, dict]:

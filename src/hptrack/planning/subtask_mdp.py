@@ -75,7 +75,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numba
 import numpy as np
 
-from hptrack.coverage.intercept import intercept_steps
+from hptrack.coverage.intercept import intercept_steps_on
 from hptrack.coverage.passes import pass_probability
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.measurement import update_covariance
@@ -84,12 +84,13 @@ from hptrack.models.mission import (
     FollowTables,
     Mission,
     follow_tables,
+    mean_position_on,
+    mean_state_on,
     position_covariance_on,
     predict_covariance_on,
     reachable_before_budget,
     steps_left,
 )
-from hptrack.models.motion import mean_position_at
 from hptrack.models.riccati import measured_covariance
 from hptrack.planning.mdp import MdpKernels, register_mdp
 from hptrack.planning.subtask_estimators import estimate_pursuit, estimator_of
@@ -421,19 +422,7 @@ def intercept_of(env, sf, a, t):
     """Whole intercept steps from the agent position ``sf`` at step ``t`` to target ``a``'s
     belief mean (``-1``: the target is faster than the agent)."""
     mission = env.mission
-    m = env.means[a]
-    x, y = mean_position_at(m, t * mission.time_step)
-    return intercept_steps(
-        sf[0],
-        sf[1],
-        x,
-        y,
-        m[2],
-        m[3],
-        mission.speed,
-        mission.time_step,
-        mission.footprint_radius,
-    )
+    return intercept_steps_on(mission, sf[0], sf[1], env.means[a], t * mission.time_step)
 
 
 @numba.njit(cache=True, inline="always")
@@ -545,7 +534,7 @@ def apply_outcome(env, state, a, outcome, payload, work):
         if not env.keep_missed:
             si[I_MASK] &= ~(np.int64(1) << a)
         si[I_LAST] = -1
-    x, y = mean_position_at(env.means[a], end * mission.time_step)
+    x, y = mean_position_on(mission, env.means[a], end * mission.time_step)
     if env.credit_passes:
         credit_passes(env, state, a, x, y, end, work[4])
     si[I_STEP] = end
@@ -569,9 +558,9 @@ def credit_passes(env, state, a, end_x, end_y, end, prior):
         if b == a:
             continue
         m = env.means[b]
-        mx, my = mean_position_at(m, t * tau)
+        mx, my, mvx, mvy = mean_state_on(mission, m, t * tau)
         # the agent relative to b's mean: from (ox, oy), at (rx, ry) m/s
-        ox, oy, rx, ry = sf[0] - mx, sf[1] - my, vx - m[2], vy - m[3]
+        ox, oy, rx, ry = sf[0] - mx, sf[1] - my, vx - mvx, vy - mvy
         speed = math.sqrt(rx * rx + ry * ry)
         if speed * duration > 1e-9:
             dx, dy = rx / speed, ry / speed

@@ -30,10 +30,16 @@ from pydantic import (
 )
 
 from hptrack.interface import MissionSpec, Observation
+from hptrack.models.belief_motion import (
+    BeliefMotion,
+    ConstantVelocity,
+    OrnsteinUhlenbeckMotion,
+    RandomWalkMotion,
+)
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import MAX_TARGETS, steps_left
-from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
+from hptrack.models.motion import ProcessNoiseForm
 from hptrack.models.truth_motion import (
     ConstantVelocityTruth,
     CoordinatedTurn,
@@ -162,7 +168,8 @@ class TargetSpec(BaseModel):
 
 
 class ConstantVelocitySpec(BaseModel):
-    """The paper's constant-velocity truth (the default)."""
+    """The paper's constant velocity (the default), with the scenario's
+    ``process_noise_form``."""
 
     model_config = _STRICT
 
@@ -170,6 +177,9 @@ class ConstantVelocitySpec(BaseModel):
 
     def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
         return ConstantVelocityTruth()
+
+    def belief(self, time_step: float, process_noise_form: ProcessNoiseForm) -> tuple:
+        return ConstantVelocity(time_step if process_noise_form == "continuous" else 1.0)
 
 
 class CoordinatedTurnSpec(BaseModel):
@@ -201,6 +211,9 @@ class RandomWalkSpec(BaseModel):
     def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
         return RandomWalk(float(self.diffusion))
 
+    def belief(self, time_step: float, process_noise_form: ProcessNoiseForm) -> tuple:
+        return RandomWalkMotion(float(self.diffusion))
+
 
 class OrnsteinUhlenbeckSpec(BaseModel):
     """Targets whose velocity decays at ``damping`` 1/s (at least 1e-3, a time constant of at
@@ -214,6 +227,9 @@ class OrnsteinUhlenbeckSpec(BaseModel):
     def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
         return OrnsteinUhlenbeck(float(self.damping))
 
+    def belief(self, time_step: float, process_noise_form: ProcessNoiseForm) -> tuple:
+        return OrnsteinUhlenbeckMotion(float(self.damping))
+
 
 TruthMotionSpec = Annotated[
     ConstantVelocitySpec | CoordinatedTurnSpec | RandomWalkSpec | OrnsteinUhlenbeckSpec,
@@ -222,6 +238,15 @@ TruthMotionSpec = Annotated[
 """How the simulated targets truly move (`hptrack.models.truth_motion`), by ``model``; each
 spec's ``build(n_targets, rng)`` gives the part it stands for (random parameters drawn from
 ``rng``)."""
+
+MotionSpec = Annotated[
+    ConstantVelocitySpec | RandomWalkSpec | OrnsteinUhlenbeckSpec,
+    Field(discriminator="model"),
+]
+"""How the beliefs assume the targets move (`hptrack.models.belief_motion`), by ``model``, with
+the parameters of the truth motion of the same name; each spec's ``belief(time_step,
+process_noise_form)`` gives the mission record's motion part. Without a ``truth_motion`` the
+simulated targets move by the same model."""
 
 
 class Scenario(BaseModel):
@@ -233,12 +258,19 @@ class Scenario(BaseModel):
     budget: Annotated[Real, Field(gt=0.0)] = 900.0
     seed: Annotated[int, BeforeValidator(_not_bool), Strict(), Field(ge=0, lt=2**63)] = 0
     process_noise_form: ProcessNoiseForm = "continuous"
+    motion: MotionSpec | None = None
     truth_motion: TruthMotionSpec | None = None
     agent: AgentSpec = AgentSpec()
     targets: Annotated[list[TargetSpec], Field(min_length=1, max_length=MAX_TARGETS)]
 
     @model_validator(mode="after")
     def _consistent(self) -> Self:
+        model = self.motion_spec.model
+        if self.process_noise_form != "continuous" and model != "constant_velocity":
+            raise ValueError(
+                f"process_noise_form {self.process_noise_form!r} is a form of constant "
+                f"velocity's Q; motion.model is {model!r}"
+            )
         steps = self.budget / self.time_step
         if self.budget < self.time_step:
             raise ValueError(
@@ -347,13 +379,24 @@ class Scenario(BaseModel):
         """Noise intensities ``q`` ``(n,)``."""
         return np.array([t.process_noise for t in self.targets], dtype=float)
 
-    def motion_model(self) -> ConstantVelocityModel:
-        return ConstantVelocityModel(self.time_step, self.process_noise_form)
+    @property
+    def motion_spec(self) -> ConstantVelocitySpec | RandomWalkSpec | OrnsteinUhlenbeckSpec:
+        """``motion``, constant velocity when not given."""
+        return self.motion or ConstantVelocitySpec()
+
+    def motion_part(self) -> tuple:
+        """The beliefs' motion, the mission record's part (`hptrack.models.belief_motion`)."""
+        return self.motion_spec.belief(self.time_step, self.process_noise_form)
+
+    def motion_model(self) -> BeliefMotion:
+        """The beliefs' motion (its numpy face)."""
+        return BeliefMotion(self.time_step, self.motion_part())
 
     def truth_motion_model(self, rng: np.random.Generator) -> tuple:
-        """The simulator's truth motion (`hptrack.models.truth_motion`); a coordinated turn
-        with ``turn_rate_sd > 0`` draws its rates from ``rng`` (nothing is drawn otherwise)."""
-        spec = self.truth_motion or ConstantVelocitySpec()
+        """The simulator's truth motion (`hptrack.models.truth_motion`; by default the model of
+        ``motion``); a coordinated turn with ``turn_rate_sd > 0`` draws its rates from ``rng``
+        (nothing is drawn otherwise)."""
+        spec = self.truth_motion or self.motion_spec
         return spec.build(len(self.targets), rng)
 
     def sensor_model(self) -> PositionMeasurementModel:
@@ -370,6 +413,7 @@ class Scenario(BaseModel):
             process_noise_form=self.process_noise_form,
             process_noise=self.process_noise(),
             target_ids=self.target_ids,
+            belief_motion=self.motion_part(),
         )
 
     def initial_observation(self) -> Observation:

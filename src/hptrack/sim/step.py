@@ -26,8 +26,7 @@ import numpy as np
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.measurement import kalman_update
-from hptrack.models.mission import predict_covariance_on
-from hptrack.models.motion import mean_position_at
+from hptrack.models.mission import mean_state_on, predict_covariance_on
 from hptrack.models.truth_motion import advance_truth
 from hptrack.scenario.model import Scenario
 
@@ -123,9 +122,11 @@ def world_step(
     steps = tau / tau
     elapsed = steps * tau
     for i in range(truth.shape[0]):
-        x, y = mean_position_at(means[i], elapsed)
+        x, y, vx, vy = mean_state_on(mission, means[i], elapsed)
         means[i, 0] = x
         means[i, 1] = y
+        means[i, 2] = vx
+        means[i, 3] = vy
         predict_covariance_on(mission, covs[i], q[i], steps, covs[i])
     radius2, factor = sensor
     seen, logdets, z = out
