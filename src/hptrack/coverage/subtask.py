@@ -25,7 +25,6 @@ import numpy as np
 from hptrack.coverage.estimator import CoverageEstimate, estimate_coverage
 from hptrack.coverage.intercept import (
     Intercept,
-    approach_step,
     intercept_path,
     intercept_waypoint,
     plan_intercept,
@@ -33,6 +32,8 @@ from hptrack.coverage.intercept import (
 from hptrack.coverage.sharp_estimator import SharpEstimate, estimate_sharp
 from hptrack.coverage.spiral import ShiftingSpiral
 from hptrack.interface import MissionSpec, Observation
+from hptrack.models.mission import approach_step_to
+from hptrack.models.state import velocities
 
 
 class CoverageSubtask:
@@ -81,9 +82,7 @@ class CoverageSubtask:
         self.mean = mean.copy()
         self.remaining_budget = remaining_budget
         self.agent_position = np.asarray(agent_position, dtype=float).copy()
-        self.intercept: Intercept = plan_intercept(
-            self.agent_position, mean[:2], mean[2:], m.agent_speed, m.time_step, m.sensor_diameter
-        )
+        self.intercept: Intercept = plan_intercept(m.record, self.agent_position, mean)
         n = self.intercept.steps
         _, covs = m.motion.predict(
             mean[None, :], np.asarray(covariance, dtype=float)[None], self.q, n * m.time_step
@@ -97,7 +96,7 @@ class CoverageSubtask:
         )
         self.spiral = ShiftingSpiral(
             self.intercept.start,
-            mean[2:],
+            velocities(mean),
             self.start_covariance[:2, :2],
             m.agent_speed,
             m.time_step,
@@ -131,16 +130,8 @@ class CoverageSubtask:
         """The sharp estimator's outcome of this sub-task (flight detections included, expected
         duration from its start; `hptrack.coverage.sharp_estimator`)."""
         m, n, mean = self.mission, self.intercept.steps, self.mean
-        approach = approach_step(
-            self.agent_position[0],
-            self.agent_position[1],
-            mean[0],
-            mean[1],
-            mean[2],
-            mean[3],
-            m.agent_speed,
-            m.time_step,
-            n,
+        approach = approach_step_to(
+            m.record, self.agent_position[0], self.agent_position[1], mean, n
         )
         remaining = (
             None if self.remaining_budget is None else self.remaining_budget - n * m.time_step

@@ -33,11 +33,11 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.envs.tracking import MissionEnv, discrete_action
-from hptrack.models.mission import reachable_before_budget, steps_left
+from hptrack.models.mission import intercept_steps_to, reachable_before_budget, steps_left
 from hptrack.models.motion import predicted_positions
+from hptrack.models.state import velocity_of
 
 
 class SubtaskTrackingEnv(MissionEnv):
@@ -66,19 +66,9 @@ class SubtaskTrackingEnv(MissionEnv):
         left = steps_left(m.time_step, w.remaining_budget)
         for i in range(w.n_targets):
             mean = w.means[i]
-            if math.hypot(mean[2], mean[3]) >= m.agent_speed:
+            if math.hypot(*velocity_of(mean)) >= m.agent_speed:
                 continue
-            steps = intercept_steps(
-                w.agent[0],
-                w.agent[1],
-                mean[0],
-                mean[1],
-                mean[2],
-                mean[3],
-                m.agent_speed,
-                m.time_step,
-                m.sensor_radius,
-            )
+            steps = intercept_steps_to(m.record, w.agent[0], w.agent[1], mean)
             mask[i] = reachable_before_budget(steps, left)
         if self.last_found is not None:
             mask[self.last_found] = True

@@ -51,6 +51,8 @@ from hptrack.interface import InputError, MissionSpec
 from hptrack.jsonout import json_text
 from hptrack.models.mission import motion_noise_factors_on
 from hptrack.models.motion import advance_true_state
+from hptrack.models.sensor import measured_mask, sensor_measures
+from hptrack.models.state import position_of, positions, velocities
 from hptrack.scenario.random import random_mean, random_prior
 
 PAPER_MAPE = {"0": (3.58, 5.18), "100": (2.46, 3.42), "200": (5.46, 3.73)}
@@ -221,15 +223,13 @@ def _advance_block(
     spiral (step >= ``flight_steps``). ``mission`` is the mission record."""
     l11, l21, l22 = motion_noise_factors_on(mission)
     tau = mission.time_step
-    radius2 = mission.footprint_radius * mission.footprint_radius
     for a in range(active.shape[0]):
         i = active[a]
         for t in range(noise.shape[1]):
             advance_true_state(states, i, noise[a, t], sqrt_q, l11, l21, l22, tau)
             j = first_step + t
-            dx = states[i, 0] - path[j, 0]
-            dy = states[i, 1] - path[j, 1]
-            if dx * dx + dy * dy <= radius2:
+            x, y = position_of(states[i])
+            if sensor_measures(mission.sensor, path[j, 0], path[j, 1], x, y):
                 if first_any[i] < 0:
                     first_any[i] = j
                 if j >= flight_steps:
@@ -245,11 +245,10 @@ def first_detections(
     (``>= n``); ``-1`` when not detected by ``t_cutoff``.
     """
     states = rng.multivariate_normal(plan.mean, plan.covariance, size=runs, method="cholesky")
-    radius2 = mission.sensor_radius**2
     n = plan.intercept_steps
     first_any = np.full(runs, -1, dtype=np.int64)
     first_spiral = np.full(runs, -1, dtype=np.int64)
-    hit = np.sum((states[:, :2] - plan.path[0]) ** 2, axis=1) <= radius2
+    hit = measured_mask(mission.record.sensor, plan.path[0], positions(states))
     first_any[hit] = 0
     if n == 0:
         first_spiral[hit] = 0
@@ -306,10 +305,10 @@ def case_rows(
             {
                 "case": case.index,
                 "delay": float(delay),
-                "mean_x": case.mean[0],
-                "mean_y": case.mean[1],
-                "vel_x": case.mean[2],
-                "vel_y": case.mean[3],
+                "mean_x": positions(case.mean)[0],
+                "mean_y": positions(case.mean)[1],
+                "vel_x": velocities(case.mean)[0],
+                "vel_y": velocities(case.mean)[1],
                 "var_x": case.covariance[0, 0],
                 "var_y": case.covariance[1, 1],
                 "cov_xy": case.covariance[0, 1],

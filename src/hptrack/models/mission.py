@@ -7,9 +7,13 @@ per-step process noise of Eq. (1) enters the kernels through ``q`` and
 divided by ``q``: ``tau`` for the continuous white-noise-acceleration form, ``1`` for the
 paper's printed form (`hptrack.models.motion`).
 
+The world's parts are fields of the record, registered classes dispatched at compile time:
+``sensor`` (`hptrack.models.sensor`) and ``vehicle`` (`hptrack.models.vehicle`).
+
 The rules, one place each: `steps_left` (whole steps of a remaining budget, the same for
-the mission's budget), `reachable_before_budget` (an intercept that ends strictly before
-the budget), `MAX_TARGETS` (the planner's action list is an ``int64`` bitmask). The kernels
+the mission's budget), `intercept_steps` (the whole steps of the flight to a belief mean, asked
+of the sensor and the vehicle), `reachable_before_budget` (an intercept that ends strictly
+before the budget), `MAX_TARGETS` (the planner's action list is an ``int64`` bitmask). The kernels
 of `hptrack.models.motion` and `hptrack.models.riccati` that need the noise form are
 offered here on the record (`predict_covariance_on`, `position_covariance_on`, ...),
 so that no layer above the models handles it.
@@ -31,6 +35,14 @@ from hptrack.models.motion import (
     predict_covariance,
 )
 from hptrack.models.riccati import riccati_table
+from hptrack.models.sensor import FootprintSensor, SensorPart, sensor_measures
+from hptrack.models.state import position_of, velocity_of
+from hptrack.models.vehicle import (
+    HolonomicVehicle,
+    VehiclePart,
+    vehicle_approach_step,
+    vehicle_intercept_time,
+)
 
 MAX_TARGETS = 62
 """Most targets of a mission: the planner's action list is an ``int64`` bitmask."""
@@ -46,24 +58,22 @@ class Mission(NamedTuple):
 
     Attributes:
         time_step: ``tau``, s.
-        speed: agent speed ``v_a``, m/s.
-        step_length: largest agent displacement per step ``v_a tau``, m.
-        footprint_radius: ``w / 2``, m; targets within it are measured.
-        measurement_noise: ``(2, 2)`` position measurement covariance ``R``, m^2.
         process_noise: ``(n,)`` per-target noise intensities ``q``, m^2/s^3.
         n_steps: whole steps in the budget ``N``.
         velocity_variance_per_q: the velocity block of the per-step ``Q`` over ``q``, s
             (``tau``, continuous form) or 1 (the paper's printed form).
+        sensor: the sensor part (`hptrack.models.sensor`; the paper's `FootprintSensor`:
+            diameter ``w`` and ``R``).
+        vehicle: the vehicle part (`hptrack.models.vehicle`; the paper's
+            `HolonomicVehicle`: speed ``v_a`` and step length ``v_a tau``).
     """
 
     time_step: float
-    speed: float
-    step_length: float
-    footprint_radius: float
-    measurement_noise: np.ndarray
     process_noise: np.ndarray
     n_steps: int
     velocity_variance_per_q: float
+    sensor: SensorPart
+    vehicle: VehiclePart
 
 
 def mission_record(
@@ -101,13 +111,11 @@ def mission_record(
     tau = float(time_step)
     return Mission(
         time_step=tau,
-        speed=float(agent_speed),
-        step_length=float(agent_speed) * tau,
-        footprint_radius=0.5 * float(sensor_diameter),
-        measurement_noise=noise,
         process_noise=q,
         n_steps=steps_left(tau, float(budget)),
         velocity_variance_per_q=tau if continuous_noise else 1.0,
+        sensor=FootprintSensor(float(sensor_diameter), noise),
+        vehicle=HolonomicVehicle(float(agent_speed), float(agent_speed) * tau),
     )
 
 
@@ -122,6 +130,47 @@ def reachable_before_budget(intercept_steps, left):
     """An intercept of ``intercept_steps`` (``-1``: never) ends strictly before the ``left``
     steps of the budget run out."""
     return 0 <= intercept_steps < left
+
+
+@numba.njit(cache=True)
+def intercept_flight(mission, agent_x, agent_y, x, y, vx, vy):
+    """The intercept flight from the agent at ``(agent_x, agent_y)`` to a belief mean at
+    ``(x, y)`` m moving at ``(vx, vy)`` m/s, asked of the mission's sensor and vehicle:
+    ``(t, n)``, the vehicle's exact intercept time ``t`` (s) and its whole steps
+    ``n = ceil(t / tau)`` (less `STEP_TOLERANCE`); ``(0, 0)`` when the sensor already measures
+    the mean, ``(inf, -1)`` when the vehicle cannot catch it (`hptrack.coverage.intercept` has
+    the convention)."""
+    if sensor_measures(mission.sensor, agent_x, agent_y, x, y):
+        return 0.0, 0
+    t = vehicle_intercept_time(mission.vehicle, agent_x, agent_y, x, y, vx, vy)
+    if math.isinf(t):
+        return t, -1
+    return t, int(math.ceil(t / mission.time_step - STEP_TOLERANCE))
+
+
+@numba.njit(cache=True)
+def intercept_steps(mission, agent_x, agent_y, x, y, vx, vy):
+    """The whole steps ``n`` of `intercept_flight` (``0``: measured at once, ``-1``: never)."""
+    return intercept_flight(mission, agent_x, agent_y, x, y, vx, vy)[1]
+
+
+@numba.njit(cache=True)
+def intercept_steps_to(mission, agent_x, agent_y, mean):
+    """`intercept_steps` to the belief mean ``mean`` (a state, `hptrack.models.state`)."""
+    x, y = position_of(mean)
+    vx, vy = velocity_of(mean)
+    return intercept_steps(mission, agent_x, agent_y, x, y, vx, vy)
+
+
+@numba.njit(cache=True)
+def approach_step_to(mission, agent_x, agent_y, mean, steps):
+    """The vehicle's displacement per step relative to the belief mean ``mean`` (a state) on an
+    intercept flight of ``steps`` whole steps, m (`hptrack.models.vehicle`)."""
+    x, y = position_of(mean)
+    vx, vy = velocity_of(mean)
+    return vehicle_approach_step(
+        mission.vehicle, agent_x, agent_y, x, y, vx, vy, mission.time_step, steps
+    )
 
 
 @numba.njit(cache=True, inline="always")
@@ -169,7 +218,7 @@ def follow_tables(mission: Mission, max_steps: int | None = None) -> FollowTable
             float(q),
             mission.time_step,
             mission.velocity_variance_per_q,
-            mission.measurement_noise,
+            mission.sensor.measurement_noise,
             steps,
         )
         for q in mission.process_noise

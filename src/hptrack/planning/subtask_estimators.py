@@ -29,10 +29,11 @@ from numba.extending import overload
 
 from hptrack._dispatch import registered
 from hptrack.coverage.estimator import coverage_outcome
-from hptrack.coverage.intercept import approach_step
 from hptrack.coverage.sharp_estimator import sharp_coverage_outcome
 from hptrack.models.mission import predict_covariance_on
 from hptrack.models.motion import mean_position_at
+from hptrack.models.state import velocity_of
+from hptrack.models.vehicle import vehicle_approach_step
 
 _ESTIMATORS: dict[type, Callable] = {}
 ESTIMATORS: dict[str, type] = {}
@@ -107,7 +108,8 @@ def sharp_outcome(estimator, env, state, a, t, ic, work):
     m = env.means[a]
     tau = mission.time_step
     x, y = mean_position_at(m, t * tau)
-    dx, dy = approach_step(sf[0], sf[1], x, y, m[2], m[3], mission.speed, tau, ic)
+    vx, vy = velocity_of(m)
+    dx, dy = vehicle_approach_step(mission.vehicle, sf[0], sf[1], x, y, vx, vy, tau, ic)
     q = mission.process_noise[a]
     predict_covariance_on(mission, base_cov[a], q, t + ic - base_step[a], work)
     cutoff, p, expected = sharp_coverage_outcome(mission, work, q, env.n_steps - t - ic, ic, dx, dy)

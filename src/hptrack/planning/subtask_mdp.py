@@ -75,15 +75,14 @@ from typing import TYPE_CHECKING, NamedTuple
 import numba
 import numpy as np
 
-from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.passes import pass_probability
 from hptrack.models.beliefs import logdet_xy
-from hptrack.models.measurement import update_covariance
 from hptrack.models.mission import (
     MAX_TARGETS,
     FollowTables,
     Mission,
     follow_tables,
+    intercept_steps,
     position_covariance_on,
     predict_covariance_on,
     reachable_before_budget,
@@ -91,6 +90,8 @@ from hptrack.models.mission import (
 )
 from hptrack.models.motion import mean_position_at
 from hptrack.models.riccati import measured_covariance
+from hptrack.models.sensor import footprint_radius, sensor_update_covariance
+from hptrack.models.state import velocity_of
 from hptrack.planning.mdp import MdpKernels, register_mdp
 from hptrack.planning.subtask_estimators import estimate_pursuit, estimator_of
 
@@ -423,17 +424,8 @@ def intercept_of(env, sf, a, t):
     mission = env.mission
     m = env.means[a]
     x, y = mean_position_at(m, t * mission.time_step)
-    return intercept_steps(
-        sf[0],
-        sf[1],
-        x,
-        y,
-        m[2],
-        m[3],
-        mission.speed,
-        mission.time_step,
-        mission.footprint_radius,
-    )
+    vx, vy = velocity_of(m)
+    return intercept_steps(mission, sf[0], sf[1], x, y, vx, vy)
 
 
 @numba.njit(cache=True, inline="always")
@@ -529,7 +521,7 @@ def apply_outcome(env, state, a, outcome, payload, work):
                 follow.length[a],
                 payload - 1,
                 x1,
-                mission.measurement_noise,
+                mission.sensor.measurement_noise,
                 prior,
                 work,
             )
@@ -538,7 +530,7 @@ def apply_outcome(env, state, a, outcome, payload, work):
                     base_cov[a, i, j] = prior[i, j]
         else:
             predict_covariance_on(mission, base_cov[a], q, end - base_step[a], prior)
-            update_covariance(prior, mission.measurement_noise, base_cov[a])
+            sensor_update_covariance(mission.sensor, prior, base_cov[a])
         base_step[a] = end
         si[I_LAST] = a
     else:
@@ -571,7 +563,8 @@ def credit_passes(env, state, a, end_x, end_y, end, prior):
         m = env.means[b]
         mx, my = mean_position_at(m, t * tau)
         # the agent relative to b's mean: from (ox, oy), at (rx, ry) m/s
-        ox, oy, rx, ry = sf[0] - mx, sf[1] - my, vx - m[2], vy - m[3]
+        mvx, mvy = velocity_of(m)
+        ox, oy, rx, ry = sf[0] - mx, sf[1] - my, vx - mvx, vy - mvy
         speed = math.sqrt(rx * rx + ry * ry)
         if speed * duration > 1e-9:
             dx, dy = rx / speed, ry / speed
@@ -584,11 +577,11 @@ def credit_passes(env, state, a, end_x, end_y, end, prior):
         q = mission.process_noise[b]
         sxx, sxy, syy = position_covariance_on(mission, base_cov[b], q, float(k - base_step[b]))
         p = pass_probability(
-            ox, oy, dx, dy, speed * duration, sxx, sxy, syy, mission.footprint_radius
+            ox, oy, dx, dy, speed * duration, sxx, sxy, syy, footprint_radius(mission.sensor)
         )
         if p >= PASS_CREDIT:
             predict_covariance_on(mission, base_cov[b], q, k - base_step[b], prior)
-            update_covariance(prior, mission.measurement_noise, base_cov[b])
+            sensor_update_covariance(mission.sensor, prior, base_cov[b])
             base_step[b] = k
             si[I_MASK] |= np.int64(1) << b
 
