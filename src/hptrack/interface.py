@@ -136,7 +136,7 @@ class MissionSpec:
             self.process_noise_form == "continuous",
             self.belief_motion,
         )
-        object.__setattr__(self, "measurement_noise", record.measurement_noise)
+        object.__setattr__(self, "measurement_noise", record.sensor.measurement_noise)
         object.__setattr__(self, "process_noise", record.process_noise)
         object.__setattr__(self, "target_ids", tuple(self.target_ids))
         object.__setattr__(self, "record", record)

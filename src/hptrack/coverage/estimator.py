@@ -55,7 +55,7 @@ def ratio_grows(area, det, next_area, next_det):
 def _covered_ratio(mission, cov, q, k):
     """``S_cover(k) / sqrt(det Sigma^xy(k))`` (dimensionless)."""
     sxx, sxy, syy = position_covariance_on(mission, cov, q, k)
-    speed, diameter, tau = mission.speed, 2.0 * mission.footprint_radius, mission.time_step
+    speed, diameter, tau = mission.vehicle.speed, mission.sensor.diameter, mission.time_step
     area = speed * diameter * k * tau + math.pi * 0.25 * diameter * diameter
     return area / math.sqrt(sxx * syy - sxy * sxy)
 
@@ -79,7 +79,7 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
     if max_steps < 0:
         return 0.0, 0.0, 0.0
     x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials_on(mission, cov, q)
-    speed, diameter, tau = mission.speed, 2.0 * mission.footprint_radius, mission.time_step
+    speed, diameter, tau = mission.vehicle.speed, mission.sensor.diameter, mission.time_step
     area0 = math.pi * 0.25 * diameter * diameter  # S_cover(k) = area0 + k area1
     area1 = speed * diameter * tau
     inv_two_pi = 1.0 / (2.0 * math.pi)

@@ -302,8 +302,8 @@ def sharp_coverage_outcome(
     if max_steps < 0:
         return 0.0, 0.0, 0.0
     x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials_on(mission, cov, q)
-    speed, tau, radius = mission.speed, mission.time_step, mission.footprint_radius
-    diameter = 2.0 * radius
+    speed, tau, diameter = mission.vehicle.speed, mission.time_step, mission.sensor.diameter
+    radius = 0.5 * diameter
     tr = 0.5 * (x0 + y0)
     gap = math.sqrt(max(tr * tr - (x0 * y0 - c0 * c0), 0.0))
     semi_a, semi_b = math.sqrt(tr + gap), math.sqrt(max(tr - gap, 0.0))

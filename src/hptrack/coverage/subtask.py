@@ -25,14 +25,15 @@ import numpy as np
 from hptrack.coverage.estimator import CoverageEstimate, estimate_coverage
 from hptrack.coverage.intercept import (
     Intercept,
-    approach_step_on,
     intercept_path,
     intercept_waypoint,
-    plan_intercept_on,
+    plan_intercept,
 )
 from hptrack.coverage.sharp_estimator import SharpEstimate, estimate_sharp
 from hptrack.coverage.spiral import ShiftingSpiral
 from hptrack.interface import MissionSpec, Observation
+from hptrack.models.mission import approach_step_to
+from hptrack.models.state import velocities
 
 
 class CoverageSubtask:
@@ -81,7 +82,7 @@ class CoverageSubtask:
         self.mean = mean.copy()
         self.remaining_budget = remaining_budget
         self.agent_position = np.asarray(agent_position, dtype=float).copy()
-        self.intercept: Intercept = plan_intercept_on(self.agent_position, mean, m.record)
+        self.intercept: Intercept = plan_intercept(m.record, self.agent_position, mean)
         n = self.intercept.steps
         means, covs = m.motion.predict(
             mean[None, :], np.asarray(covariance, dtype=float)[None], self.q, n * m.time_step
@@ -95,7 +96,7 @@ class CoverageSubtask:
         )
         self.spiral = ShiftingSpiral(
             self.intercept.start,
-            mean[2:] if m.motion.straight else means[0, 2:],
+            velocities(mean) if m.motion.straight else velocities(means[0]),
             self.start_covariance[:2, :2],
             m.agent_speed,
             m.time_step,
@@ -138,7 +139,7 @@ class CoverageSubtask:
         """The sharp estimator's outcome of this sub-task (flight detections included, expected
         duration from its start; `hptrack.coverage.sharp_estimator`)."""
         m, n, mean = self.mission, self.intercept.steps, self.mean
-        approach = approach_step_on(
+        approach = approach_step_to(
             m.record, self.agent_position[0], self.agent_position[1], mean, 0.0, n
         )
         remaining = (

@@ -33,10 +33,10 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from hptrack.coverage.intercept import intercept_steps_on
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.envs.tracking import MissionEnv, discrete_action
-from hptrack.models.mission import reachable_before_budget, steps_left
+from hptrack.models.mission import intercept_steps_to, reachable_before_budget, steps_left
+from hptrack.models.state import velocity_of
 
 
 class SubtaskTrackingEnv(MissionEnv):
@@ -65,9 +65,9 @@ class SubtaskTrackingEnv(MissionEnv):
         left = steps_left(m.time_step, w.remaining_budget)
         for i in range(w.n_targets):
             mean = w.means[i]
-            if math.hypot(mean[2], mean[3]) >= m.agent_speed:
+            if math.hypot(*velocity_of(mean)) >= m.agent_speed:
                 continue
-            steps = intercept_steps_on(m.record, w.agent[0], w.agent[1], mean, 0.0)
+            steps = intercept_steps_to(m.record, w.agent[0], w.agent[1], mean, 0.0)
             mask[i] = reachable_before_budget(steps, left)
         if self.last_found is not None:
             mask[self.last_found] = True

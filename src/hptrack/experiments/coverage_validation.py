@@ -50,6 +50,8 @@ from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.experiments.workers import worker_pool
 from hptrack.interface import InputError, MissionSpec
 from hptrack.jsonout import json_text
+from hptrack.models.sensor import measured_mask, sensor_measures
+from hptrack.models.state import position_of, positions, velocities
 from hptrack.models.truth_motion import ConstantVelocityTruth, advance_truth
 from hptrack.scenario.model import ConstantVelocitySpec, MotionSpec
 from hptrack.scenario.random import random_mean, random_prior
@@ -260,15 +262,13 @@ def _advance_block(
     with unit normal ``noise`` ``(runs, steps, 4)`` and record detections; a run stops at its
     first detection on the spiral (step >= ``flight_steps``). ``mission`` is the mission
     record, ``sqrt_q`` ``(1,)``."""
-    radius2 = mission.footprint_radius * mission.footprint_radius
     for a in range(active.shape[0]):
         i = active[a]
         for t in range(noise.shape[1]):
             advance_truth(truth, mission, states[i : i + 1], noise[a, t : t + 1], sqrt_q)
             j = first_step + t
-            dx = states[i, 0] - path[j, 0]
-            dy = states[i, 1] - path[j, 1]
-            if dx * dx + dy * dy <= radius2:
+            x, y = position_of(states[i])
+            if sensor_measures(mission.sensor, path[j, 0], path[j, 1], x, y):
                 if first_any[i] < 0:
                     first_any[i] = j
                 if j >= flight_steps:
@@ -291,11 +291,10 @@ def first_detections(
     """
     truth = ConstantVelocityTruth() if truth is None else truth
     states = rng.multivariate_normal(plan.mean, plan.covariance, size=runs, method="cholesky")
-    radius2 = mission.sensor_radius**2
     n = plan.intercept_steps
     first_any = np.full(runs, -1, dtype=np.int64)
     first_spiral = np.full(runs, -1, dtype=np.int64)
-    hit = np.sum((states[:, :2] - plan.path[0]) ** 2, axis=1) <= radius2
+    hit = measured_mask(mission.record.sensor, plan.path[0], positions(states))
     first_any[hit] = 0
     if n == 0:
         first_spiral[hit] = 0
@@ -355,10 +354,10 @@ def case_rows(
             {
                 "case": case.index,
                 "delay": float(delay),
-                "mean_x": case.mean[0],
-                "mean_y": case.mean[1],
-                "vel_x": case.mean[2],
-                "vel_y": case.mean[3],
+                "mean_x": positions(case.mean)[0],
+                "mean_y": positions(case.mean)[1],
+                "vel_x": velocities(case.mean)[0],
+                "vel_y": velocities(case.mean)[1],
                 "var_x": case.covariance[0, 0],
                 "var_y": case.covariance[1, 1],
                 "cov_xy": case.covariance[0, 1],

@@ -49,8 +49,8 @@ from stonesoup.types.update import Update
 from hptrack.interface import MissionSpec, Observation, Planner
 from hptrack.models.measurement import check_noise_covariance
 from hptrack.models.motion import ConstantVelocityModel
+from hptrack.models.vehicle import move_towards
 from hptrack.registry import make_planner, planner_settings
-from hptrack.sim.step import move_towards
 
 __all__ = [
     "STONESOUP_TO_HPTRACK",

@@ -5,11 +5,16 @@ validated once (`mission_record`, or `hptrack.interface.MissionSpec.record`). Ho
 assume the targets move is its ``motion`` part (`hptrack.models.belief_motion`: the paper's
 constant velocity by default, with either form of Eq. (1)'s ``Q``), dispatched at compile time.
 
+The world's parts are fields of the record, registered classes dispatched at compile time:
+``sensor`` (`hptrack.models.sensor`) and ``vehicle`` (`hptrack.models.vehicle`).
+
 The rules, one place each: `steps_left` (whole steps of a remaining budget, the same for
-the mission's budget), `reachable_before_budget` (an intercept that ends strictly before
-the budget), `MAX_TARGETS` (the planner's action list is an ``int64`` bitmask). The motion's
-kernels are offered here on the record (`predict_covariance_on`, `position_covariance_on`,
-`mean_position_on`, ...), so that no layer above the models handles the motion itself.
+the mission's budget), `intercept_steps` (the whole steps of the flight to a belief mean, asked
+of the sensor, the vehicle and the motion), `reachable_before_budget` (an intercept that ends
+strictly before the budget), `MAX_TARGETS` (the planner's action list is an ``int64``
+bitmask). The motion's kernels are offered here on the record (`predict_covariance_on`,
+`position_covariance_on`, `mean_position_on`, ...), so that no layer above the models handles
+the motion itself.
 """
 
 from __future__ import annotations
@@ -27,6 +32,13 @@ from hptrack.models.belief_motion import ConstantVelocity, registered_motion
 from hptrack.models.measurement import check_noise_covariance
 from hptrack.models.motion import motion_noise_factors
 from hptrack.models.riccati import riccati_table_of
+from hptrack.models.sensor import FootprintSensor, SensorPart, sensor_measures
+from hptrack.models.vehicle import (
+    HolonomicVehicle,
+    VehiclePart,
+    vehicle_approach_step,
+    vehicle_intercept_time,
+)
 
 MAX_TARGETS = 62
 """Most targets of a mission: the planner's action list is an ``int64`` bitmask."""
@@ -42,24 +54,22 @@ class Mission(NamedTuple):
 
     Attributes:
         time_step: ``tau``, s.
-        speed: agent speed ``v_a``, m/s.
-        step_length: largest agent displacement per step ``v_a tau``, m.
-        footprint_radius: ``w / 2``, m; targets within it are measured.
-        measurement_noise: ``(2, 2)`` position measurement covariance ``R``, m^2.
         process_noise: ``(n,)`` per-target noise intensities ``q``, m^2/s^3.
         n_steps: whole steps in the budget ``N``.
         motion: how the beliefs assume the targets move, a registered part of
             `hptrack.models.belief_motion` (`ConstantVelocity` by default).
+        sensor: the sensor part (`hptrack.models.sensor`; the paper's `FootprintSensor`:
+            diameter ``w`` and ``R``).
+        vehicle: the vehicle part (`hptrack.models.vehicle`; the paper's
+            `HolonomicVehicle`: speed ``v_a`` and step length ``v_a tau``).
     """
 
     time_step: float
-    speed: float
-    step_length: float
-    footprint_radius: float
-    measurement_noise: np.ndarray
     process_noise: np.ndarray
     n_steps: int
     motion: tuple
+    sensor: SensorPart
+    vehicle: VehiclePart
 
 
 def mission_record(
@@ -102,13 +112,11 @@ def mission_record(
     q.flags.writeable = False
     return Mission(
         time_step=tau,
-        speed=float(agent_speed),
-        step_length=float(agent_speed) * tau,
-        footprint_radius=0.5 * float(sensor_diameter),
-        measurement_noise=noise,
         process_noise=q,
         n_steps=steps_left(tau, float(budget)),
         motion=motion,
+        sensor=FootprintSensor(float(sensor_diameter), noise),
+        vehicle=HolonomicVehicle(float(agent_speed), float(agent_speed) * tau),
     )
 
 
@@ -123,6 +131,94 @@ def reachable_before_budget(intercept_steps, left):
     """An intercept of ``intercept_steps`` (``-1``: never) ends strictly before the ``left``
     steps of the budget run out."""
     return 0 <= intercept_steps < left
+
+
+@numba.njit(cache=True)
+def intercept_flight(mission, agent_x, agent_y, x, y, vx, vy):
+    """The intercept flight from the agent at ``(agent_x, agent_y)`` to a belief mean at
+    ``(x, y)`` m moving at ``(vx, vy)`` m/s, asked of the mission's sensor and vehicle:
+    ``(t, n)``, the vehicle's exact intercept time ``t`` (s) and its whole steps
+    ``n = ceil(t / tau)`` (less `STEP_TOLERANCE`); ``(0, 0)`` when the sensor already measures
+    the mean, ``(inf, -1)`` when the vehicle cannot catch it (`hptrack.coverage.intercept` has
+    the convention)."""
+    if sensor_measures(mission.sensor, agent_x, agent_y, x, y):
+        return 0.0, 0
+    t = vehicle_intercept_time(mission.vehicle, agent_x, agent_y, x, y, vx, vy)
+    if math.isinf(t):
+        return t, -1
+    return t, int(math.ceil(t / mission.time_step - STEP_TOLERANCE))
+
+
+@numba.njit(cache=True)
+def intercept_steps(mission, agent_x, agent_y, x, y, vx, vy):
+    """The whole steps ``n`` of `intercept_flight` (``0``: measured at once, ``-1``: never)."""
+    return intercept_flight(mission, agent_x, agent_y, x, y, vx, vy)[1]
+
+
+DOUBLINGS = 64
+"""Most doublings of the bracket of an intercept of a curved mean path (`intercept_flight_on`)."""
+BISECTION_ROUNDS = 200
+"""Most halvings of that bracket; it stops earlier at machine precision."""
+
+
+@numba.njit(cache=True, inline="always")
+def _reaches(mission, agent_x, agent_y, mean, elapsed, s):
+    """Whether the vehicle can be, ``s`` s from now, where the mean predicted ``elapsed + s``
+    s ahead will be."""
+    x, y = mean_position_on(mission, mean, elapsed + s)
+    return vehicle_intercept_time(mission.vehicle, agent_x, agent_y, x, y, 0.0, 0.0) <= s
+
+
+@numba.njit(cache=True)
+def intercept_flight_on(mission, agent_x, agent_y, mean, elapsed):
+    """`intercept_flight` to the belief mean ``mean`` (a state) predicted ``elapsed`` s ahead by
+    the mission's motion, along its predicted path: the closed form when the mean moves
+    straight; otherwise the earliest ``t`` at which the vehicle can be where the mean will be,
+    by doubling and bisection (one root: the mean's speed stays below the vehicle's,
+    `hptrack.models.belief_motion`)."""
+    x, y, vx, vy = mean_state_on(mission, mean, elapsed)
+    if moves_straight_on(mission):
+        return intercept_flight(mission, agent_x, agent_y, x, y, vx, vy)
+    if sensor_measures(mission.sensor, agent_x, agent_y, x, y):
+        return 0.0, 0
+    if math.isinf(vehicle_intercept_time(mission.vehicle, agent_x, agent_y, x, y, vx, vy)):
+        return math.inf, -1
+    lo, hi = 0.0, max(mission.time_step, 1e-9)
+    for _ in range(DOUBLINGS):
+        if _reaches(mission, agent_x, agent_y, mean, elapsed, hi):
+            break
+        lo, hi = hi, 2.0 * hi
+    else:
+        return math.inf, -1
+    for _ in range(BISECTION_ROUNDS):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        if _reaches(mission, agent_x, agent_y, mean, elapsed, mid):
+            hi = mid
+        else:
+            lo = mid
+    return hi, int(math.ceil(hi / mission.time_step - STEP_TOLERANCE))
+
+
+@numba.njit(cache=True)
+def intercept_steps_to(mission, agent_x, agent_y, mean, elapsed):
+    """The whole steps of `intercept_flight_on` (``0``: measured at once, ``-1``: never)."""
+    return intercept_flight_on(mission, agent_x, agent_y, mean, elapsed)[1]
+
+
+@numba.njit(cache=True)
+def approach_step_to(mission, agent_x, agent_y, mean, elapsed, steps):
+    """The vehicle's displacement per step relative to the belief mean ``mean`` (a state)
+    predicted ``elapsed`` s ahead, on an intercept flight of ``steps`` whole steps, m
+    (`hptrack.models.vehicle`); along a curved mean path, relative to the mean's average
+    velocity over the flight."""
+    x, y, vx, vy = mean_state_on(mission, mean, elapsed)
+    tau = mission.time_step
+    if not moves_straight_on(mission) and steps > 0:
+        ex, ey = mean_position_on(mission, mean, elapsed + steps * tau)
+        vx, vy = (ex - x) / (steps * tau), (ey - y) / (steps * tau)
+    return vehicle_approach_step(mission.vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps)
 
 
 @numba.njit(cache=True, inline="always")
@@ -177,6 +273,18 @@ def moves_straight_on(mission):
     return bm.moves_straight(mission.motion)
 
 
+@numba.njit(cache=True)
+def mission_moves_straight(mission):
+    """`moves_straight_on` for Python callers."""
+    return moves_straight_on(mission)
+
+
+@numba.njit(cache=True)
+def mean_position_at_on(mission, mean, elapsed):
+    """`mean_position_on` for Python callers."""
+    return mean_position_on(mission, mean, elapsed)
+
+
 def _cv_velocity_variance(motion, tau):
     raise NotImplementedError
 
@@ -221,7 +329,7 @@ def follow_tables(mission: Mission, max_steps: int | None = None) -> FollowTable
     for q in mission.process_noise:
         f, qq = np.empty((4, 4)), np.empty((4, 4))
         _step_matrices_on(mission, float(q), f, qq)
-        tables.append(riccati_table_of(f, qq, mission.measurement_noise, steps))
+        tables.append(riccati_table_of(f, qq, mission.sensor.measurement_noise, steps))
     lengths = np.array([t[3] for t in tables], dtype=np.int64)
     top = int(lengths.max()) if lengths.size else 1
     stacked = [

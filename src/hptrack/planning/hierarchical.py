@@ -28,10 +28,14 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
-from hptrack.coverage.intercept import intercept_steps_on
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.interface import CurrentPlan, MissionSpec, Observation, Subtask
-from hptrack.models.mission import follow_tables, reachable_before_budget, steps_left
+from hptrack.models.mission import (
+    follow_tables,
+    intercept_steps_to,
+    reachable_before_budget,
+    steps_left,
+)
 from hptrack.planning.backups import backup_of
 from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchOptions, SearchResult
@@ -297,7 +301,7 @@ class HierarchicalPlanner:
         if not self._available[target]:
             return False
         m, agent, mission = observation.means[target], observation.agent_position, self._record
-        steps = intercept_steps_on(mission, agent[0], agent[1], m, 0.0)
+        steps = intercept_steps_to(mission, agent[0], agent[1], m, 0.0)
         left = steps_left(mission.time_step, observation.remaining_budget)
         return reachable_before_budget(steps, left)
 

@@ -75,15 +75,14 @@ from typing import TYPE_CHECKING, NamedTuple
 import numba
 import numpy as np
 
-from hptrack.coverage.intercept import intercept_steps_on
 from hptrack.coverage.passes import pass_probability
 from hptrack.models.beliefs import logdet_xy
-from hptrack.models.measurement import update_covariance
 from hptrack.models.mission import (
     MAX_TARGETS,
     FollowTables,
     Mission,
     follow_tables,
+    intercept_steps_to,
     mean_position_on,
     mean_state_on,
     position_covariance_on,
@@ -92,6 +91,7 @@ from hptrack.models.mission import (
     steps_left,
 )
 from hptrack.models.riccati import measured_covariance
+from hptrack.models.sensor import footprint_radius, sensor_update_covariance
 from hptrack.planning.mdp import MdpKernels, register_mdp
 from hptrack.planning.subtask_estimators import estimate_pursuit, estimator_of
 
@@ -422,7 +422,7 @@ def intercept_of(env, sf, a, t):
     """Whole intercept steps from the agent position ``sf`` at step ``t`` to target ``a``'s
     belief mean (``-1``: the target is faster than the agent)."""
     mission = env.mission
-    return intercept_steps_on(mission, sf[0], sf[1], env.means[a], t * mission.time_step)
+    return intercept_steps_to(mission, sf[0], sf[1], env.means[a], t * mission.time_step)
 
 
 @numba.njit(cache=True, inline="always")
@@ -518,7 +518,7 @@ def apply_outcome(env, state, a, outcome, payload, work):
                 follow.length[a],
                 payload - 1,
                 x1,
-                mission.measurement_noise,
+                mission.sensor.measurement_noise,
                 prior,
                 work,
             )
@@ -527,7 +527,7 @@ def apply_outcome(env, state, a, outcome, payload, work):
                     base_cov[a, i, j] = prior[i, j]
         else:
             predict_covariance_on(mission, base_cov[a], q, end - base_step[a], prior)
-            update_covariance(prior, mission.measurement_noise, base_cov[a])
+            sensor_update_covariance(mission.sensor, prior, base_cov[a])
         base_step[a] = end
         si[I_LAST] = a
     else:
@@ -573,11 +573,11 @@ def credit_passes(env, state, a, end_x, end_y, end, prior):
         q = mission.process_noise[b]
         sxx, sxy, syy = position_covariance_on(mission, base_cov[b], q, float(k - base_step[b]))
         p = pass_probability(
-            ox, oy, dx, dy, speed * duration, sxx, sxy, syy, mission.footprint_radius
+            ox, oy, dx, dy, speed * duration, sxx, sxy, syy, footprint_radius(mission.sensor)
         )
         if p >= PASS_CREDIT:
             predict_covariance_on(mission, base_cov[b], q, k - base_step[b], prior)
-            update_covariance(prior, mission.measurement_noise, base_cov[b])
+            sensor_update_covariance(mission.sensor, prior, base_cov[b])
             base_step[b] = k
             si[I_MASK] |= np.int64(1) << b
 
