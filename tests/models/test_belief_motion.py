@@ -50,8 +50,8 @@ def van_loan(a2: np.ndarray, w2: np.ndarray, duration: float) -> tuple[np.ndarra
 
 
 def spd(seed: int) -> np.ndarray:
-    l = np.random.default_rng(seed).standard_normal((4, 4))
-    return l @ l.T + np.eye(4)
+    low = np.random.default_rng(seed).standard_normal((4, 4))
+    return low @ low.T + np.eye(4)
 
 
 MEAN = np.array([120.0, -40.0, 3.0, -1.5])
@@ -177,9 +177,7 @@ def test_the_same_models_truth_samples_the_beliefs_prediction(truth, motion):
     rng = np.random.default_rng(7)
     for _ in range(steps):
         states = sample_truth(truth, mission, states, np.full(runs, q), rng)
-    means, covs = BeliefMotion(TAU, motion).predict(
-        MEAN[None], np.zeros((1, 4, 4)), q, steps * TAU
-    )
+    means, covs = BeliefMotion(TAU, motion).predict(MEAN[None], np.zeros((1, 4, 4)), q, steps * TAU)
     sd = np.sqrt(np.diag(covs[0]))
     moving = sd > 0
     assert np.all(np.abs(states.mean(axis=0) - means[0])[moving] < 4 * sd[moving] / runs**0.5)
