@@ -140,7 +140,7 @@ class CoverageSubtask:
         duration from its start; `hptrack.coverage.sharp_estimator`)."""
         m, n, mean = self.mission, self.intercept.steps, self.mean
         approach = approach_step_to(
-            m.record, self.agent_position[0], self.agent_position[1], mean, 0.0, n
+            m.record, self.agent_position[0], self.agent_position[1], mean, n
         )
         remaining = (
             None if self.remaining_budget is None else self.remaining_budget - n * m.time_step

@@ -67,7 +67,7 @@ class SubtaskTrackingEnv(MissionEnv):
             mean = w.means[i]
             if math.hypot(*velocity_of(mean)) >= m.agent_speed:
                 continue
-            steps = intercept_steps_to(m.record, w.agent[0], w.agent[1], mean, 0.0)
+            steps = intercept_steps_to(m.record, w.agent[0], w.agent[1], mean)
             mask[i] = reachable_before_budget(steps, left)
         if self.last_found is not None:
             mask[self.last_found] = True

@@ -202,13 +202,14 @@ def intercept_flight_on(mission, agent_x, agent_y, mean, elapsed):
 
 
 @numba.njit(cache=True)
-def intercept_steps_to(mission, agent_x, agent_y, mean, elapsed):
-    """The whole steps of `intercept_flight_on` (``0``: measured at once, ``-1``: never)."""
+def intercept_steps_to(mission, agent_x, agent_y, mean, elapsed=0.0):
+    """The whole steps of `intercept_flight_on` to the belief mean ``mean`` (a state) predicted
+    ``elapsed`` s ahead (``0``: measured at once, ``-1``: never)."""
     return intercept_flight_on(mission, agent_x, agent_y, mean, elapsed)[1]
 
 
 @numba.njit(cache=True)
-def approach_step_to(mission, agent_x, agent_y, mean, elapsed, steps):
+def approach_step_to(mission, agent_x, agent_y, mean, steps, elapsed=0.0):
     """The vehicle's displacement per step relative to the belief mean ``mean`` (a state)
     predicted ``elapsed`` s ahead, on an intercept flight of ``steps`` whole steps, m
     (`hptrack.models.vehicle`); along a curved mean path, relative to the mean's average

@@ -301,7 +301,7 @@ class HierarchicalPlanner:
         if not self._available[target]:
             return False
         m, agent, mission = observation.means[target], observation.agent_position, self._record
-        steps = intercept_steps_to(mission, agent[0], agent[1], m, 0.0)
+        steps = intercept_steps_to(mission, agent[0], agent[1], m)
         left = steps_left(mission.time_step, observation.remaining_budget)
         return reachable_before_budget(steps, left)
 

@@ -102,7 +102,7 @@ def sharp_outcome(estimator, env, state, a, t, ic, work):
     intercept flight, and a find lasts the estimated duration from departure."""
     mission = env.mission
     sf, base_cov, base_step = state[1], state[2], state[3]
-    dx, dy = approach_step_to(mission, sf[0], sf[1], env.means[a], t * mission.time_step, ic)
+    dx, dy = approach_step_to(mission, sf[0], sf[1], env.means[a], ic, t * mission.time_step)
     q = mission.process_noise[a]
     predict_covariance_on(mission, base_cov[a], q, t + ic - base_step[a], work)
     cutoff, p, expected = sharp_coverage_outcome(mission, work, q, env.n_steps - t - ic, ic, dx, dy)
