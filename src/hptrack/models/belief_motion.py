@@ -554,7 +554,7 @@ class BeliefMotion:
         )
         return out_means, out_covs
 
-    def mean_positions(self, mean: np.ndarray, elapsed: np.ndarray) -> np.ndarray:
+    def mean_positions(self, mean: np.ndarray, elapsed: np.ndarray | list[float]) -> np.ndarray:
         """Positions ``(len(elapsed), 2)`` of one belief mean ``(4,)`` after each of
         ``elapsed`` seconds, m."""
         elapsed = np.ascontiguousarray(elapsed, dtype=float).reshape(-1)
