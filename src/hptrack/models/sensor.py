@@ -30,7 +30,7 @@ import numpy as np
 from numba.extending import overload
 
 from hptrack._dispatch import registered
-from hptrack.models.measurement import kalman_update, update_covariance
+from hptrack.models.measurement import kalman_update, update_covariance, within_footprint
 
 
 class FootprintSensor(NamedTuple):
@@ -129,11 +129,8 @@ def footprint_radius(sensor):
 
 @numba.njit(cache=True, inline="always")
 def footprint_measures(sensor, agent_x, agent_y, x, y):
-    """`FootprintSensor`: ``|p - agent| <= w/2``."""
-    dx = x - agent_x
-    dy = y - agent_y
-    r = footprint_radius(sensor)
-    return dx * dx + dy * dy <= r * r
+    """`FootprintSensor`: ``|p - agent| <= w/2`` (`within_footprint`)."""
+    return within_footprint(sensor.diameter, agent_x, agent_y, x, y)
 
 
 @numba.njit(cache=True)
