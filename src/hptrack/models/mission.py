@@ -132,7 +132,7 @@ def reachable_before_budget(intercept_steps, left):
     return 0 <= intercept_steps < left
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def intercept_flight(mission, agent_x, agent_y, x, y, vx, vy):
     """The intercept flight from the agent at ``(agent_x, agent_y)`` to a belief mean at
     ``(x, y)`` m moving at ``(vx, vy)`` m/s, asked of the mission's sensor and vehicle:

@@ -96,27 +96,27 @@ def sensor_missed(sensor, mean, cov):
     raise NotImplementedError
 
 
-@overload(sensor_measures)
+@overload(sensor_measures, inline="always")
 def _measures(sensor, agent_x, agent_y, x, y):
     return _kernel(sensor, "measures")
 
 
-@overload(sensor_reach)
+@overload(sensor_reach, inline="always")
 def _reach(sensor):
     return _kernel(sensor, "reach")
 
 
-@overload(sensor_update)
+@overload(sensor_update, inline="always")
 def _update(sensor, mean, cov, z, mean_out, cov_out):
     return _kernel(sensor, "update")
 
 
-@overload(sensor_update_covariance)
+@overload(sensor_update_covariance, inline="always")
 def _update_covariance(sensor, cov, out):
     return _kernel(sensor, "update_covariance")
 
 
-@overload(sensor_missed)
+@overload(sensor_missed, inline="always")
 def _missed(sensor, mean, cov):
     return _kernel(sensor, "missed")
 

@@ -85,17 +85,17 @@ def vehicle_approach_step(vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps):
     raise NotImplementedError
 
 
-@overload(vehicle_move)
+@overload(vehicle_move, inline="always")
 def _move(vehicle, agent, waypoint):
     return _kernel(vehicle, "move")
 
 
-@overload(vehicle_intercept_time)
+@overload(vehicle_intercept_time, inline="always")
 def _intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy):
     return _kernel(vehicle, "intercept_time")
 
 
-@overload(vehicle_approach_step)
+@overload(vehicle_approach_step, inline="always")
 def _approach_step(vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps):
     return _kernel(vehicle, "approach_step")
 
