@@ -148,7 +148,7 @@ def intercept_flight(mission, agent_x, agent_y, x, y, vx, vy):
     return t, int(math.ceil(t / mission.time_step - STEP_TOLERANCE))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def intercept_steps(mission, agent_x, agent_y, x, y, vx, vy):
     """The whole steps ``n`` of `intercept_flight` (``0``: measured at once, ``-1``: never)."""
     return intercept_flight(mission, agent_x, agent_y, x, y, vx, vy)[1]
