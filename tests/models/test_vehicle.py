@@ -87,14 +87,16 @@ def test_the_registered_kernels_are_the_holonomic_point():
 
 
 @pytest.mark.parametrize(
-    ("position", "velocity", "radius", "expected"),
+    ("state", "expected"),
     [
-        ((130.0, 0.0), (0.0, 0.0), 10.0, 4.0),  # 120 m to the edge at 30 m/s
-        ((130.0, 0.0), (-10.0, 0.0), 10.0, 3.0),  # closing at 40 m/s
-        ((5.0, 0.0), (0.0, 0.0), 10.0, 0.0),  # already within reach
-        ((130.0, 0.0), (40.0, 0.0), 10.0, math.inf),  # faster than the agent, receding
+        ((300.0, 0.0, 0.0, 0.0), 250.0 / 30.0),  # static: fly to the footprint's edge
+        ((300.0, 0.0, 10.0, 0.0), 250.0 / 20.0),  # running away at 10 m/s
+        ((300.0, 0.0, -10.0, 0.0), 250.0 / 40.0),  # coming closer
+        ((0.0, 40.0, 0.0, 0.0), 0.0),  # already inside the footprint
+        ((300.0, 0.0, 40.0, 0.0), math.inf),  # faster than the agent
     ],
 )
-def test_reach_times_are_the_earliest_arrivals_at_the_edge(position, velocity, radius, expected):
-    got = reach_times(np.zeros(2), np.array([position]), np.array([velocity]), 30.0, radius)[0]
-    assert got == pytest.approx(expected)
+def test_reach_times_are_the_earliest_arrivals_at_the_footprints_edge(state, expected):
+    states = np.array([state])
+    t = reach_times(RECORD.vehicle, np.zeros(2), states[:, :2], states[:, 2:], 50.0)[0]
+    assert t == pytest.approx(expected, rel=1e-12)

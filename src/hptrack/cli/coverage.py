@@ -41,6 +41,7 @@ from hptrack.experiments.coverage_validation import (
 )
 from hptrack.interface import InputError, MissionSpec, one_line, shown
 from hptrack.models.motion import ProcessNoiseForm
+from hptrack.models.state import state_from, velocities
 from hptrack.scenario import load_scenario
 from hptrack.scenario.model import MotionSpec
 
@@ -161,7 +162,7 @@ def coverage(
         n = subtask.intercept.steps
         start_mean = subtask.intercept.start
         end_mean, end_cov = mission.motion.predict(
-            np.concatenate([start_mean, means[0, 2:]])[None],
+            state_from(start_mean, velocities(means[0]))[None],
             subtask.start_covariance[None],
             q,
             est.cutoff_time,

@@ -35,7 +35,7 @@ from hptrack.cli.common import (
 from hptrack.interface import CurrentPlan, InputError
 from hptrack.registry import PLANNERS, make_planner, planner_entry
 from hptrack.scenario import load_scenario
-from hptrack.scenario.io import format_validation_error, parse_scenario
+from hptrack.scenario.io import file_data, format_validation_error, parse_scenario
 
 FLY_ITERATIONS = 2000
 """Tree-search simulations per decision in ``fly`` when neither effort flag is given (a
@@ -277,13 +277,15 @@ def fly(
         target.print(escape(text), highlight=False, soft_wrap=True)  # paths stay whole
 
     def build(limits: VehicleLimits) -> MissionController:
-        speed = planned_speed(scenario.agent.speed, limits, cap_speed)
+        scenario_speed = scenario.vehicle_spec().speed
+        speed = planned_speed(scenario_speed, limits, cap_speed)
         on_message(
             f"vehicle limits: {limits.detail}; planning with {speed:g} m/s "
-            f"(the scenario's agent speed is {scenario.agent.speed:g} m/s)"
+            f"(the scenario's agent speed is {scenario_speed:g} m/s)"
         )
-        data = scenario.model_dump(mode="json")
-        data["agent"]["speed"] = speed
+        data = file_data(scenario)
+        data["agent"].pop("speed", None)
+        data["vehicle"] = {**data.get("vehicle", {}), "speed": speed}
         flown = parse_scenario(data, f"{scenario_path} with the vehicle's speed")
         on_message(f"mission log: {log_path}")
         return MissionController(
@@ -296,7 +298,7 @@ def fly(
                 "source": "fly",
                 "flight": options.as_json(),
                 "vehicle_limits": limits.__dict__,
-                "scenario_agent_speed": scenario.agent.speed,
+                "scenario_agent_speed": scenario_speed,
             },
         )
 

@@ -133,7 +133,7 @@ def reachable_before_budget(intercept_steps, left):
     return 0 <= intercept_steps < left
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def intercept_flight(mission, agent_x, agent_y, x, y, vx, vy):
     """The intercept flight from the agent at ``(agent_x, agent_y)`` to a belief mean at
     ``(x, y)`` m moving at ``(vx, vy)`` m/s, asked of the mission's sensor and vehicle:
@@ -149,7 +149,7 @@ def intercept_flight(mission, agent_x, agent_y, x, y, vx, vy):
     return t, int(math.ceil(t / mission.time_step - STEP_TOLERANCE))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def intercept_steps(mission, agent_x, agent_y, x, y, vx, vy):
     """The whole steps ``n`` of `intercept_flight` (``0``: measured at once, ``-1``: never)."""
     return intercept_flight(mission, agent_x, agent_y, x, y, vx, vy)[1]

@@ -30,7 +30,7 @@ import numpy as np
 from numba.extending import overload
 
 from hptrack._dispatch import registered
-from hptrack.models.measurement import kalman_update, update_covariance
+from hptrack.models.measurement import kalman_update, update_covariance, within_footprint
 
 
 class FootprintSensor(NamedTuple):
@@ -96,27 +96,27 @@ def sensor_missed(sensor, mean, cov):
     raise NotImplementedError
 
 
-@overload(sensor_measures)
+@overload(sensor_measures, inline="always")
 def _measures(sensor, agent_x, agent_y, x, y):
     return _kernel(sensor, "measures")
 
 
-@overload(sensor_reach)
+@overload(sensor_reach, inline="always")
 def _reach(sensor):
     return _kernel(sensor, "reach")
 
 
-@overload(sensor_update)
+@overload(sensor_update, inline="always")
 def _update(sensor, mean, cov, z, mean_out, cov_out):
     return _kernel(sensor, "update")
 
 
-@overload(sensor_update_covariance)
+@overload(sensor_update_covariance, inline="always")
 def _update_covariance(sensor, cov, out):
     return _kernel(sensor, "update_covariance")
 
 
-@overload(sensor_missed)
+@overload(sensor_missed, inline="always")
 def _missed(sensor, mean, cov):
     return _kernel(sensor, "missed")
 
@@ -129,11 +129,8 @@ def footprint_radius(sensor):
 
 @numba.njit(cache=True, inline="always")
 def footprint_measures(sensor, agent_x, agent_y, x, y):
-    """`FootprintSensor`: ``|p - agent| <= w/2``."""
-    dx = x - agent_x
-    dy = y - agent_y
-    r = footprint_radius(sensor)
-    return dx * dx + dy * dy <= r * r
+    """`FootprintSensor`: ``|p - agent| <= w/2`` (`within_footprint`)."""
+    return within_footprint(sensor.diameter, agent_x, agent_y, x, y)
 
 
 @numba.njit(cache=True)

@@ -85,17 +85,17 @@ def vehicle_approach_step(vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps):
     raise NotImplementedError
 
 
-@overload(vehicle_move)
+@overload(vehicle_move, inline="always")
 def _move(vehicle, agent, waypoint):
     return _kernel(vehicle, "move")
 
 
-@overload(vehicle_intercept_time)
+@overload(vehicle_intercept_time, inline="always")
 def _intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy):
     return _kernel(vehicle, "intercept_time")
 
 
-@overload(vehicle_approach_step)
+@overload(vehicle_approach_step, inline="always")
 def _approach_step(vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps):
     return _kernel(vehicle, "approach_step")
 
@@ -203,12 +203,17 @@ register_vehicle(
 
 
 def reach_times(
-    agent: np.ndarray, positions: np.ndarray, velocities: np.ndarray, speed: float, radius: float
+    vehicle: HolonomicVehicle,
+    agent: np.ndarray,
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    radius: float,
 ) -> np.ndarray:
-    """Earliest time, s, at which a holonomic agent flying straight at ``speed`` (m/s) from
-    ``agent`` ``(2,)`` or ``(k, 2)`` comes within ``radius`` (m) of each point moving at constant
+    """Earliest time, s, at which the ``vehicle`` flying straight at full speed from ``agent``
+    ``(2,)`` or ``(k, 2)`` comes within ``radius`` (m) of each point moving at constant
     ``velocities`` ``(k, 2)`` (m/s) from ``positions`` ``(k, 2)`` (m); ``inf`` if it never does
     (a point faster than the agent)."""
+    speed = vehicle.speed
     d = positions - agent
     v = velocities
     a = np.einsum("ij,ij->i", v, v) - speed * speed
