@@ -23,13 +23,12 @@ import numpy as np
 
 from hptrack.coverage import (
     ShiftingSpiral,
-    approach_step,
     coverage_outcome,
     estimate_coverage,
-    intercept_steps,
     sharp_coverage_outcome,
 )
 from hptrack.interface import MissionSpec
+from hptrack.models.mission import approach_step_to, intercept_steps_to
 from hptrack.scenario.random import random_mean, random_prior
 
 
@@ -76,14 +75,10 @@ def start_covariances(
         mean = random_mean(rng)
         unobserved = rng.integers(0, 1201) * settings.time_step if age is None else age
         m, c = motion.predict(mean[None], cov[None], q, unobserved)
-        steps = intercept_steps(
-            0.0, 0.0, *m[0], settings.agent_speed, settings.time_step, settings.sensor_radius
-        )
+        steps = intercept_steps_to(settings.record, 0.0, 0.0, m[0])
         start = motion.predict(m, c, q, steps * settings.time_step)[1][0]
         means[i], covs[i], qs[i], flights[i] = m[0], start, q, steps
-        approach[i] = approach_step(
-            0.0, 0.0, *m[0], settings.agent_speed, settings.time_step, steps
-        )
+        approach[i] = approach_step_to(settings.record, 0.0, 0.0, m[0], steps)
     return means, covs, qs, flights, approach
 
 

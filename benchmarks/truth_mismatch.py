@@ -8,7 +8,10 @@ reproducible; each row names its planner's canonical settings, part of its ident
 appended to a CSV as they finish, and a re-run skips those there, so a stopped run resumes;
 ``--report`` writes the mean ``U`` with its standard error and the targets never detected per
 planner, truth and ``n``, and the paired difference of ``mcts`` from ``greedy`` (``table.md``,
-``summary.json``).
+``summary.json``). ``mcts_told`` is ``mcts`` told the true model where a belief can hold it
+(the linear-Gaussian truths of `TOLD`: the scenario's ``motion:`` block is the truth's), with
+its paired difference from ``mcts``; its ``U`` is its own beliefs', so the targets never
+detected compare across belief models better than ``U`` does.
 
     python3 benchmarks/truth_mismatch.py --targets 6,12 --seeds 10 --csv results/mismatch.csv
     python3 benchmarks/truth_mismatch.py --report --csv results/mismatch.csv \\
@@ -32,7 +35,10 @@ TRUTHS: dict[str, dict | None] = {
     "ou_0.01": {"model": "ornstein_uhlenbeck", "damping": 0.01},
 }
 """The truth motions flown, by the name the table gives them."""
-PLANNERS = ("mcts", "greedy", "clairvoyant")
+TOLD = ("random_walk_5", "ou_0.01")
+"""The truths a belief motion can hold (`hptrack.models.belief_motion`)."""
+PLANNERS = ("mcts", "greedy", "clairvoyant", "mcts_told")
+"""The planners flown (``mcts_told``: ``mcts`` with the true model, on `TOLD` only)."""
 FIELDS = ("planner", "planner_settings", "truth", "n", "seed", "U", "never_detected")
 """A row: its identity (the planner and its canonical settings, the truth, ``n``, the seed) and
 its results."""
@@ -46,8 +52,9 @@ def _sibling(name: str):
     return module
 
 
-def scenario(n: int, seed: int, truth: str):
-    """The homogeneous random scenario ``(n, seed)`` with ``truth``'s motion."""
+def scenario(n: int, seed: int, truth: str, told: bool = False):
+    """The homogeneous random scenario ``(n, seed)`` with ``truth``'s motion (``told``: as the
+    beliefs' motion too)."""
     from hptrack.scenario.model import Scenario
     from hptrack.scenario.random import random_scenario
 
@@ -55,7 +62,8 @@ def scenario(n: int, seed: int, truth: str):
     spec = TRUTHS[truth]
     if spec is None:
         return base
-    return Scenario.model_validate({**base.model_dump(exclude_none=True), "truth_motion": spec})
+    field = "motion" if told else "truth_motion"
+    return Scenario.model_validate({**base.model_dump(exclude_none=True), field: spec})
 
 
 def settings_of(planner: str, iterations: int):
@@ -63,7 +71,11 @@ def settings_of(planner: str, iterations: int):
     ``iterations`` simulations per decision)."""
     from hptrack.registry import planner_settings
 
-    return planner_settings(planner, {"iterations": iterations} if planner == "mcts" else None)
+    searches = planner in ("mcts", "mcts_told")
+    return planner_settings(
+        "mcts" if planner == "mcts_told" else planner,
+        {"iterations": iterations} if searches else None,
+    )
 
 
 def episode(job: tuple) -> dict:
@@ -73,7 +85,10 @@ def episode(job: tuple) -> dict:
 
     planner, truth, n, seed, iterations = job
     settings = settings_of(planner, iterations)
-    record = run_episode(scenario(n, seed, truth), planner_entry(planner).factory(settings))
+    told = planner == "mcts_told"
+    record = run_episode(
+        scenario(n, seed, truth, told), planner_entry("mcts" if told else planner).factory(settings)
+    )
     never = int((~record.detections.any(axis=0)).sum())
     values = (planner, settings.canonical(), truth, n, seed, repr(record.uncertainty), never)
     return dict(zip(FIELDS, values, strict=True))
@@ -85,15 +100,19 @@ def run(args: argparse.Namespace) -> None:
     if path.exists():
         with path.open() as f:
             rows = csv.DictReader(f)
-            done = {(r["planner_settings"], r["truth"], int(r["n"]), int(r["seed"])) for r in rows}
+            done = {
+                (r["planner"], r["planner_settings"], r["truth"], int(r["n"]), int(r["seed"]))
+                for r in rows
+            }
     counts = [int(n) for n in args.targets.split(",")]
     jobs = [
         (planner, truth, n, seed, args.iterations)
         for n in counts
         for seed in range(args.seeds)
         for truth in TRUTHS
-        for planner in PLANNERS
-        if (settings_of(planner, args.iterations).canonical(), truth, n, seed) not in done
+        for planner in args.planners.split(",")
+        if planner != "mcts_told" or truth in TOLD
+        if (planner, settings_of(planner, args.iterations).canonical(), truth, n, seed) not in done
     ]
     path.parent.mkdir(parents=True, exist_ok=True)
     new = not path.exists()
@@ -154,11 +173,38 @@ def report(args: argparse.Namespace) -> None:
             for r in rows:
                 if int(r["n"]) == n and r["truth"] == truth:
                     by_seed.setdefault(int(r["seed"]), {})[r["planner"]] = float(r["U"])
-            diffs = [u["mcts"] - u["greedy"] for u in by_seed.values() if len(u) == len(PLANNERS)]
+            diffs = [
+                u["mcts"] - u["greedy"] for u in by_seed.values() if {"mcts", "greedy"} <= set(u)
+            ]
             if len(diffs) < 2:
                 continue
             mean, se = mean_se(diffs)
             lines.append(f"| {n} | {truth} | {mean:+.2f} | {se:.2f} |")
+    told_lines = []
+    for n in sorted({int(r["n"]) for r in rows}):
+        for truth in TOLD:
+            pairs: dict[int, dict[str, dict]] = {}
+            for r in rows:
+                if int(r["n"]) == n and r["truth"] == truth:
+                    pairs.setdefault(int(r["seed"]), {})[r["planner"]] = r
+            both = [p for p in pairs.values() if {"mcts", "mcts_told"} <= set(p)]
+            if len(both) < 2:
+                continue
+            du, _ = mean_se([float(p["mcts_told"]["U"]) - float(p["mcts"]["U"]) for p in both])
+            dn, se = mean_se(
+                [
+                    int(p["mcts_told"]["never_detected"]) - int(p["mcts"]["never_detected"])
+                    for p in both
+                ]
+            )
+            told_lines.append(f"| {n} | {truth} | {len(both)} | {du:+.2f} | {dn:+.2f} | {se:.2f} |")
+    if told_lines:
+        lines += [
+            "",
+            "| n | truth | scenarios | mcts_told - mcts: U | never detected | std. error |",
+            "|---|---|---|---|---|---|",
+            *told_lines,
+        ]
     (out / "table.md").write_text("\n".join(lines) + "\n")
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     print("\n".join(lines))
@@ -170,6 +216,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10, help="scenario seeds 0..N-1")
     parser.add_argument("--iterations", type=int, default=2000, help="mcts simulations/decision")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--planners", default=",".join(PLANNERS), help="comma-separated")
     parser.add_argument("--csv", required=True, help="the episodes' CSV (appended, resumed)")
     parser.add_argument("--report", action="store_true", help="write the table from the CSV")
     parser.add_argument("--out", default="docs/results/truth-mismatch")

@@ -24,9 +24,10 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from hptrack.models.belief_motion import BeliefMotion
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import Mission, mission_record
-from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
+from hptrack.models.motion import ProcessNoiseForm
 from hptrack.subtasks import Subtask, SubtaskAction
 
 DEFAULT_MEASUREMENT_NOISE = 10.0
@@ -108,6 +109,9 @@ class MissionSpec:
         target_ids: the targets' names.
         n_vehicles: ``m``, the vehicles flown (every planner today flies one and refuses
             more, `one_vehicle`); they share the speed and the sensor.
+        belief_motion: how the beliefs assume the targets move, a registered part of
+            `hptrack.models.belief_motion`; ``None``: constant velocity with
+            ``process_noise_form``.
     """
 
     time_step: float = 0.5
@@ -119,6 +123,7 @@ class MissionSpec:
     process_noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     target_ids: tuple[str, ...] = ()
     n_vehicles: int = 1
+    belief_motion: tuple | None = None
     record: Mission = field(init=False, repr=False)
     """The mission's constants as the compiled kernels take them (built and validated once,
     with the spec)."""
@@ -138,8 +143,9 @@ class MissionSpec:
             self.measurement_noise,
             self.process_noise,
             self.process_noise_form == "continuous",
+            self.belief_motion,
         )
-        object.__setattr__(self, "measurement_noise", record.measurement_noise)
+        object.__setattr__(self, "measurement_noise", record.sensor.measurement_noise)
         object.__setattr__(self, "process_noise", record.process_noise)
         object.__setattr__(self, "target_ids", tuple(self.target_ids))
         object.__setattr__(self, "record", record)
@@ -164,9 +170,9 @@ class MissionSpec:
         return len(self.target_ids)
 
     @property
-    def motion(self) -> ConstantVelocityModel:
-        """The target motion model (``F``, ``Q`` form)."""
-        return ConstantVelocityModel(self.time_step, self.process_noise_form)
+    def motion(self) -> BeliefMotion:
+        """The beliefs' motion model (its numpy face)."""
+        return BeliefMotion(self.time_step, self.record.motion)
 
     @property
     def sensor(self) -> PositionMeasurementModel:

@@ -8,27 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from hptrack.baselines.clairvoyant import ClairvoyantPlanner, intercept_time
+from hptrack.baselines.clairvoyant import ClairvoyantPlanner
 from hptrack.experiments.benchmark import gap_closed
 from hptrack.interface import InputError, TruthReader
 from hptrack.registry import PLANNERS, make_planner
 from hptrack.scenario.model import AgentSpec, Scenario, TargetSpec
 from hptrack.sim.episode import run_episode
-
-
-@pytest.mark.parametrize(
-    ("state", "expected"),
-    [
-        ((300.0, 0.0, 0.0, 0.0), 250.0 / 30.0),  # static: fly to the footprint's edge
-        ((300.0, 0.0, 10.0, 0.0), 250.0 / 20.0),  # running away at 10 m/s
-        ((300.0, 0.0, -10.0, 0.0), 250.0 / 40.0),  # coming closer
-        ((0.0, 40.0, 0.0, 0.0), 0.0),  # already inside the footprint
-        ((300.0, 0.0, 40.0, 0.0), math.inf),  # faster than the agent
-    ],
-)
-def test_intercept_time(state, expected):
-    t = intercept_time(np.zeros(2), np.array([state]), 30.0, 50.0)[0]
-    assert t == pytest.approx(expected, rel=1e-12)
 
 
 def _one_target(x: float, budget: float = 60.0, q: float = 0.0) -> Scenario:

@@ -6,10 +6,10 @@ import pytest
 from scipy.stats import chi2
 
 from hptrack.coverage.estimator import coverage_cdf, coverage_outcome, estimate_coverage
-from hptrack.coverage.intercept import intercept_time
 from hptrack.interface import MissionSpec
 from hptrack.models.mission import mission_record
 from hptrack.models.motion import position_covariance_after
+from hptrack.models.vehicle import intercept_time
 from hptrack.scenario.random import random_prior
 
 MISSION = MissionSpec()

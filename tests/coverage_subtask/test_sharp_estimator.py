@@ -7,7 +7,6 @@ from scipy.stats import norm
 
 from hptrack.coverage import CoverageSubtask
 from hptrack.coverage.estimator import coverage_outcome, estimate_coverage
-from hptrack.coverage.intercept import approach_step, intercept_steps
 from hptrack.coverage.sharp_estimator import (
     ellipse_perimeter,
     estimate_sharp,
@@ -18,7 +17,7 @@ from hptrack.coverage.sharp_estimator import (
 )
 from hptrack.experiments.coverage_validation import draw_case, first_detections, plan_coverage
 from hptrack.interface import MissionSpec
-from hptrack.models.mission import predict_covariance_on
+from hptrack.models.mission import approach_step_to, intercept_steps_to, predict_covariance_on
 
 MISSION = MissionSpec()
 """The paper's constants: tau 0.5 s, v_a 30 m/s, w 100 m, continuous-form Q."""
@@ -32,9 +31,9 @@ def start_of_coverage(case_index, delay_s, agent=(0.0, 0.0)):
     case = draw_case(case_index, 0)
     means, covs = MISSION.motion.predict(case.mean[None], case.covariance[None], case.q, delay_s)
     m = means[0]
-    n = intercept_steps(agent[0], agent[1], m[0], m[1], m[2], m[3], SPEED, TAU, R)
+    n = intercept_steps_to(RECORD, agent[0], agent[1], m)
     start = MISSION.motion.predict(means, covs, case.q, n * TAU)[1][0]
-    return start, case.q, n, approach_step(agent[0], agent[1], *m, SPEED, TAU, n)
+    return start, case.q, n, approach_step_to(RECORD, agent[0], agent[1], m, n)
 
 
 def reference_model(cov, q, n, approach, cutoff):
@@ -227,7 +226,7 @@ def test_the_subtask_exposes_the_sharp_estimate_of_its_own_flight():
         case.q,
         mission,
         n,
-        approach_step(*agent, *case.mean, SPEED, TAU, n),
+        approach_step_to(RECORD, *agent, case.mean, n),
         900.0 - n * TAU,
     )
     assert sub.sharp_estimate == direct
@@ -236,8 +235,8 @@ def test_the_subtask_exposes_the_sharp_estimate_of_its_own_flight():
 
 @numba.njit
 def _node_expansion(mission, agent, mean, cov, q, left):
-    n = intercept_steps(agent[0], agent[1], mean[0], mean[1], mean[2], mean[3], 30.0, 0.5, 50.0)
-    ax, ay = approach_step(agent[0], agent[1], mean[0], mean[1], mean[2], mean[3], 30.0, 0.5, n)
+    n = intercept_steps_to(mission, agent[0], agent[1], mean)
+    ax, ay = approach_step_to(mission, agent[0], agent[1], mean, n)
     start = np.empty((4, 4))
     predict_covariance_on(mission, cov, q, n, start)
     return n, sharp_coverage_outcome(mission, start, q, left - n, n, ax, ay)
@@ -251,7 +250,7 @@ def test_the_kernel_is_callable_from_numba_like_the_paper_one():
         case.q,
         MISSION,
         n,
-        approach_step(0.0, 0.0, *case.mean, SPEED, TAU, n),
+        approach_step_to(RECORD, 0.0, 0.0, case.mean, n),
         900.0 - n * TAU,
     )
     assert (k, p) == (est.cutoff_steps, est.p_find)

@@ -144,7 +144,10 @@ def test_target_not_slower_than_agent_is_rejected():
 def test_kernel_stops_instead_of_looping_on_inconsistent_input():
     out = np.empty(5)
     # frame shift longer than a step: f(theta_k) >= 0, no root above can be bracketed
-    assert spiral_phases(0.0, 1.0, 10.0, 5.0, 20.0, 0.0, 15.0, out) == 0
+    assert spiral_phases(0.0, 1.0, 10.0, 5.0, np.full(5, 20.0), np.zeros(5), 15.0, out) == 0
+    # a shift that grows past the step at the third step: two phases, then it stops
+    shifts = np.array([1.0, 1.0, 20.0, 1.0, 1.0])
+    assert spiral_phases(0.0, 1.0, 10.0, 5.0, shifts, np.zeros(5), 15.0, out) == 2
 
 
 def test_negative_step_is_rejected(spiral):

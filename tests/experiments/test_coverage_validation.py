@@ -16,6 +16,7 @@ from hptrack.experiments.coverage_validation import (
     summarise,
 )
 from hptrack.interface import MissionSpec
+from hptrack.models.truth_motion import ConstantVelocityTruth, sample_truth
 
 
 def test_command_runs_end_to_end_and_resumes(cli, tmp_path):
@@ -98,13 +99,15 @@ def test_simulated_detections_match_an_independent_step_by_step_simulation():
     case = draw_case(3, 0)
     plan = plan_coverage(case, 100 * 2, settings)
     first_any, _ = first_detections(plan, case.q, settings, 4000, np.random.default_rng(2))
-    # Reference: the model's own sampler, one step at a time, 4000 runs at once.
+    # Reference: the simulator's sampler, one step at a time, 4000 runs at once.
     rng = np.random.default_rng(3)
     states = rng.multivariate_normal(plan.mean, plan.covariance, size=4000)
     found = np.zeros(4000, dtype=bool)
     for j in range(plan.path.shape[0]):
         if j:
-            states = settings.motion.sample_motion(states, np.full(4000, case.q), rng)
+            states = sample_truth(
+                ConstantVelocityTruth(), settings.record, states, np.full(4000, case.q), rng
+            )
         found |= np.hypot(*(states[:, :2] - plan.path[j]).T) <= 50.0
     assert np.mean(first_any >= 0) == pytest.approx(found.mean(), abs=0.03)
 

@@ -16,6 +16,8 @@ from hptrack.models.mission import (
     steps_left,
 )
 from hptrack.models.motion import ConstantVelocityModel
+from hptrack.models.sensor import FootprintSensor
+from hptrack.models.vehicle import HolonomicVehicle
 from hptrack.scenario.random import random_scenario
 
 R = np.array([[10.0, 1.0], [1.0, 12.0]])
@@ -23,27 +25,27 @@ R = np.array([[10.0, 1.0], [1.0, 12.0]])
 
 def test_record_holds_the_derived_constants():
     rec = mission_record(0.5, 900.0, 30.0, 100.0, R, [3e-4, 1e-4])
-    assert (rec.time_step, rec.speed, rec.step_length, rec.footprint_radius) == (
-        0.5,
-        30.0,
-        15.0,
-        50.0,
-    )
-    assert (rec.n_steps, rec.velocity_variance_per_q) == (1800, 0.5)
+    assert rec.time_step == 0.5
+    assert rec.vehicle == HolonomicVehicle(speed=30.0, step_length=15.0)
+    assert type(rec.sensor) is FootprintSensor and rec.sensor.diameter == 100.0
+    np.testing.assert_array_equal(rec.sensor.measurement_noise, R)
+    assert (rec.n_steps, rec.motion.velocity_variance_per_q) == (1800, 0.5)
     assert rec.process_noise.tolist() == [3e-4, 1e-4]
-    assert not rec.process_noise.flags.writeable and not rec.measurement_noise.flags.writeable
+    assert (
+        not rec.process_noise.flags.writeable and not rec.sensor.measurement_noise.flags.writeable
+    )
     paper = mission_record(0.25, 10.0, 20.0, 80.0, R, [0.0], continuous_noise=False)
-    assert (paper.n_steps, paper.velocity_variance_per_q) == (40, 1.0)
+    assert (paper.n_steps, paper.motion.velocity_variance_per_q) == (40, 1.0)
 
 
 def test_the_record_is_the_velocity_block_of_q_over_q():
-    """``velocity_variance_per_q`` is what its name says: the velocity block of the per-step
-    ``Q`` divided by ``q``, for both forms of ``Q``."""
+    """The motion part's ``velocity_variance_per_q`` is what its name says: the velocity block
+    of the per-step ``Q`` divided by ``q``, for both forms of ``Q``."""
     for form, continuous in (("continuous", True), ("paper_text", False)):
         q = 3e-4
         rec = mission_record(0.5, 900.0, 30.0, 100.0, R, [q], continuous)
         block = ConstantVelocityModel(0.5, form).process_noise(q)[2, 2]
-        assert block / q == pytest.approx(rec.velocity_variance_per_q, rel=1e-12)
+        assert block / q == pytest.approx(rec.motion.velocity_variance_per_q, rel=1e-12)
 
 
 @pytest.mark.parametrize(
@@ -78,8 +80,10 @@ def test_mission_spec_builds_its_record_once_with_the_same_constants():
     spec = MissionSpec(time_step=0.25, budget=30.0, process_noise=[2e-4, 0.0])
     assert spec.record is spec.record
     assert spec.n_steps == spec.record.n_steps == 120
-    assert spec.record.step_length == spec.step_length
-    assert spec.record.footprint_radius == spec.sensor_radius
+    assert spec.record.vehicle.step_length == spec.step_length
+    assert spec.record.vehicle.speed == spec.agent_speed
+    assert spec.record.sensor.diameter == spec.sensor_diameter
+    assert spec.record.sensor.measurement_noise is spec.measurement_noise
     assert spec.record.process_noise is spec.process_noise
 
 

@@ -482,6 +482,8 @@ def test_misbehaviours_are_checked(changes, message):
     with pytest.raises(ValueError) as err:
         Misbehaviour(**changes)
     assert str(err.value).startswith(message)
+
+
 class _Straight:
     """A planner that flies east: 4 m (one step) ahead of the agent (``"agent"``), or along a
     path laid out at the start, one step per tick whatever the agent does (``"path"``, as a

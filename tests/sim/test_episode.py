@@ -4,10 +4,10 @@ import pytest
 from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.baselines.stationary import StationaryPlanner
 from hptrack.models.beliefs import position_logdet
+from hptrack.models.vehicle import move_towards
 from hptrack.scenario import AgentSpec, Scenario, TargetSpec, random_scenario
 from hptrack.sim.episode import run_episode
 from hptrack.sim.record import EpisodeRecord
-from hptrack.sim.step import move_towards
 
 COV = (
     (900.0, 100.0, 0.0, 0.0),

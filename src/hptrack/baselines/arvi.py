@@ -225,7 +225,7 @@ class ArviPlanner(PrimitivePlanner):
         horizon = self.horizon_primitives(observation, self.settings.horizon)
         means = mean_positions(
             np.asarray(observation.means, dtype=float),
-            self.mission.time_step,
+            self.mission.motion,
             horizon * self.settings.control_steps,
         )
         best: PassResult | None = None

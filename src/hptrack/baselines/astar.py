@@ -152,7 +152,7 @@ class AStarPlanner(PrimitivePlanner):
         k = params.control_steps
         n_controls = self.step_displacements.shape[0]
         means = mean_positions(
-            np.asarray(observation.means, dtype=float), mission.time_step, horizon * k
+            np.asarray(observation.means, dtype=float), mission.motion, horizon * k
         )
         difference = params.cost == "difference"
         capacity = 1 + n_controls * params.max_expansions

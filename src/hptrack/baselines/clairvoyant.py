@@ -24,6 +24,8 @@ import numpy as np
 from hptrack.interface import CurrentPlan, InputError, MissionSpec, Observation, one_vehicle
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.mission import STEP_TOLERANCE
+from hptrack.models.state import positions, velocities
+from hptrack.models.vehicle import reach_times
 from hptrack.settings import NoSettings
 
 STAYS = (0.0, 5.0, 10.0, 20.0, 40.0, 80.0, math.inf)
@@ -31,26 +33,6 @@ STAYS = (0.0, 5.0, 10.0, 20.0, 40.0, 80.0, math.inf)
 SETTLED_STEPS = 200
 """Measured steps after which a stay's covariance is taken as settled (the Riccati recursion
 converges within it at the paper's ``q`` and ``R``); longer stays keep it."""
-
-
-def intercept_time(
-    agent: np.ndarray, states: np.ndarray, speed: float, radius: float
-) -> np.ndarray:
-    """Earliest time, s, at which an agent flying straight at ``speed`` (m/s) from ``agent``
-    ``(2,)`` or ``(k, 2)`` comes within ``radius`` (m) of each target moving at constant velocity
-    from ``states`` ``(k, 4)``; ``inf`` if it never does (a target faster than the agent)."""
-    d = states[:, :2] - agent
-    v = states[:, 2:]
-    a = np.einsum("ij,ij->i", v, v) - speed * speed
-    b = 2.0 * (np.einsum("ij,ij->i", d, v) - radius * speed)
-    c = np.einsum("ij,ij->i", d, d) - radius * radius
-    disc = b * b - 4.0 * a * c
-    with np.errstate(divide="ignore", invalid="ignore"):
-        root = np.where(
-            np.abs(a) > 1e-12, (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a), -c / b
-        )
-    root = np.where((disc < 0.0) | ~np.isfinite(root) | (root < 0.0), math.inf, root)
-    return np.where(c <= 0.0, 0.0, root)
 
 
 class ClairvoyantPlanner:
@@ -105,22 +87,32 @@ class ClairvoyantPlanner:
         stays = np.array(STAYS)
         # first visits: every target x every stay
         t1, s1 = np.repeat(np.arange(n), stays.size), np.tile(stays, n)
-        a1 = intercept_time(obs.agent_position, truth, m.agent_speed, m.sensor_radius)[t1]
+        vehicle, true_positions, true_velocities = (
+            m.record.vehicle,
+            positions(truth),
+            velocities(truth),
+        )
+        a1 = reach_times(
+            vehicle, obs.agent_position, true_positions, true_velocities, m.sensor_radius
+        )[t1]
         ok = (a1 <= left) & ((t1 != leaving) | (n == 1))
         t1, s1, a1 = t1[ok], s1[ok], a1[ok]
         if t1.size == 0:  # no target can be met in time: to the nearest, staying to the end
-            return int(np.argmin(np.hypot(*(truth[:, :2] - obs.agent_position).T))), left
+            return int(np.argmin(np.hypot(*(true_positions - obs.agent_position).T))), left
         s1 = np.minimum(s1, left - a1)
         gain1 = base[t1] - self._final_logdets(covs[t1], q[t1], a1, s1, left)
         free1 = a1 + s1  # when the first visit ends, s from now
         # where each first visit leaves the agent, and every target's truth then
-        leave = truth[t1, :2] + truth[t1, 2:] * free1[:, None]
+        leave = true_positions[t1] + true_velocities[t1] * free1[:, None]
         k1 = np.repeat(np.arange(t1.size), n * stays.size)
         t2 = np.tile(np.repeat(np.arange(n), stays.size), t1.size)
         s2 = np.tile(stays, n * t1.size)
         moved = truth[t2].copy()
-        moved[:, :2] += moved[:, 2:] * free1[k1, None]
-        a2 = free1[k1] + intercept_time(leave[k1], moved, m.agent_speed, m.sensor_radius)
+        moved_positions, moved_velocities = positions(moved), velocities(moved)
+        moved_positions += moved_velocities * free1[k1, None]
+        a2 = free1[k1] + reach_times(
+            vehicle, leave[k1], moved_positions, moved_velocities, m.sensor_radius
+        )
         ok = (t2 != t1[k1]) & (a2 <= left)
         k1, t2, s2, a2 = k1[ok], t2[ok], s2[ok], a2[ok]
         s2 = np.minimum(s2, left - a2)
@@ -152,11 +144,13 @@ class ClairvoyantPlanner:
             self._visits.append(
                 {"step": obs.step, "target_index": self._target, "stay_s": self._stay}
             )
-        state = truth[self._target]
+        position, velocity = positions(truth[self._target]), velocities(truth[self._target])
         if self._leave_at is not None:  # staying: where the target will be after this step
-            return state[:2] + state[2:] * m.time_step
-        meet = intercept_time(obs.agent_position, state[None], m.agent_speed, 0.0)[0]
-        return state[:2] + state[2:] * (meet if math.isfinite(meet) else 0.0)
+            return position + velocity * m.time_step
+        meet = reach_times(
+            m.record.vehicle, obs.agent_position, position[None], velocity[None], 0.0
+        )[0]
+        return position + velocity * (meet if math.isfinite(meet) else 0.0)
 
     def current_plan(self) -> CurrentPlan:
         """No sub-tasks of the paper's kind: nothing to show."""

@@ -18,6 +18,7 @@ import numpy as np
 
 from hptrack.interface import CurrentPlan, MissionSpec, Observation, one_vehicle
 from hptrack.models.beliefs import position_logdet
+from hptrack.models.state import positions, speeds
 from hptrack.settings import NoSettings
 
 
@@ -39,8 +40,8 @@ class GreedyPlanner:
 
     def _reach_times(self, obs: Observation) -> np.ndarray:
         """Time to reach each belief mean flying straight at full speed (conservative), s."""
-        distance = np.hypot(*(obs.means[:, :2] - obs.agent_position).T)
-        closing = self._mission.agent_speed - np.hypot(obs.means[:, 2], obs.means[:, 3])
+        distance = np.hypot(*(positions(obs.means) - obs.agent_position).T)
+        closing = self._mission.agent_speed - speeds(obs.means)
         return distance / closing
 
     def _choose(self, obs: Observation) -> int:
@@ -63,13 +64,13 @@ class GreedyPlanner:
             self._given_up[:] = False
             self._target = None
         if self._target is not None:
-            mean = obs.means[self._target, :2]
+            mean = positions(obs.means[self._target])
             if np.hypot(*(mean - obs.agent_position)) < self._mission.step_length:
                 self._given_up[self._target] = True
                 self._target = None
         if self._target is None:
             self._target = self._choose(obs)
-        return obs.means[self._target, :2].copy()
+        return positions(obs.means[self._target]).copy()
 
     def current_plan(self) -> CurrentPlan:
         """No sub-tasks: nothing to show."""

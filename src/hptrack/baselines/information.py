@@ -40,11 +40,12 @@ from typing import TYPE_CHECKING, Literal
 import numba
 import numpy as np
 
+from hptrack.models.belief_motion import BeliefMotion
 from hptrack.models.beliefs import logdet_xy
-from hptrack.models.measurement import update_covariance
 from hptrack.models.mission import follow_tables, predict_covariance_on
 from hptrack.models.motion import predicted_positions
 from hptrack.models.riccati import measured_covariance
+from hptrack.models.sensor import sensor_measures, sensor_reach, sensor_update_covariance
 
 if TYPE_CHECKING:
     from hptrack.interface import MissionSpec
@@ -54,10 +55,13 @@ CostKind = Literal["difference", "sum"]
 ``log det`` after each step, summed over the steps (original ARVI / A* papers)."""
 
 
-def mean_positions(means: np.ndarray, time_step: float, n_sub_steps: int) -> np.ndarray:
-    """Open-loop predicted mean positions ``(n_sub_steps + 1, n, 2)`` at sub-steps ``0..S``, m."""
-    t = time_step * np.arange(n_sub_steps + 1)
-    return predicted_positions(means[None, :, :], t[:, None])
+def mean_positions(means: np.ndarray, motion: BeliefMotion, n_sub_steps: int) -> np.ndarray:
+    """Open-loop predicted mean positions ``(n_sub_steps + 1, n, 2)`` at sub-steps ``0..S``
+    by the beliefs' ``motion``, m."""
+    t = motion.time_step * np.arange(n_sub_steps + 1)
+    if motion.straight:
+        return predicted_positions(means[None, :, :], t[:, None])
+    return np.stack([motion.mean_positions(m, t) for m in means], axis=1)
 
 
 @numba.njit(cache=True)
@@ -81,9 +85,8 @@ def rollout_children(
     n_controls = step_displacements.shape[0]
     n_targets = covariances.shape[1]
     n_steps = level_means.shape[0] - 1
-    process_noise, noise = mission.process_noise, mission.measurement_noise
-    radius = mission.footprint_radius
-    radius2 = radius * radius
+    process_noise, sensor = mission.process_noise, mission.sensor
+    sensing_range = sensor_reach(sensor)
     reach = 0.0
     for c in range(n_controls):
         reach = max(reach, n_steps * math.hypot(step_displacements[c, 0], step_displacements[c, 1]))
@@ -108,7 +111,7 @@ def rollout_children(
                     level_means[n_steps, i, 1] - level_means[0, i, 1],
                 )
                 gap0 = math.hypot(level_means[0, i, 0] - px, level_means[0, i, 1] - py)
-                if gap0 > reach + drift + radius:
+                if gap0 > reach + drift + sensing_range:
                     far_cov[i] = covariances[a, i]
                     predict_covariance_on(
                         mission, far_cov[i], process_noise[i], n_steps, far_cov[i]
@@ -124,11 +127,10 @@ def rollout_children(
             gap = 0
             for s in range(1, n_steps + 1):
                 gap += 1
-                ex = px + s * dx - level_means[s, i, 0]
-                ey = py + s * dy - level_means[s, i, 1]
-                if ex * ex + ey * ey <= radius2:
+                mx, my = level_means[s, i, 0], level_means[s, i, 1]
+                if sensor_measures(sensor, px + s * dx, py + s * dy, mx, my):
                     predict_covariance_on(mission, p, process_noise[i], gap, p)
-                    update_covariance(p, noise, p)
+                    sensor_update_covariance(sensor, p, p)
                     gap = 0
             if gap > 0:
                 predict_covariance_on(mission, p, process_noise[i], gap, p)
@@ -260,8 +262,8 @@ def bound_children(mission, follow, positions, covariances, start, boundaries, a
     """Compiled kernel of `RiccatiBound.lower_bounds` (``mission``: the mission record,
     ``follow``: its `FollowTables`); adds the bounds to
     ``out``."""
-    process_noise, noise = mission.process_noise, mission.measurement_noise
-    step_length, radius = mission.step_length, mission.footprint_radius
+    process_noise, noise = mission.process_noise, mission.sensor.measurement_noise
+    step_length, sensing_range = mission.vehicle.step_length, sensor_reach(mission.sensor)
     n_nodes, n_targets = covariances.shape[:2]
     n_total = all_means.shape[0] - 1
     p = np.empty((4, 4))
@@ -273,7 +275,7 @@ def bound_children(mission, follow, positions, covariances, start, boundaries, a
             for s in range(1, n_total - start + 1):
                 ex = all_means[start + s, i, 0] - positions[j, 0]
                 ey = all_means[start + s, i, 1] - positions[j, 1]
-                reach = s * step_length + radius
+                reach = s * step_length + sensing_range
                 if ex * ex + ey * ey <= reach * reach:
                     first = s
                     break

@@ -61,6 +61,13 @@ def benchmark(
             "(q I, as printed in the paper)."
         ),
     ] = "continuous",
+    motion: Annotated[
+        str,
+        typer.Option(
+            help="The targets' motion, for beliefs and truth: constant_velocity (the paper's), "
+            "random_walk:D (D m^2/s) or ornstein_uhlenbeck:K (K 1/s)."
+        ),
+    ] = "constant_velocity",
     iterations: Annotated[
         int | None, typer.Option(help="Tree-search iterations per decision.")
     ] = None,
@@ -111,7 +118,9 @@ def benchmark(
     from hptrack.experiments.benchmark import (
         BenchmarkConfig,
         check_effort,
+        motion_label,
         run_benchmark,
+        scenario_for,
         summarise,
     )
     from hptrack.experiments.store import ResultStore
@@ -154,7 +163,9 @@ def benchmark(
         homogeneous=homogeneous,
         first_seed=first_seed,
         process_noise_form=process_noise_form,
+        motion="" if motion_label(motion) is None else motion,
     )
+    scenario_for(config.keys()[0])  # a bad --motion value is refused before any work
     with ExitStack() as stack:
         store = ResultStore(db)
         stack.callback(store.close)

@@ -6,10 +6,11 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 import typer
+from pydantic import TypeAdapter, ValidationError
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
@@ -38,9 +39,11 @@ from hptrack.experiments.coverage_validation import (
     table_rows,
     write_reports,
 )
-from hptrack.interface import InputError, MissionSpec, shown
+from hptrack.interface import InputError, MissionSpec, one_line, shown
 from hptrack.models.motion import ProcessNoiseForm
+from hptrack.models.state import state_from, velocities
 from hptrack.scenario import load_scenario
+from hptrack.scenario.model import MotionSpec
 
 MAX_DELAY_S = 3600.0
 """Longest departure delay of ``validate-coverage``, s (an hour; the paper's budget is 900 s)."""
@@ -134,7 +137,7 @@ def coverage(
                 "time_step": mission.time_step,
                 "agent_speed": mission.agent_speed,
                 "sensor_diameter": mission.sensor.sensor_diameter,
-                "process_noise_form": mission.motion.process_noise_form,
+                "process_noise_form": mission.process_noise_form,
                 "belief_at_departure": {
                     "mean": means[0].tolist(),
                     "covariance": covs[0].tolist(),
@@ -159,7 +162,7 @@ def coverage(
         n = subtask.intercept.steps
         start_mean = subtask.intercept.start
         end_mean, end_cov = mission.motion.predict(
-            np.concatenate([start_mean, means[0, 2:]])[None],
+            state_from(start_mean, velocities(means[0]))[None],
             subtask.start_covariance[None],
             q,
             est.cutoff_time,
@@ -178,6 +181,41 @@ def coverage(
                 title=f"coverage sub-task of target {target} after waiting {delay:g} s",
             )
         console.print(f"figure written to {plot}")
+
+
+MOTION_ADAPTER: TypeAdapter[MotionSpec] = TypeAdapter(MotionSpec)
+
+MotionName = Literal["constant_velocity", "random_walk", "ornstein_uhlenbeck"]
+"""The belief motions ``validate-coverage`` offers (`hptrack.scenario.model.MotionSpec`)."""
+
+
+def motion_of(
+    name: str, diffusion: float, damping: float, process_noise_form: str
+) -> MotionSpec | None:
+    """The scenario ``motion:`` spec of ``--motion`` and its parameters (``None``: constant
+    velocity, the default).
+
+    Raises:
+        InputError: a parameter out of its range, naming the option.
+    """
+    if name == "constant_velocity":
+        return None
+    if process_noise_form != "continuous":
+        raise InputError(
+            f"--process-noise-form {process_noise_form} is a form of constant velocity's Q, "
+            f"not of --motion {name}"
+        )
+    data = {"model": name}
+    if name == "random_walk":
+        data["diffusion"] = diffusion
+    else:
+        data["damping"] = damping
+    try:
+        return MOTION_ADAPTER.validate_python(data)
+    except ValidationError as err:
+        option = "--diffusion" if name == "random_walk" else "--damping"
+        reason = one_line(err.errors()[0]["msg"])
+        raise InputError(f"{option}: {reason} (value {shown(data.popitem()[1])})") from None
 
 
 def validate_coverage(
@@ -199,10 +237,35 @@ def validate_coverage(
         ProcessNoiseForm, typer.Option(help="Q form: continuous (default) or paper_text.")
     ] = "continuous",
     sample_case: Annotated[int, typer.Option(help="Case drawn in the CDF figure.")] = 0,
+    motion: Annotated[
+        MotionName,
+        typer.Option(help="The targets' motion, for beliefs and truth alike."),
+    ] = "constant_velocity",
+    diffusion: Annotated[
+        float, typer.Option(help="Random walk: position variance per second per axis, m^2/s.")
+    ] = 5.0,
+    damping: Annotated[
+        float, typer.Option(help="Ornstein-Uhlenbeck: the velocity's decay rate, 1/s.")
+    ] = 0.01,
+    budget: Annotated[
+        float | None,
+        typer.Option(
+            help="Mission budget, s from the start (delay included); needed by random_walk "
+            "and ornstein_uhlenbeck, whose P_cdf may never stop rising."
+        ),
+    ] = None,
 ) -> None:
     """Estimator-accuracy experiment (paper Sec. V-A): MAPE of P_find and E[T_find] per delay,
     for the paper's estimator and the sharp one on the same simulated runs."""
     check_seed(seed)
+    motion_spec = motion_of(motion, diffusion, damping, process_noise_form)
+    if motion != "constant_velocity" and budget is None:
+        raise InputError(
+            f"--motion {motion} needs a --budget (s): its P_cdf may never stop rising, so "
+            "t_cutoff may never come"
+        )
+    if budget is not None and not (math.isfinite(budget) and 0.0 < budget <= MAX_DELAY_S * 10):
+        raise InputError(f"--budget must be in (0, {MAX_DELAY_S * 10:g}] s, got {shown(budget)}")
     for value, name, most in ((cases, "--cases", MAX_CASES), (runs, "--runs", MAX_RUNS)):
         if not 1 <= value <= most:
             raise InputError(f"{name} must be between 1 and {most:,}, got {shown(value)}")
@@ -218,12 +281,17 @@ def validate_coverage(
         delays=_parse_delays(delays),
         seed=seed,
         mission=MissionSpec(process_noise_form=process_noise_form),
+        motion=motion_spec,
+        budget=budget,
     )
     if not 0 <= sample_case < cases:
         raise InputError(f"--sample-case {sample_case} is not among the {cases} cases")
+    for delay in config.delays:
+        if budget is not None and delay >= budget:
+            raise InputError(f"--delays {delay:g} s is not before --budget {budget:g} s")
     console.print(
-        f"Q form: {process_noise_form}; {cases} cases x {len(config.delays)} delays "
-        f"x {runs} runs; {workers} worker(s); results in {out}"
+        f"motion: {motion}; Q form: {process_noise_form}; {cases} cases x "
+        f"{len(config.delays)} delays x {runs} runs; {workers} worker(s); results in {out}"
     )
     start = time.perf_counter()
     with progress_display(

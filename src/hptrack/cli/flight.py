@@ -36,7 +36,7 @@ from hptrack.cli.common import (
 from hptrack.interface import CurrentPlan, InputError
 from hptrack.registry import PLANNERS, make_planner, planner_entry
 from hptrack.scenario import load_scenario
-from hptrack.scenario.io import format_validation_error, parse_scenario
+from hptrack.scenario.io import file_data, format_validation_error, parse_scenario
 
 FLY_ITERATIONS = 2000
 """Tree-search simulations per decision in ``fly`` when neither effort flag is given (a
@@ -315,13 +315,15 @@ def fly(
         target.print(escape(text), highlight=False, soft_wrap=True)  # paths stay whole
 
     def build(limits: VehicleLimits) -> MissionController:
-        speed = planned_speed(scenario.agent.speed, limits, cap_speed)
+        scenario_speed = scenario.vehicle_spec().speed
+        speed = planned_speed(scenario_speed, limits, cap_speed)
         on_message(
             f"vehicle limits: {limits.detail}; planning with {speed:g} m/s "
-            f"(the scenario's agent speed is {scenario.agent.speed:g} m/s)"
+            f"(the scenario's agent speed is {scenario_speed:g} m/s)"
         )
-        data = scenario.model_dump(mode="json")
-        data["agent"]["speed"] = speed
+        data = file_data(scenario)
+        data["agent"].pop("speed", None)
+        data["vehicle"] = {**data.get("vehicle", {}), "speed": speed}
         flown = parse_scenario(data, f"{scenario_path} with the vehicle's speed")
         on_message(f"mission log: {log_path}")
         return MissionController(
@@ -334,7 +336,7 @@ def fly(
                 "source": "fly",
                 "flight": options.as_json(),
                 "vehicle_limits": limits.__dict__,
-                "scenario_agent_speed": scenario.agent.speed,
+                "scenario_agent_speed": scenario_speed,
                 "warm_up_s": warm_up_s,
             },
         )
@@ -532,7 +534,7 @@ def vehicle_sim(
     check_output_path(stats, "--stats")
     if not 1 <= system_id <= 255:
         raise InputError(f"--system-id must be an integer in [1, 255], got {system_id}")
-    from hptrack.runtime.vehicle_sim import Misbehaviour, VehicleSim
+    from hptrack.runtime.vehicle_sim import PX4_VELOCITY_TRACKING, Misbehaviour, VehicleSim
 
     try:
         misbehaviour = Misbehaviour(
@@ -559,7 +561,7 @@ def vehicle_sim(
         on_event=on_event,
         system_id=system_id,
         misbehaviour=misbehaviour,
-        **({} if velocity_tracking is None else {"velocity_tracking": velocity_tracking}),
+        velocity_tracking=PX4_VELOCITY_TRACKING if velocity_tracking is None else velocity_tracking,
     )
     stop = threading.Event()
     previous = {

@@ -1,9 +1,9 @@
 """Coverage sub-task (paper Sec. IV-A, IV-B): interception, shifting spiral, outcome estimator.
 
-Compiled kernels for the tree search: `intercept_time`, `intercept_steps`,
-`coverage_outcome` (the paper's estimator), `sharp_coverage_outcome` with
-`approach_step` (the sharp estimator: flight detections and the spiral's footprint), and
-`spiral_phases` for the path. Python objects for planners: `CoverageSubtask`,
+Compiled kernels for the tree search: `coverage_outcome` (the paper's estimator),
+`sharp_coverage_outcome` (the sharp estimator: flight detections and the spiral's footprint), and
+`spiral_phases` for the path; the intercept itself is the mission's vehicle's
+(`hptrack.models.mission.intercept_flight`). Python objects for planners: `CoverageSubtask`,
 `estimate_coverage`.
 """
 
@@ -15,10 +15,7 @@ from hptrack.coverage.estimator import (
 )
 from hptrack.coverage.intercept import (
     Intercept,
-    approach_step,
     intercept_path,
-    intercept_steps,
-    intercept_time,
     intercept_waypoint,
     plan_intercept,
 )
@@ -31,14 +28,11 @@ __all__ = [
     "CoverageSubtask",
     "Intercept",
     "ShiftingSpiral",
-    "approach_step",
     "coverage_cdf",
     "coverage_outcome",
     "ellipse_axes",
     "estimate_coverage",
     "intercept_path",
-    "intercept_steps",
-    "intercept_time",
     "intercept_waypoint",
     "plan_intercept",
     "sharp_coverage_outcome",

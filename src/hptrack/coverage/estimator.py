@@ -13,9 +13,15 @@ measured from the start of the coverage. When the remaining budget ends first, e
 truncated at the budget's end.
 
 `coverage_outcome` is the compiled kernel used by the tree search: O(t_cutoff) arithmetic
-with the covariance as polynomials in the step count (closed form), one root and one exponential
-per step, no allocation. `estimate_coverage` is its validated
+with the covariance in closed form (for constant velocity polynomials in the step count; for
+other belief motions the motion's own terms, `hptrack.models.mission.position_det_on`), one
+root and one exponential per step, no allocation. `estimate_coverage` is its validated
 Python wrapper, returning a `CoverageEstimate` in seconds with the CDF.
+
+Under random walk and Ornstein-Uhlenbeck beliefs the position covariance grows linearly in
+time in the long run (``D t`` per axis, ``q t / K^2`` for Ornstein-Uhlenbeck) while ``S_cover``
+does too, so ``S_cover / sqrt(det)`` tends to a finite limit and ``P_cdf`` stays below
+``1 - exp(-v_a w / (2 pi D))`` (``D = q / K^2``) however long the coverage: ``p_max < 1``.
 """
 
 from __future__ import annotations
@@ -27,32 +33,15 @@ import numba
 import numpy as np
 
 from hptrack.interface import MissionSpec
-from hptrack.models.mission import position_covariance_on, position_polynomials_on, steps_left
+from hptrack.models.mission import (
+    position_covariance_on,
+    position_det_on,
+    position_polynomials_on,
+    steps_left,
+)
 
 MAX_COVERAGE_STEPS = 10_000_000
 """Cap on ``t_cutoff`` when no budget is given; reaching it means the belief does not grow."""
-
-
-@numba.njit(cache=True, inline="always")
-def position_det(poly, n):
-    """``det Sigma^xy`` (m^4) after ``n`` steps from `position_polynomials`' ``poly``
-    (its first ten entries), by Horner's rule."""
-    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = (
-        poly[0],
-        poly[1],
-        poly[2],
-        poly[3],
-        poly[4],
-        poly[5],
-        poly[6],
-        poly[7],
-        poly[8],
-        poly[9],
-    )
-    sxx = x0 + n * (x1 + n * (x2 + n * x3))
-    syy = y0 + n * (y1 + n * (y2 + n * x3))
-    sxy = c0 + n * (c1 + n * c2)
-    return sxx * syy - sxy * sxy
 
 
 @numba.njit(cache=True, inline="always")
@@ -66,7 +55,7 @@ def ratio_grows(area, det, next_area, next_det):
 def _covered_ratio(mission, cov, q, k):
     """``S_cover(k) / sqrt(det Sigma^xy(k))`` (dimensionless)."""
     sxx, sxy, syy = position_covariance_on(mission, cov, q, k)
-    speed, diameter, tau = mission.speed, 2.0 * mission.footprint_radius, mission.time_step
+    speed, diameter, tau = mission.vehicle.speed, mission.sensor.diameter, mission.time_step
     area = speed * diameter * k * tau + math.pi * 0.25 * diameter * diameter
     return area / math.sqrt(sxx * syy - sxy * sxy)
 
@@ -90,7 +79,7 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
     if max_steps < 0:
         return 0.0, 0.0, 0.0
     x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials_on(mission, cov, q)
-    speed, diameter, tau = mission.speed, 2.0 * mission.footprint_radius, mission.time_step
+    speed, diameter, tau = mission.vehicle.speed, mission.sensor.diameter, mission.time_step
     area0 = math.pi * 0.25 * diameter * diameter  # S_cover(k) = area0 + k area1
     area1 = speed * diameter * tau
     inv_two_pi = 1.0 / (2.0 * math.pi)
@@ -100,7 +89,7 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
     cdf_sum = 0.0  # sum_{j<k} P_cdf(j)
     poly = (x0, x1, x2, y0, y1, y2, c0, c1, c2, x3)
     while k < max_steps:
-        next_det = position_det(poly, k + 1.0)
+        next_det = position_det_on(mission, poly, k + 1.0)
         next_area = area + area1
         if not ratio_grows(area, det, next_area, next_det):
             break

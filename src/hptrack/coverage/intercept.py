@@ -3,11 +3,15 @@
 
 Before the shifting spiral of Sec. IV-A starts, the agent flies in a straight line at its full
 speed ``v_a`` to the point where the belief mean, moving at the estimated velocity ``v_hat``, can
-first be reached. With ``d = mean - agent`` the intercept time ``t`` is the smallest ``t >= 0`` with
+first be reached: the mission's vehicle answers when (`hptrack.models.vehicle`, the closed form
+of the holonomic point) and the mission record turns it into whole steps
+(`hptrack.models.mission.intercept_flight`); this module plans the flight from it.
 
-    |d + v_hat t| = v_a t   <=>   (v_a^2 - |v_hat|^2) t^2 - 2 (d . v_hat) t - |d|^2 = 0,
-
-whose only non-negative root exists for every ``d`` when ``|v_hat| < v_a``.
+Under a belief motion whose mean does not move in a straight line (random walk,
+Ornstein-Uhlenbeck: `hptrack.models.belief_motion`) the mean's path ``m(t)`` is the motion's
+prediction, its speed never above ``|v_hat|``: the intercept is the earliest ``t`` at which the
+vehicle can be at ``m(t)``, one root found by doubling and bisection
+(`hptrack.models.mission.intercept_flight_on`), and the agent flies straight to ``m(n tau)``.
 
 Time-step convention (shared by the sub-task, the tree search and the validation experiment):
 the simulator moves in whole steps of ``tau``, so the intercept takes ``n = ceil(t / tau)`` steps
@@ -16,97 +20,24 @@ the mean reaches at step ``n``, ``mean + v_hat n tau``, which it can reach by th
 ``|d + v_hat s| - v_a s`` decreases in ``s``; the last step may be shorter than ``v_a tau``.
 The coverage starts at step ``n`` from the covariance propagated ``n`` steps. If the belief mean
 already lies inside the sensor footprint (``|d| <= w/2``) the coverage starts at once: ``n = 0``
-and the spiral is anchored at the agent's position (see `hptrack.coverage.subtask`).
+and the spiral is anchored at the agent's position (see `hptrack.coverage.subtask`): the
+mission's sensor decides (`hptrack.models.sensor`).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
-from hptrack.models.mission import STEP_TOLERANCE
-
-
-@numba.njit(cache=True)
-def intercept_time(
-    agent_x: float,
-    agent_y: float,
-    mean_x: float,
-    mean_y: float,
-    vel_x: float,
-    vel_y: float,
-    speed: float,
-) -> float:
-    """Smallest ``t >= 0`` (s) with ``|mean + vel t - agent| = speed t`` (closed form).
-
-    Positions in m, velocities in m/s. Returns ``inf`` when ``|vel| >= speed`` (the target cannot
-    be caught for sure; `plan_intercept` turns that into an error) and ``0`` when the agent
-    is on the mean.
-    """
-    dx = mean_x - agent_x
-    dy = mean_y - agent_y
-    closing = speed * speed - (vel_x * vel_x + vel_y * vel_y)
-    if closing <= 0.0:
-        return math.inf
-    dd = dx * dx + dy * dy
-    if dd == 0.0:
-        return 0.0
-    dv = dx * vel_x + dy * vel_y
-    root = math.sqrt(dv * dv + closing * dd)
-    # Two algebraically equal forms of the positive root; each avoids cancellation on its side.
-    if dv >= 0.0:
-        return (dv + root) / closing
-    return dd / (root - dv)
-
-
-@numba.njit(cache=True)
-def intercept_steps(
-    agent_x: float,
-    agent_y: float,
-    mean_x: float,
-    mean_y: float,
-    vel_x: float,
-    vel_y: float,
-    speed: float,
-    tau: float,
-    footprint_radius: float,
-) -> int:
-    """Whole steps of the intercept flight (module docstring): ``ceil(t / tau)``, or ``0`` when
-    the mean is within ``footprint_radius`` (m) of the agent. ``-1`` when ``|vel| >= speed``."""
-    dx = mean_x - agent_x
-    dy = mean_y - agent_y
-    if dx * dx + dy * dy <= footprint_radius * footprint_radius:
-        return 0
-    t = intercept_time(agent_x, agent_y, mean_x, mean_y, vel_x, vel_y, speed)
-    if math.isinf(t):
-        return -1
-    return int(math.ceil(t / tau - STEP_TOLERANCE))
-
-
-@numba.njit(cache=True)
-def approach_step(
-    agent_x: float,
-    agent_y: float,
-    mean_x: float,
-    mean_y: float,
-    vel_x: float,
-    vel_y: float,
-    speed: float,
-    tau: float,
-    steps: int,
-) -> tuple:
-    """The agent's displacement per step relative to the belief mean during an intercept flight
-    of ``steps`` whole steps (module docstring), m: ``v_a tau u - v_hat tau`` with ``u`` the unit
-    vector towards the mean at step ``steps``. ``(0, 0)`` when ``steps <= 0``."""
-    if steps <= 0:
-        return 0.0, 0.0
-    dx = mean_x + vel_x * steps * tau - agent_x
-    dy = mean_y + vel_y * steps * tau - agent_y
-    length = math.hypot(dx, dy)
-    return speed * tau * dx / length - vel_x * tau, speed * tau * dy / length - vel_y * tau
+from hptrack.models.mission import (
+    Mission,
+    intercept_flight,
+    intercept_flight_on,
+    mean_position_at_on,
+    mission_moves_straight,
+)
+from hptrack.models.state import position_of, speeds, velocity_of
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,42 +70,36 @@ def _finite_vector(name: str, value: np.ndarray | tuple[float, float]) -> np.nda
     return array
 
 
-def plan_intercept(
-    agent_position: np.ndarray,
-    mean_position: np.ndarray,
-    mean_velocity: np.ndarray,
-    speed: float,
-    time_step: float,
-    sensor_diameter: float,
-) -> Intercept:
-    """Plan the intercept of a belief mean moving at ``mean_velocity`` (m/s) by an agent at
-    ``agent_position`` (m) flying at ``speed`` (m/s), with the whole-step convention.
+def plan_intercept(mission: Mission, agent_position: np.ndarray, mean: np.ndarray) -> Intercept:
+    """Plan the intercept of the belief mean ``mean`` (a state ``[x, y, vx, vy]``, m and m/s)
+    by the mission's vehicle from ``agent_position`` (m), with the whole-step convention.
 
     Raises:
-        ValueError: non-finite inputs, non-positive speed, time step or footprint, or a target
-            whose estimated speed is not below the agent's.
+        ValueError: non-finite inputs, or a target the vehicle cannot catch (its estimated
+            speed not below the agent's).
     """
     agent = _finite_vector("agent_position", agent_position)
-    mean = _finite_vector("mean_position", mean_position)
-    velocity = _finite_vector("mean_velocity", mean_velocity)
-    for name, value in (
-        ("speed", speed),
-        ("time_step", time_step),
-        ("sensor_diameter", sensor_diameter),
-    ):
-        if not (math.isfinite(value) and value > 0.0):
-            raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    target_speed = float(np.hypot(*velocity))
-    if target_speed >= speed:
+    state = np.asarray(mean, dtype=float)
+    if state.shape != (4,) or not np.all(np.isfinite(state)):
+        raise ValueError(f"mean must be 4 finite numbers [x, y, vx, vy], got {mean!r}")
+    x, y = position_of(state)
+    vx, vy = velocity_of(state)
+    if mission_moves_straight(mission):
+        t, steps = intercept_flight(mission, agent[0], agent[1], x, y, vx, vy)
+    else:
+        t, steps = intercept_flight_on(mission, agent[0], agent[1], state, 0.0)
+    if steps < 0:
         raise ValueError(
-            f"the target's estimated speed {target_speed:g} m/s is not below the "
-            f"agent speed {speed:g} m/s: the belief mean cannot be intercepted"
+            f"the target's estimated speed {float(speeds(state)):g} m/s is not below the "
+            f"agent speed {mission.vehicle.speed:g} m/s: the belief mean cannot be intercepted"
         )
-    if np.hypot(*(mean - agent)) <= 0.5 * sensor_diameter:
-        return Intercept(0.0, 0, agent, time_step)
-    t = intercept_time(agent[0], agent[1], mean[0], mean[1], velocity[0], velocity[1], speed)
-    steps = math.ceil(t / time_step - STEP_TOLERANCE)
-    return Intercept(t, steps, mean + velocity * steps * time_step, time_step)
+    if steps == 0:
+        return Intercept(0.0, 0, agent, mission.time_step)
+    if mission_moves_straight(mission):
+        reached = np.array([x + vx * steps * mission.time_step, y + vy * steps * mission.time_step])
+    else:
+        reached = np.array(mean_position_at_on(mission, state, steps * mission.time_step))
+    return Intercept(t, steps, reached, mission.time_step)
 
 
 def intercept_path(

@@ -59,9 +59,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from hptrack.coverage.estimator import estimate_coverage, position_det, ratio_grows
+from hptrack.coverage.estimator import estimate_coverage, ratio_grows
 from hptrack.interface import MissionSpec
-from hptrack.models.mission import position_polynomials_on
+from hptrack.models.mission import position_det_on, position_det_rate_on, position_polynomials_on
 
 PHASE_NODES = 2
 """Gauss-Legendre nodes in the phase of the last pass ``alpha``."""
@@ -188,51 +188,48 @@ def flight_detection_sum(cov, flight_steps, approach_x, approach_y, radius):
 
 
 @numba.njit(cache=True, inline="always")
-def _outer_area_ratio(poly, scale, area_ab, perimeter, radius):
+def _outer_area_ratio(mission, poly, scale, area_ab, perimeter, radius):
     """``h_out``: the parallel body of the loop at ``scale`` over ``pi sqrt(det Sigma^xy)`` at
     the time of that loop, ``scale^2 / scale_rate`` steps into the coverage (``poly[10]``)."""
     steps = scale * scale / poly[10]
     area = area_ab * scale * scale + radius * perimeter * scale + math.pi * radius * radius
-    return area / (math.pi * math.sqrt(position_det(poly, steps)))
+    return area / (math.pi * math.sqrt(position_det_on(mission, poly, steps)))
 
 
 @numba.njit(cache=True, inline="always")
-def _outer_growing(poly, k, area_ab, perimeter, radius):
+def _outer_growing(mission, poly, k, area_ab, perimeter, radius):
     """Whether ``h_out`` grows at ``k > 0`` steps: ``2 S_out' det > S_out det'``."""
-    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3, rate = poly
+    rate = poly[10]
     scale = math.sqrt(rate * k)
     area = area_ab * scale * scale + radius * perimeter * scale + math.pi * radius * radius
     area_rate = rate * (area_ab + 0.5 * radius * perimeter / scale)
-    sxx = x0 + k * (x1 + k * (x2 + k * x3))
-    syy = y0 + k * (y1 + k * (y2 + k * x3))
-    sxy = c0 + k * (c1 + k * c2)
-    det_rate = (
-        (x1 + k * (2.0 * x2 + 3.0 * k * x3)) * syy
-        + sxx * (y1 + k * (2.0 * y2 + 3.0 * k * x3))
-        - 2.0 * sxy * (c1 + 2.0 * k * c2)
-    )
-    return 2.0 * area_rate * (sxx * syy - sxy * sxy) > area * det_rate
+    det, det_rate = position_det_rate_on(mission, poly, k)
+    return 2.0 * area_rate * det > area * det_rate
 
 
 @numba.njit(cache=True)
-def _outer_peak(poly, cutoff, area_ab, perimeter, radius):
+def _outer_peak(mission, poly, cutoff, area_ab, perimeter, radius):
     """``(t*, h_out(t*))``: where ``h_out`` stops growing within ``t_cutoff`` steps, by bisection
     on the sign of its derivative to 0.05 steps (it rises while the swept area outgrows the
     belief, then falls); ``(inf, 0)`` when it still grows at ``t_cutoff``."""
-    if cutoff <= 0.0 or _outer_growing(poly, cutoff, area_ab, perimeter, radius):
+    if cutoff <= 0.0 or _outer_growing(mission, poly, cutoff, area_ab, perimeter, radius):
         return math.inf, 0.0
     lo, hi = 0.0, cutoff
     while hi - lo > 0.05:
         mid = 0.5 * (lo + hi)
-        if _outer_growing(poly, mid, area_ab, perimeter, radius):
+        if _outer_growing(mission, poly, mid, area_ab, perimeter, radius):
             lo = mid
         else:
             hi = mid
-    return lo, _outer_area_ratio(poly, math.sqrt(poly[10] * lo), area_ab, perimeter, radius)
+    return lo, _outer_area_ratio(
+        mission, poly, math.sqrt(poly[10] * lo), area_ab, perimeter, radius
+    )
 
 
 @numba.njit(cache=True)
-def _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start):
+def _found_ratio(
+    mission, poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start
+):
     """``h_F(k)``: the normalised area found by step ``k`` (module docstring); ``start`` is the
     start footprint's, ``h_out(0)``."""
     scale = math.sqrt(poly[10] * k)
@@ -244,17 +241,30 @@ def _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ra
         elif passed * passed / poly[10] >= peak_steps:
             value = peak_ratio
         else:
-            value = _outer_area_ratio(poly, passed, area_ab, perimeter, radius)
+            value = _outer_area_ratio(mission, poly, passed, area_ab, perimeter, radius)
         total += ALPHA_WEIGHTS[i] * value
     return total
 
 
 @numba.njit(cache=True, inline="always")
 def _found(
-    poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start, flight_steps, strip
+    mission,
+    poly,
+    k,
+    pitch,
+    area_ab,
+    perimeter,
+    radius,
+    peak_steps,
+    peak_ratio,
+    start,
+    flight_steps,
+    strip,
 ):
     """``F(k)``: spiral plus flight strip."""
-    h = _found_ratio(poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start)
+    h = _found_ratio(
+        mission, poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start
+    )
     p = -math.expm1(-0.5 * h)
     if flight_steps > 0:
         p += strip_mass(h, strip)
@@ -292,8 +302,8 @@ def sharp_coverage_outcome(
     if max_steps < 0:
         return 0.0, 0.0, 0.0
     x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials_on(mission, cov, q)
-    speed, tau, radius = mission.speed, mission.time_step, mission.footprint_radius
-    diameter = 2.0 * radius
+    speed, tau, diameter = mission.vehicle.speed, mission.time_step, mission.sensor.diameter
+    radius = 0.5 * diameter
     tr = 0.5 * (x0 + y0)
     gap = math.sqrt(max(tr * tr - (x0 * y0 - c0 * c0), 0.0))
     semi_a, semi_b = math.sqrt(tr + gap), math.sqrt(max(tr - gap, 0.0))
@@ -308,7 +318,7 @@ def sharp_coverage_outcome(
     det = x0 * y0 - c0 * c0
     k = 0
     while k < max_steps:
-        next_det = position_det(poly, k + 1.0)
+        next_det = position_det_on(mission, poly, k + 1.0)
         next_area = area + area1
         if not ratio_grows(area, det, next_area, next_det):
             break
@@ -316,7 +326,7 @@ def sharp_coverage_outcome(
         area = next_area
         det = next_det
     cutoff = k
-    peak_steps, peak_ratio = _outer_peak(poly, float(cutoff), area_ab, perimeter, radius)
+    peak_steps, peak_ratio = _outer_peak(mission, poly, float(cutoff), area_ab, perimeter, radius)
     # The flight: its detections' time sum and the strip's width.
     flight_sum = 0.0
     strip = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -329,8 +339,9 @@ def sharp_coverage_outcome(
     # curvature term F'' L (L^2 - 1) / 12 of each interval of L steps (F'' from its neighbours).
     spacing = max(1, -(-(cutoff - EXACT_STEPS) // GRID_INTERVALS))
     at, before = 0, 0
-    start = _outer_area_ratio(poly, 0.0, area_ab, perimeter, radius)
+    start = _outer_area_ratio(mission, poly, 0.0, area_ab, perimeter, radius)
     found = _found(
+        mission,
         poly,
         0.0,
         pitch,
@@ -348,6 +359,7 @@ def sharp_coverage_outcome(
     while at < cutoff:
         length = min(1 if at < EXACT_STEPS else spacing, cutoff - at)
         nxt = _found(
+            mission,
             poly,
             float(at + length),
             pitch,

@@ -23,6 +23,7 @@ most ``v_a tau / 32`` and refined by bisection to machine precision (far below a
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numba
 import numpy as np
@@ -50,8 +51,8 @@ def spiral_phases(
     pitch: float,
     semi_a: float,
     semi_b: float,
-    shift_x: float,
-    shift_y: float,
+    shift_x: np.ndarray,
+    shift_y: np.ndarray,
     step_length: float,
     out: np.ndarray,
 ) -> int:
@@ -61,7 +62,8 @@ def spiral_phases(
         theta_start: the current phase ``theta_k``, rad.
         pitch: ``b`` (m per rad per m of semi-axis; ``r = b theta``).
         semi_a, semi_b: ``A >= B`` along the E-frame axes, m.
-        shift_x, shift_y: ``v_E tau``: the frame's displacement per step in E axes, m.
+        shift_x, shift_y: the frame's displacement in E axes, m, over each step to fill
+            (``v_E tau`` every step when the mean moves at a constant velocity).
         step_length: ``v_a tau``, m; must exceed ``|v_E tau|``.
         out: preallocated phases to fill.
 
@@ -71,14 +73,15 @@ def spiral_phases(
     """
     step2 = step_length * step_length
     speed_scale = pitch * max(semi_a, semi_b)  # |dp/dtheta| <= speed_scale * sqrt(1 + theta^2)
-    # A root lies below theta_k + reach: on the u1 axis |p_E(m pi)| = b m pi A while
-    # |p_E(theta_k)| <= b theta_k A, so some m pi in that range is farther than step + shift.
-    reach = 2.0 * math.pi + 2.0 * (step_length + math.hypot(shift_x, shift_y)) / (pitch * semi_a)
     theta = theta_start
     for i in range(out.shape[0]):
+        # A root lies below theta_k + reach: on the u1 axis |p_E(m pi)| = b m pi A while
+        # |p_E(theta_k)| <= b theta_k A, so some m pi in that range is farther than step + shift.
+        shift = math.hypot(shift_x[i], shift_y[i])
+        reach = 2.0 * math.pi + 2.0 * (step_length + shift) / (pitch * semi_a)
         r = pitch * theta
-        ref_x = r * semi_a * math.cos(theta) - shift_x
-        ref_y = r * semi_b * math.sin(theta) - shift_y
+        ref_x = r * semi_a * math.cos(theta) - shift_x[i]
+        ref_y = r * semi_b * math.sin(theta) - shift_y[i]
         lo = theta
         if _gap(lo, pitch, semi_a, semi_b, ref_x, ref_y, step2) >= 0.0:
             return i
@@ -145,6 +148,9 @@ class ShiftingSpiral:
         speed: agent speed ``v_a``, m/s.
         time_step: ``tau``, s.
         sensor_diameter: footprint diameter ``w``, m.
+        mean_offsets: for a belief mean that does not move at a constant velocity, a function
+            from spiral steps ``(m,)`` to the mean's displacement from ``centre`` ``(m, 2)``, m
+            (its speed never above ``|velocity|``); ``None``: ``v_hat k tau``.
     """
 
     def __init__(
@@ -155,7 +161,9 @@ class ShiftingSpiral:
         speed: float,
         time_step: float,
         sensor_diameter: float,
+        mean_offsets: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> None:
+        self.mean_offsets = mean_offsets
         self.centre = np.asarray(centre, dtype=float).copy()
         self.velocity = np.asarray(velocity, dtype=float).copy()
         if (
@@ -193,17 +201,32 @@ class ShiftingSpiral:
         """``v_a tau``, m."""
         return self.speed * self.time_step
 
+    def _offsets(self, steps: np.ndarray) -> np.ndarray:
+        """The mean's displacement from ``centre`` at spiral steps ``steps``, ``(m, 2)``, m."""
+        if self.mean_offsets is None:
+            return self.velocity * (steps[:, None] * self.time_step)
+        return np.asarray(self.mean_offsets(steps), dtype=float).reshape(-1, 2)
+
+    def _frame_shifts(self, first: int, count: int) -> np.ndarray:
+        """The frame's displacement in E axes over steps ``first .. first + count - 1``
+        (each to the next), ``(count, 2)``, m."""
+        if self.mean_offsets is None:
+            return np.repeat(self._shift[None, :], count, axis=0)
+        path = self._offsets(np.arange(first, first + count + 1, dtype=float))
+        return np.diff(path, axis=0) @ self.rotation
+
     def _extend(self, n_steps: int) -> None:
         while self._phases.shape[0] < n_steps:
             more = max(CHUNK_STEPS, n_steps - self._phases.shape[0])
             out = np.empty(more)
+            shifts = self._frame_shifts(self._phases.shape[0] - 1, more)
             filled = spiral_phases(
                 float(self._phases[-1]),
                 self.pitch,
                 self.semi_a,
                 self.semi_b,
-                float(self._shift[0]),
-                float(self._shift[1]),
+                np.ascontiguousarray(shifts[:, 0]),
+                np.ascontiguousarray(shifts[:, 1]),
                 self.step_length,
                 out,
             )
@@ -229,12 +252,8 @@ class ShiftingSpiral:
 
     def positions(self, n_steps: int) -> np.ndarray:
         """``(n_steps, 2)`` world positions of steps ``0 .. n_steps - 1`` (Eq. (5)), m."""
-        k = np.arange(n_steps, dtype=float)[:, None]
-        return (
-            self.centre
-            + self.frame_positions(n_steps) @ self.rotation.T
-            + self.velocity * (k * self.time_step)
-        )
+        k = np.arange(n_steps, dtype=float)
+        return self.centre + self.frame_positions(n_steps) @ self.rotation.T + self._offsets(k)
 
     def position(self, step: int) -> np.ndarray:
         """World position ``(2,)`` of step ``step``, m."""
@@ -244,4 +263,7 @@ class ShiftingSpiral:
         theta = float(self._phases[step])
         r = self.pitch * theta
         frame = np.array([r * self.semi_a * math.cos(theta), r * self.semi_b * math.sin(theta)])
-        return self.centre + self.rotation @ frame + self.velocity * (step * self.time_step)
+        if self.mean_offsets is None:
+            return self.centre + self.rotation @ frame + self.velocity * (step * self.time_step)
+        offset = self._offsets(np.array([float(step)]))[0]
+        return self.centre + self.rotation @ frame + offset

@@ -25,7 +25,6 @@ import numpy as np
 from hptrack.coverage.estimator import CoverageEstimate, estimate_coverage
 from hptrack.coverage.intercept import (
     Intercept,
-    approach_step,
     intercept_path,
     intercept_waypoint,
     plan_intercept,
@@ -33,6 +32,8 @@ from hptrack.coverage.intercept import (
 from hptrack.coverage.sharp_estimator import SharpEstimate, estimate_sharp
 from hptrack.coverage.spiral import ShiftingSpiral
 from hptrack.interface import MissionSpec, Observation
+from hptrack.models.mission import approach_step_to
+from hptrack.models.state import velocities
 from hptrack.subtasks import Subtask
 
 
@@ -82,11 +83,9 @@ class CoverageSubtask:
         self.mean = mean.copy()
         self.remaining_budget = remaining_budget
         self.agent_position = np.asarray(agent_position, dtype=float).copy()
-        self.intercept: Intercept = plan_intercept(
-            self.agent_position, mean[:2], mean[2:], m.agent_speed, m.time_step, m.sensor_diameter
-        )
+        self.intercept: Intercept = plan_intercept(m.record, self.agent_position, mean)
         n = self.intercept.steps
-        _, covs = m.motion.predict(
+        means, covs = m.motion.predict(
             mean[None, :], np.asarray(covariance, dtype=float)[None], self.q, n * m.time_step
         )
         self.start_covariance = covs[0]
@@ -98,16 +97,25 @@ class CoverageSubtask:
         )
         self.spiral = ShiftingSpiral(
             self.intercept.start,
-            mean[2:],
+            velocities(mean) if m.motion.straight else velocities(means[0]),
             self.start_covariance[:2, :2],
             m.agent_speed,
             m.time_step,
             m.sensor_diameter,
+            None if m.motion.straight else self._mean_offsets,
         )
         self.total_steps = n + self.estimate.cutoff_steps
         if remaining_budget is not None:
             budget_steps = math.floor(remaining_budget / m.time_step + 1e-9)
             self.total_steps = min(self.total_steps, max(budget_steps, 0))
+
+    def _mean_offsets(self, spiral_steps: np.ndarray) -> np.ndarray:
+        """The predicted mean's displacement from the spiral's centre at ``spiral_steps``
+        ``(m,)`` steps into the coverage, ``(m, 2)``, m (a mean that does not move straight)."""
+        tau, n = self.mission.time_step, self.intercept.steps
+        elapsed = (n + np.asarray(spiral_steps, dtype=float)) * tau
+        path = self.mission.motion.mean_positions(self.mean, np.append(n * tau, elapsed))
+        return path[1:] - path[0]
 
     @classmethod
     def from_observation(
@@ -132,16 +140,8 @@ class CoverageSubtask:
         """The sharp estimator's outcome of this sub-task (flight detections included, expected
         duration from its start; `hptrack.coverage.sharp_estimator`)."""
         m, n, mean = self.mission, self.intercept.steps, self.mean
-        approach = approach_step(
-            self.agent_position[0],
-            self.agent_position[1],
-            mean[0],
-            mean[1],
-            mean[2],
-            mean[3],
-            m.agent_speed,
-            m.time_step,
-            n,
+        approach = approach_step_to(
+            m.record, self.agent_position[0], self.agent_position[1], mean, n
         )
         remaining = (
             None if self.remaining_budget is None else self.remaining_budget - n * m.time_step

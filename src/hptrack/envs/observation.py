@@ -22,6 +22,7 @@ import numpy as np
 
 from hptrack.interface import Observation
 from hptrack.models.beliefs import logdet_xy
+from hptrack.models.state import position_of, velocity_of
 
 FEATURES = ("dx", "dy", "vx", "vy", "logdet", "measured")
 """The per-target features, in order."""
@@ -49,10 +50,12 @@ def encode(agent, means, logdets, seen, budget_fraction, n_slots, masked, out):
     for i in range(n_slots):
         k = N_FEATURES * i
         if i < n:
-            out[k] = _clip((means[i, 0] - agent[0]) / POSITION_SCALE_M, b)
-            out[k + 1] = _clip((means[i, 1] - agent[1]) / POSITION_SCALE_M, b)
-            out[k + 2] = _clip(means[i, 2] / VELOCITY_SCALE_MPS, b)
-            out[k + 3] = _clip(means[i, 3] / VELOCITY_SCALE_MPS, b)
+            x, y = position_of(means[i])
+            vx, vy = velocity_of(means[i])
+            out[k] = _clip((x - agent[0]) / POSITION_SCALE_M, b)
+            out[k + 1] = _clip((y - agent[1]) / POSITION_SCALE_M, b)
+            out[k + 2] = _clip(vx / VELOCITY_SCALE_MPS, b)
+            out[k + 3] = _clip(vy / VELOCITY_SCALE_MPS, b)
             out[k + 4] = _clip((logdets[i] - LOGDET_OFFSET) / LOGDET_SCALE, b)
             out[k + 5] = 1.0 if seen[i] else 0.0
         else:

@@ -48,6 +48,8 @@ class BenchmarkConfig:
         homogeneous: the paper's setting for ARVI and A* (shared ``q`` and prior).
         first_seed: first scenario seed.
         process_noise_form: the scenarios' per-step ``Q`` (`hptrack.models.motion`).
+        motion: the scenarios' ``motion:`` block as `motion_label` writes it (``""``: the
+            paper's constant velocity), e.g. ``"ornstein_uhlenbeck:0.01"``.
     """
 
     planners: tuple[str, ...]
@@ -57,6 +59,7 @@ class BenchmarkConfig:
     homogeneous: bool = True
     first_seed: int = 0
     process_noise_form: str = "continuous"
+    motion: str = ""
 
     def __post_init__(self) -> None:
         missing = [p for p in self.planners if p not in self.settings]
@@ -70,7 +73,7 @@ class BenchmarkConfig:
 
     @property
     def setting(self) -> str:
-        return setting_name(self.homogeneous, self.process_noise_form)
+        return setting_name(self.homogeneous, self.process_noise_form, self.motion)
 
     def keys(self) -> list[EpisodeKey]:
         """Every episode of the benchmark, in run order."""
@@ -83,21 +86,59 @@ class BenchmarkConfig:
         ]
 
 
-def setting_name(homogeneous: bool, process_noise_form: str = "continuous") -> str:
+MOTION_PARAMETERS = {"random_walk": "diffusion", "ornstein_uhlenbeck": "damping"}
+"""The one parameter of each belief motion a benchmark's ``motion`` label names."""
+
+
+def motion_label(label: str) -> dict | None:
+    """The scenario ``motion:`` block of a label ``MODEL:VALUE`` (``random_walk:5``: diffusion
+    5 m^2/s; ``ornstein_uhlenbeck:0.01``: damping 0.01 1/s); ``None`` for ``""`` or
+    ``constant_velocity``.
+
+    Raises:
+        InputError: an unknown model or a value that is not a number.
+    """
+    if label in ("", "constant_velocity"):
+        return None
+    model, _, value = label.partition(":")
+    if model not in MOTION_PARAMETERS:
+        raise InputError(
+            f"--motion {label!r}: the model is one of constant_velocity, "
+            f"{', '.join(f'{m}:VALUE' for m in MOTION_PARAMETERS)}"
+        )
+    block: dict = {"model": model}
+    if value:
+        try:
+            block[MOTION_PARAMETERS[model]] = float(value)
+        except ValueError:
+            raise InputError(f"--motion {label!r}: {value!r} is not a number") from None
+    return block
+
+
+def setting_name(
+    homogeneous: bool, process_noise_form: str = "continuous", motion: str = ""
+) -> str:
     """The setting part of an episode's identity: ``"homogeneous"`` or ``"heterogeneous"``,
-    with ``"+paper_text"`` when ``Q`` is the paper's printed form."""
+    with ``"+paper_text"`` when ``Q`` is the paper's printed form and ``"+MODEL:VALUE"`` under
+    another belief motion (`motion_label`)."""
     base = "homogeneous" if homogeneous else "heterogeneous"
-    return base if process_noise_form == "continuous" else f"{base}+{process_noise_form}"
+    parts = [base] + ([process_noise_form] if process_noise_form != "continuous" else [])
+    parts += [motion] if motion_label(motion) is not None else []
+    return "+".join(parts)
 
 
 def scenario_for(key: EpisodeKey) -> Scenario:
     """The random scenario of a benchmark episode."""
-    base, _, form = key.setting.partition("+")
+    base, *rest = key.setting.split("+")
+    forms = [part for part in rest if part in ("continuous", "paper_text")]
+    motions = [motion_label(part) for part in rest if part not in forms]
+    fields = {"motion": motions[0]} if motions else {}
     return random_scenario(
         key.n_targets,
         seed=key.seed,
         homogeneous=base == "homogeneous",
-        process_noise_form=form or "continuous",
+        process_noise_form=forms[0] if forms else "continuous",
+        **fields,
     )
 
 

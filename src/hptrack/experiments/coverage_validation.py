@@ -21,8 +21,9 @@ expected duration given a find against the empirical detection time from departu
 ``t_cutoff``, hence the plan and the simulation.
 
 The agent's path is the hierarchical planner's own sub-task
-(`CoverageSubtask`), and the true motion is `hptrack.models.motion.advance_true_state`, the
-simulator's. Sampling: no detection is checked while the agent waits, so the true state at departure
+(`CoverageSubtask`), and the true motion is the simulator's (`hptrack.models.truth_motion`), by
+the same model as the beliefs (constant velocity by default; ``ValidationConfig.motion``).
+Sampling: no detection is checked while the agent waits, so the true state at departure
 is drawn exactly from the belief propagated ``t_d`` (Eq. (1) in closed form); from there
 trajectories are advanced step by step, all runs at once, with the process noise drawn in blocks of
 steps and runs dropped once detected. Randomness: the case ``i`` is drawn from ``SeedSequence(seed,
@@ -49,8 +50,10 @@ from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.experiments.workers import worker_pool
 from hptrack.interface import InputError, MissionSpec
 from hptrack.jsonout import json_text
-from hptrack.models.mission import motion_noise_factors_on
-from hptrack.models.motion import advance_true_state
+from hptrack.models.sensor import measured_mask, sensor_measures
+from hptrack.models.state import position_of, positions, velocities
+from hptrack.models.truth_motion import ConstantVelocityTruth, advance_truth
+from hptrack.scenario.model import ConstantVelocitySpec, MotionSpec
 from hptrack.scenario.random import random_mean, random_prior
 
 PAPER_MAPE = {"0": (3.58, 5.18), "100": (2.46, 3.42), "200": (5.46, 3.73)}
@@ -102,7 +105,13 @@ class ValidationConfig:
         delays: departure delays ``t_d``, s (whole time steps).
         seed: root seed.
         mission: agent, sensor and model constants (its budget is not used: the coverage runs
-            to ``t_cutoff``).
+            to ``t_cutoff``, or to ``budget``).
+        motion: how the target moves, for the beliefs and the sampled truth alike (a scenario
+            ``motion:`` spec, `hptrack.scenario.model.MotionSpec`); ``None``: constant
+            velocity with the mission's ``Q`` form.
+        budget: the mission's budget, s from the start (the delay included); ``None``: every
+            coverage runs to ``t_cutoff`` (needed by beliefs under which ``P_cdf`` may never
+            stop rising: random walk, Ornstein-Uhlenbeck).
     """
 
     cases: int = 1000
@@ -110,14 +119,28 @@ class ValidationConfig:
     delays: tuple[float, ...] = (0.0, 100.0, 200.0)
     seed: int = 0
     mission: MissionSpec = field(default_factory=MissionSpec)
+    motion: MotionSpec | None = None
+    budget: float | None = None
 
     def __post_init__(self) -> None:
+        if self.motion is not None:
+            part = self.motion.belief(self.mission.time_step, self.mission.process_noise_form)
+            object.__setattr__(self, "mission", replace(self.mission, belief_motion=part))
+        if self.budget is not None and not (math.isfinite(self.budget) and self.budget > 0.0):
+            raise ValueError(f"budget must be a positive number of seconds, got {self.budget!r}")
         if self.cases < 1 or self.runs < 1:
             raise ValueError(f"cases and runs must be positive, got {self.cases}, {self.runs}")
         if not self.delays:
             raise ValueError("give at least one delay")
         for delay in self.delays:
             self.delay_steps(delay)
+            if self.budget is not None and delay >= self.budget:
+                raise ValueError(f"delay {delay:g} s is not before the budget {self.budget:g} s")
+
+    def truth(self) -> tuple:
+        """The sampled targets' truth motion (`hptrack.models.truth_motion`), the beliefs'."""
+        spec = self.motion or ConstantVelocitySpec()
+        return spec.build(1, np.random.default_rng(0))
 
     def delay_steps(self, delay: float) -> int:
         """The delay in whole steps; raises if it is negative or not a whole number of steps."""
@@ -132,7 +155,7 @@ class ValidationConfig:
     def identity(self) -> dict:
         """Everything that determines a case's rows (``cases`` excluded, so runs can extend)."""
         m = self.mission
-        return {
+        identity = {
             "runs": self.runs,
             "delays": [float(d) for d in self.delays],
             "seed": self.seed,
@@ -146,6 +169,12 @@ class ValidationConfig:
             "sampler": "models.motion.advance_true_state",
             "estimators": ["paper", "sharp"],
         }
+        if self.motion is not None:
+            identity["motion"] = self.motion.model_dump(mode="json")
+            identity["sampler"] = "models.truth_motion.advance_truth"
+        if self.budget is not None:
+            identity["budget"] = float(self.budget)
+        return identity
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,16 +221,19 @@ def plan_coverage(
     delay_steps: int,
     mission: MissionSpec,
     agent_position: np.ndarray | None = None,
+    budget: float | None = None,
 ) -> CoveragePlan:
     """Wait ``delay_steps`` at ``agent_position`` (default the origin), then fly the planner's
-    coverage sub-task (intercept, spiral) to ``t_cutoff``."""
+    coverage sub-task (intercept, spiral) to ``t_cutoff`` (or the end of ``budget`` s from
+    the start)."""
     agent = np.zeros(2) if agent_position is None else np.asarray(agent_position, dtype=float)
     means, covs = mission.motion.predict(
         case.mean[None], case.covariance[None], case.q, delay_steps * mission.time_step
     )
     mean, cov = means[0], covs[0]
     single = replace(mission, process_noise=np.array([case.q]), target_ids=("case",))
-    subtask = CoverageSubtask(agent, mean, cov, case.q, single, None)
+    left = None if budget is None else budget - delay_steps * mission.time_step
+    subtask = CoverageSubtask(agent, mean, cov, case.q, single, left)
     return CoveragePlan(
         mean,
         cov,
@@ -214,22 +246,29 @@ def plan_coverage(
 
 @numba.njit(cache=True)
 def _advance_block(
-    mission, states, active, noise, path, first_step, flight_steps, sqrt_q, first_any, first_spiral
+    truth,
+    mission,
+    states,
+    active,
+    noise,
+    path,
+    first_step,
+    flight_steps,
+    sqrt_q,
+    first_any,
+    first_spiral,
 ):
-    """Advance the ``active`` runs through steps ``first_step ..`` with unit normal ``noise``
-    ``(runs, steps, 4)`` and record detections; a run stops at its first detection on the
-    spiral (step >= ``flight_steps``). ``mission`` is the mission record."""
-    l11, l21, l22 = motion_noise_factors_on(mission)
-    tau = mission.time_step
-    radius2 = mission.footprint_radius * mission.footprint_radius
+    """Advance the ``active`` runs through steps ``first_step ..`` by the ``truth`` motion
+    with unit normal ``noise`` ``(runs, steps, 4)`` and record detections; a run stops at its
+    first detection on the spiral (step >= ``flight_steps``). ``mission`` is the mission
+    record, ``sqrt_q`` ``(1,)``."""
     for a in range(active.shape[0]):
         i = active[a]
         for t in range(noise.shape[1]):
-            advance_true_state(states, i, noise[a, t], sqrt_q, l11, l21, l22, tau)
+            advance_truth(truth, mission, states[i : i + 1], noise[a, t : t + 1], sqrt_q)
             j = first_step + t
-            dx = states[i, 0] - path[j, 0]
-            dy = states[i, 1] - path[j, 1]
-            if dx * dx + dy * dy <= radius2:
+            x, y = position_of(states[i])
+            if sensor_measures(mission.sensor, path[j, 0], path[j, 1], x, y):
                 if first_any[i] < 0:
                     first_any[i] = j
                 if j >= flight_steps:
@@ -238,18 +277,24 @@ def _advance_block(
 
 
 def first_detections(
-    plan: CoveragePlan, q: float, mission: MissionSpec, runs: int, rng: np.random.Generator
+    plan: CoveragePlan,
+    q: float,
+    mission: MissionSpec,
+    runs: int,
+    rng: np.random.Generator,
+    truth: tuple | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Monte Carlo of the fixed plan: for each of ``runs`` sampled trajectories, the first step
-    (from departure) at which the target is detected, and the first such step on the spiral
-    (``>= n``); ``-1`` when not detected by ``t_cutoff``.
+    """Monte Carlo of the fixed plan: for each of ``runs`` trajectories sampled by the
+    ``truth`` motion (default constant velocity), the first step (from departure) at which
+    the target is detected, and the first such step on the spiral (``>= n``); ``-1`` when not
+    detected by ``t_cutoff``.
     """
+    truth = ConstantVelocityTruth() if truth is None else truth
     states = rng.multivariate_normal(plan.mean, plan.covariance, size=runs, method="cholesky")
-    radius2 = mission.sensor_radius**2
     n = plan.intercept_steps
     first_any = np.full(runs, -1, dtype=np.int64)
     first_spiral = np.full(runs, -1, dtype=np.int64)
-    hit = np.sum((states[:, :2] - plan.path[0]) ** 2, axis=1) <= radius2
+    hit = measured_mask(mission.record.sensor, plan.path[0], positions(states))
     first_any[hit] = 0
     if n == 0:
         first_spiral[hit] = 0
@@ -260,6 +305,7 @@ def first_detections(
         block = min(BLOCK_STEPS, total - step)
         noise = rng.standard_normal((active.size, block, 4))
         _advance_block(
+            truth,
             mission.record,
             states,
             active,
@@ -267,7 +313,7 @@ def first_detections(
             plan.path,
             step,
             n,
-            math.sqrt(q),
+            np.array([math.sqrt(q)]),
             first_any,
             first_spiral,
         )
@@ -293,11 +339,13 @@ def case_rows(
     rows, times = [], {}
     for delay in config.delays:
         d = config.delay_steps(delay)
-        plan = plan_coverage(case, d, s)
+        plan = plan_coverage(case, d, s, budget=config.budget)
         rng = np.random.default_rng(
             np.random.SeedSequence(config.seed, spawn_key=(case.index, 1 + d))
         )
-        first_any, first_spiral = first_detections(plan, case.q, s, config.runs, rng)
+        first_any, first_spiral = first_detections(
+            plan, case.q, s, config.runs, rng, config.truth()
+        )
         n, est = plan.intercept_steps, plan.estimate
         found = first_any >= 0
         coverage_time = np.maximum(first_any[found] - n, 0) * s.time_step
@@ -306,10 +354,10 @@ def case_rows(
             {
                 "case": case.index,
                 "delay": float(delay),
-                "mean_x": case.mean[0],
-                "mean_y": case.mean[1],
-                "vel_x": case.mean[2],
-                "vel_y": case.mean[3],
+                "mean_x": positions(case.mean)[0],
+                "mean_y": positions(case.mean)[1],
+                "vel_x": velocities(case.mean)[0],
+                "vel_y": velocities(case.mean)[1],
                 "var_x": case.covariance[0, 0],
                 "var_y": case.covariance[1, 1],
                 "cov_xy": case.covariance[0, 1],

@@ -49,8 +49,9 @@ from stonesoup.types.update import Update
 from hptrack.interface import MissionSpec, Observation, Planner
 from hptrack.models.measurement import check_noise_covariance
 from hptrack.models.motion import ConstantVelocityModel
+from hptrack.models.sensor import FootprintSensor, measured_mask
+from hptrack.models.vehicle import move_towards
 from hptrack.registry import make_planner, planner_settings
-from hptrack.sim.step import move_towards
 
 __all__ = [
     "STONESOUP_TO_HPTRACK",
@@ -143,8 +144,10 @@ class FootprintPositionSensor(SimpleSensor):
         )
 
     def _within(self, xy: np.ndarray) -> bool:
+        """The footprint's rule, asked of hptrack's sensor part (`hptrack.models.sensor`)."""
         centre = np.asarray(self.position, dtype=float).reshape(-1)[:2]
-        return float(np.hypot(*(xy - centre))) <= 0.5 * self.diameter
+        part = FootprintSensor(float(self.diameter), np.asarray(self.noise_covar, dtype=float))
+        return bool(measured_mask(part, centre, xy[None])[0])
 
     def is_detectable(self, state, measurement_model=None) -> bool:
         return self._within(

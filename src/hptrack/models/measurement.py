@@ -15,6 +15,22 @@ import numpy as np
 
 
 @numba.njit(cache=True, inline="always")
+def within_footprint(diameter, agent_x, agent_y, x, y):
+    """The footprint's rule: a target at ``(x, y)`` lies within ``w/2`` (``diameter`` ``w``, m)
+    of the agent at ``(agent_x, agent_y)``, ``|p - agent|^2 <= (w/2)^2``."""
+    dx = x - agent_x
+    dy = y - agent_y
+    r = 0.5 * diameter
+    return dx * dx + dy * dy <= r * r
+
+
+@numba.njit(cache=True)
+def _within_all(diameter, agent, positions, out):
+    for i in range(positions.shape[0]):
+        out[i] = within_footprint(diameter, agent[0], agent[1], positions[i, 0], positions[i, 1])
+
+
+@numba.njit(cache=True, inline="always")
 def _gain(cov, noise):
     """Entries of ``K = P H' (H P H' + R)^-1`` (rows x, y, vx, vy) and of the symmetric ``P``."""
     p00, p01, p02, p03 = cov[0, 0], 0.5 * (cov[0, 1] + cov[1, 0]), cov[0, 2], cov[0, 3]
@@ -140,9 +156,12 @@ class PositionMeasurementModel:
         )
 
     def in_footprint(self, agent_position: np.ndarray, positions: np.ndarray) -> np.ndarray:
-        """Boolean mask ``(n,)``: which positions ``(n, 2)`` lie within ``w/2`` of the agent."""
-        d2 = np.sum((positions - agent_position) ** 2, axis=-1)
-        return d2 <= (0.5 * self.sensor_diameter) ** 2
+        """Boolean mask ``(n,)``: which positions ``(n, 2)`` lie within ``w/2`` of the agent
+        (`within_footprint`)."""
+        points = np.ascontiguousarray(np.asarray(positions, dtype=float).reshape(-1, 2))
+        out = np.empty(points.shape[0], dtype=np.bool_)
+        _within_all(self.sensor_diameter, np.asarray(agent_position, dtype=float), points, out)
+        return out
 
     def sample(self, positions: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy measurements ``(m, 2)`` of true positions ``(m, 2)``: ``z = p + L e``,

@@ -1,18 +1,20 @@
 """The mission's constants as one compiled record, and the rules on it (paper Sec. III, V-A).
 
 `Mission` is what every compiled kernel takes instead of loose constants: it is built and
-validated once (`mission_record`, or `hptrack.interface.MissionSpec.record`). The
-per-step process noise of Eq. (1) enters the kernels through ``q`` and
-`Mission.velocity_variance_per_q`, the lower-right (velocity) block of the per-step ``Q``
-divided by ``q``: ``tau`` for the continuous white-noise-acceleration form, ``1`` for the
-paper's printed form (`hptrack.models.motion`).
+validated once (`mission_record`, or `hptrack.interface.MissionSpec.record`). How the beliefs
+assume the targets move is its ``motion`` part (`hptrack.models.belief_motion`: the paper's
+constant velocity by default, with either form of Eq. (1)'s ``Q``), dispatched at compile time.
+
+The world's parts are fields of the record, registered classes dispatched at compile time:
+``sensor`` (`hptrack.models.sensor`) and ``vehicle`` (`hptrack.models.vehicle`).
 
 The rules, one place each: `steps_left` (whole steps of a remaining budget, the same for
-the mission's budget), `reachable_before_budget` (an intercept that ends strictly before
-the budget), `MAX_TARGETS` (the planner's action list is an ``int64`` bitmask). The kernels
-of `hptrack.models.motion` and `hptrack.models.riccati` that need the noise form are
-offered here on the record (`predict_covariance_on`, `position_covariance_on`, ...),
-so that no layer above the models handles it.
+the mission's budget), `intercept_steps` (the whole steps of the flight to a belief mean, asked
+of the sensor, the vehicle and the motion), `reachable_before_budget` (an intercept that ends
+strictly before the budget), `MAX_TARGETS` (the planner's action list is an ``int64``
+bitmask). The motion's kernels are offered here on the record (`predict_covariance_on`,
+`position_covariance_on`, `mean_position_on`, ...), so that no layer above the models handles
+the motion itself.
 """
 
 from __future__ import annotations
@@ -22,15 +24,21 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+from numba import types
+from numba.extending import overload
 
+from hptrack.models import belief_motion as bm
+from hptrack.models.belief_motion import ConstantVelocity, registered_motion
 from hptrack.models.measurement import check_noise_covariance
-from hptrack.models.motion import (
-    motion_noise_factors,
-    position_covariance_after,
-    position_polynomials,
-    predict_covariance,
+from hptrack.models.motion import motion_noise_factors
+from hptrack.models.riccati import riccati_table_of
+from hptrack.models.sensor import FootprintSensor, SensorPart, sensor_measures
+from hptrack.models.vehicle import (
+    HolonomicVehicle,
+    VehiclePart,
+    vehicle_approach_step,
+    vehicle_intercept_time,
 )
-from hptrack.models.riccati import riccati_table
 
 MAX_TARGETS = 62
 """Most targets of a mission: the planner's action list is an ``int64`` bitmask."""
@@ -46,24 +54,22 @@ class Mission(NamedTuple):
 
     Attributes:
         time_step: ``tau``, s.
-        speed: agent speed ``v_a``, m/s.
-        step_length: largest agent displacement per step ``v_a tau``, m.
-        footprint_radius: ``w / 2``, m; targets within it are measured.
-        measurement_noise: ``(2, 2)`` position measurement covariance ``R``, m^2.
         process_noise: ``(n,)`` per-target noise intensities ``q``, m^2/s^3.
         n_steps: whole steps in the budget ``N``.
-        velocity_variance_per_q: the velocity block of the per-step ``Q`` over ``q``, s
-            (``tau``, continuous form) or 1 (the paper's printed form).
+        motion: how the beliefs assume the targets move, a registered part of
+            `hptrack.models.belief_motion` (`ConstantVelocity` by default).
+        sensor: the sensor part (`hptrack.models.sensor`; the paper's `FootprintSensor`:
+            diameter ``w`` and ``R``).
+        vehicle: the vehicle part (`hptrack.models.vehicle`; the paper's
+            `HolonomicVehicle`: speed ``v_a`` and step length ``v_a tau``).
     """
 
     time_step: float
-    speed: float
-    step_length: float
-    footprint_radius: float
-    measurement_noise: np.ndarray
     process_noise: np.ndarray
     n_steps: int
-    velocity_variance_per_q: float
+    motion: tuple
+    sensor: SensorPart
+    vehicle: VehiclePart
 
 
 def mission_record(
@@ -74,9 +80,11 @@ def mission_record(
     measurement_noise: np.ndarray,
     process_noise: np.ndarray,
     continuous_noise: bool = True,
+    motion: tuple | None = None,
 ) -> Mission:
     """The validated `Mission` (``continuous_noise``: the continuous form of ``Q``, else
-    the paper's printed one).
+    the paper's printed one; ``motion``: a registered belief motion, default constant velocity
+    with that ``Q``).
 
     Raises:
         ValueError: a constant not positive and finite, ``R`` not symmetric positive definite,
@@ -96,18 +104,19 @@ def mission_record(
         raise ValueError(f"process_noise must be finite and >= 0, got {q.tolist()}")
     if q.size > MAX_TARGETS:
         raise ValueError(f"at most {MAX_TARGETS} targets, got {q.size}")
+    tau = float(time_step)
+    if motion is None:
+        motion = ConstantVelocity(tau if continuous_noise else 1.0)
+    registered_motion(motion)
     noise.flags.writeable = False
     q.flags.writeable = False
-    tau = float(time_step)
     return Mission(
         time_step=tau,
-        speed=float(agent_speed),
-        step_length=float(agent_speed) * tau,
-        footprint_radius=0.5 * float(sensor_diameter),
-        measurement_noise=noise,
         process_noise=q,
         n_steps=steps_left(tau, float(budget)),
-        velocity_variance_per_q=tau if continuous_noise else 1.0,
+        motion=motion,
+        sensor=FootprintSensor(float(sensor_diameter), noise),
+        vehicle=HolonomicVehicle(float(agent_speed), float(agent_speed) * tau),
     )
 
 
@@ -125,29 +134,182 @@ def reachable_before_budget(intercept_steps, left):
 
 
 @numba.njit(cache=True, inline="always")
+def intercept_flight(mission, agent_x, agent_y, x, y, vx, vy):
+    """The intercept flight from the agent at ``(agent_x, agent_y)`` to a belief mean at
+    ``(x, y)`` m moving at ``(vx, vy)`` m/s, asked of the mission's sensor and vehicle:
+    ``(t, n)``, the vehicle's exact intercept time ``t`` (s) and its whole steps
+    ``n = ceil(t / tau)`` (less `STEP_TOLERANCE`); ``(0, 0)`` when the sensor already measures
+    the mean, ``(inf, -1)`` when the vehicle cannot catch it (`hptrack.coverage.intercept` has
+    the convention)."""
+    if sensor_measures(mission.sensor, agent_x, agent_y, x, y):
+        return 0.0, 0
+    t = vehicle_intercept_time(mission.vehicle, agent_x, agent_y, x, y, vx, vy)
+    if math.isinf(t):
+        return t, -1
+    return t, int(math.ceil(t / mission.time_step - STEP_TOLERANCE))
+
+
+@numba.njit(cache=True, inline="always")
+def intercept_steps(mission, agent_x, agent_y, x, y, vx, vy):
+    """The whole steps ``n`` of `intercept_flight` (``0``: measured at once, ``-1``: never)."""
+    return intercept_flight(mission, agent_x, agent_y, x, y, vx, vy)[1]
+
+
+DOUBLINGS = 64
+"""Most doublings of the bracket of an intercept of a curved mean path (`intercept_flight_on`)."""
+BISECTION_ROUNDS = 200
+"""Most halvings of that bracket; it stops earlier at machine precision."""
+
+
+@numba.njit(cache=True, inline="always")
+def _reaches(mission, agent_x, agent_y, mean, elapsed, s):
+    """Whether the vehicle can be, ``s`` s from now, where the mean predicted ``elapsed + s``
+    s ahead will be."""
+    x, y = mean_position_on(mission, mean, elapsed + s)
+    return vehicle_intercept_time(mission.vehicle, agent_x, agent_y, x, y, 0.0, 0.0) <= s
+
+
+@numba.njit(cache=True)
+def intercept_flight_on(mission, agent_x, agent_y, mean, elapsed):
+    """`intercept_flight` to the belief mean ``mean`` (a state) predicted ``elapsed`` s ahead by
+    the mission's motion, along its predicted path: the closed form when the mean moves
+    straight; otherwise the earliest ``t`` at which the vehicle can be where the mean will be,
+    by doubling and bisection (one root: the mean's speed stays below the vehicle's,
+    `hptrack.models.belief_motion`)."""
+    x, y, vx, vy = mean_state_on(mission, mean, elapsed)
+    if moves_straight_on(mission):
+        return intercept_flight(mission, agent_x, agent_y, x, y, vx, vy)
+    if sensor_measures(mission.sensor, agent_x, agent_y, x, y):
+        return 0.0, 0
+    if math.isinf(vehicle_intercept_time(mission.vehicle, agent_x, agent_y, x, y, vx, vy)):
+        return math.inf, -1
+    lo, hi = 0.0, max(mission.time_step, 1e-9)
+    for _ in range(DOUBLINGS):
+        if _reaches(mission, agent_x, agent_y, mean, elapsed, hi):
+            break
+        lo, hi = hi, 2.0 * hi
+    else:
+        return math.inf, -1
+    for _ in range(BISECTION_ROUNDS):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        if _reaches(mission, agent_x, agent_y, mean, elapsed, mid):
+            hi = mid
+        else:
+            lo = mid
+    return hi, int(math.ceil(hi / mission.time_step - STEP_TOLERANCE))
+
+
+@numba.njit(cache=True)
+def intercept_steps_to(mission, agent_x, agent_y, mean, elapsed=0.0):
+    """The whole steps of `intercept_flight_on` to the belief mean ``mean`` (a state) predicted
+    ``elapsed`` s ahead (``0``: measured at once, ``-1``: never)."""
+    return intercept_flight_on(mission, agent_x, agent_y, mean, elapsed)[1]
+
+
+@numba.njit(cache=True)
+def approach_step_to(mission, agent_x, agent_y, mean, steps, elapsed=0.0):
+    """The vehicle's displacement per step relative to the belief mean ``mean`` (a state)
+    predicted ``elapsed`` s ahead, on an intercept flight of ``steps`` whole steps, m
+    (`hptrack.models.vehicle`); along a curved mean path, relative to the mean's average
+    velocity over the flight."""
+    x, y, vx, vy = mean_state_on(mission, mean, elapsed)
+    tau = mission.time_step
+    if not moves_straight_on(mission) and steps > 0:
+        ex, ey = mean_position_on(mission, mean, elapsed + steps * tau)
+        vx, vy = (ex - x) / (steps * tau), (ey - y) / (steps * tau)
+    return vehicle_approach_step(mission.vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps)
+
+
+@numba.njit(cache=True, inline="always")
 def predict_covariance_on(mission, cov, q, steps, out):
-    """`hptrack.models.motion.predict_covariance` with the mission's ``tau`` and ``Q``."""
-    predict_covariance(cov, q, steps, mission.time_step, mission.velocity_variance_per_q, out)
+    """``out = F cov F' + Q`` over ``steps`` steps of the mission's motion (Eq. (1) for
+    constant velocity); ``out`` may be ``cov``."""
+    bm.predict_covariance(mission.motion, mission.time_step, cov, q, steps, out)
 
 
 @numba.njit(cache=True, inline="always")
 def position_covariance_on(mission, cov, q, steps):
-    """`hptrack.models.motion.position_covariance_after` on the mission."""
-    return position_covariance_after(
-        cov, q, steps, mission.time_step, mission.velocity_variance_per_q
-    )
+    """``(sxx, sxy, syy)`` of the position covariance after ``steps`` steps, m^2."""
+    return bm.position_covariance(mission.motion, mission.time_step, cov, q, steps)
 
 
 @numba.njit(cache=True, inline="always")
 def position_polynomials_on(mission, cov, q):
-    """`hptrack.models.motion.position_polynomials` on the mission."""
-    return position_polynomials(cov, q, mission.time_step, mission.velocity_variance_per_q)
+    """The motion's ten position terms of ``cov`` (for constant velocity the polynomials of
+    `hptrack.models.motion.position_polynomials`), read by `position_det_on`."""
+    return bm.position_terms(mission.motion, mission.time_step, cov, q)
+
+
+@numba.njit(cache=True, inline="always")
+def position_det_on(mission, poly, steps):
+    """``det Sigma^xy`` (m^4) after ``steps`` steps from `position_polynomials_on`'s terms."""
+    return bm.position_det(mission.motion, mission.time_step, poly, steps)
+
+
+@numba.njit(cache=True, inline="always")
+def position_det_rate_on(mission, poly, steps):
+    """``(det Sigma^xy, d det / d steps)`` from `position_polynomials_on`'s terms."""
+    return bm.position_det_rate(mission.motion, mission.time_step, poly, steps)
+
+
+@numba.njit(cache=True, inline="always")
+def mean_position_on(mission, mean, elapsed):
+    """``(x, y)`` of the belief mean ``[x, y, vx, vy]`` predicted ``elapsed`` s ahead, m."""
+    x, y, _, _ = bm.mean_state(mission.motion, mission.time_step, mean, elapsed)
+    return x, y
+
+
+@numba.njit(cache=True, inline="always")
+def mean_state_on(mission, mean, elapsed):
+    """``(x, y, vx, vy)``: the belief mean predicted ``elapsed`` s ahead."""
+    return bm.mean_state(mission.motion, mission.time_step, mean, elapsed)
+
+
+@numba.njit(cache=True, inline="always")
+def moves_straight_on(mission):
+    """Whether the belief mean moves in a straight line at its velocity (constant velocity:
+    then intercepts and spiral shifts have closed forms)."""
+    return bm.moves_straight(mission.motion)
+
+
+@numba.njit(cache=True)
+def mission_moves_straight(mission):
+    """`moves_straight_on` for Python callers."""
+    return moves_straight_on(mission)
+
+
+@numba.njit(cache=True)
+def mean_position_at_on(mission, mean, elapsed):
+    """`mean_position_on` for Python callers."""
+    return mean_position_on(mission, mean, elapsed)
+
+
+def _cv_velocity_variance(motion, tau):
+    raise NotImplementedError
+
+
+@overload(_cv_velocity_variance)
+def _cv_velocity_variance_impl(motion, tau):
+    if isinstance(motion, types.BaseNamedTuple) and motion.instance_class is ConstantVelocity:
+        return lambda motion, tau: motion.velocity_variance_per_q
+    return lambda motion, tau: tau
 
 
 @numba.njit(cache=True, inline="always")
 def motion_noise_factors_on(mission):
-    """`hptrack.models.motion.motion_noise_factors` on the mission."""
-    return motion_noise_factors(mission.time_step, mission.velocity_variance_per_q)
+    """`hptrack.models.motion.motion_noise_factors` of the constant-velocity truth on the
+    mission: its ``Q`` form when the beliefs assume constant velocity, else the continuous
+    form."""
+    return motion_noise_factors(
+        mission.time_step, _cv_velocity_variance(mission.motion, mission.time_step)
+    )
+
+
+@numba.njit(cache=True)
+def _step_matrices_on(mission, q, f, qq):
+    bm.step_matrices(mission.motion, mission.time_step, q, f, qq)
 
 
 class FollowTables(NamedTuple):
@@ -164,16 +326,11 @@ def follow_tables(mission: Mission, max_steps: int | None = None) -> FollowTable
     """The targets' Riccati tables up to ``max_steps`` (default the mission's ``N``): build
     them once per mission; a table holds for any shorter horizon."""
     steps = mission.n_steps if max_steps is None else int(max_steps)
-    tables = [
-        riccati_table(
-            float(q),
-            mission.time_step,
-            mission.velocity_variance_per_q,
-            mission.measurement_noise,
-            steps,
-        )
-        for q in mission.process_noise
-    ]
+    tables = []
+    for q in mission.process_noise:
+        f, qq = np.empty((4, 4)), np.empty((4, 4))
+        _step_matrices_on(mission, float(q), f, qq)
+        tables.append(riccati_table_of(f, qq, mission.sensor.measurement_noise, steps))
     lengths = np.array([t[3] for t in tables], dtype=np.int64)
     top = int(lengths.max()) if lengths.size else 1
     stacked = [

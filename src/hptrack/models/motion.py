@@ -126,6 +126,55 @@ def position_polynomials(cov, q, tau, c_per_step):
 
 
 @numba.njit(cache=True, inline="always")
+def position_det(poly, n):
+    """``det Sigma^xy`` (m^4) after ``n`` steps from `position_polynomials`' ``poly``
+    (its first ten entries), by Horner's rule."""
+    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = (
+        poly[0],
+        poly[1],
+        poly[2],
+        poly[3],
+        poly[4],
+        poly[5],
+        poly[6],
+        poly[7],
+        poly[8],
+        poly[9],
+    )
+    sxx = x0 + n * (x1 + n * (x2 + n * x3))
+    syy = y0 + n * (y1 + n * (y2 + n * x3))
+    sxy = c0 + n * (c1 + n * c2)
+    return sxx * syy - sxy * sxy
+
+
+@numba.njit(cache=True, inline="always")
+def position_det_rate(poly, k):
+    """``(det Sigma^xy, d det / dk)`` after ``k`` steps from `position_polynomials`'
+    ``poly`` (m^4, m^4 per step)."""
+    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = (
+        poly[0],
+        poly[1],
+        poly[2],
+        poly[3],
+        poly[4],
+        poly[5],
+        poly[6],
+        poly[7],
+        poly[8],
+        poly[9],
+    )
+    sxx = x0 + k * (x1 + k * (x2 + k * x3))
+    syy = y0 + k * (y1 + k * (y2 + k * x3))
+    sxy = c0 + k * (c1 + k * c2)
+    det_rate = (
+        (x1 + k * (2.0 * x2 + 3.0 * k * x3)) * syy
+        + sxx * (y1 + k * (2.0 * y2 + 3.0 * k * x3))
+        - 2.0 * sxy * (c1 + 2.0 * k * c2)
+    )
+    return sxx * syy - sxy * sxy, det_rate
+
+
+@numba.njit(cache=True, inline="always")
 def mean_position_at(mean, elapsed):
     """``(x, y)`` of the belief mean ``[x, y, vx, vy]`` after ``elapsed`` seconds: ``p + v t``."""
     return mean[0] + mean[2] * elapsed, mean[1] + mean[3] * elapsed

@@ -52,6 +52,13 @@ def riccati_table(q, tau, c_per_step, noise, max_steps):
     fill_transition(tau, f)
     qq = np.empty((4, 4))
     fill_process_noise(q, 1.0, tau, c_per_step, qq)
+    return riccati_table_of(f, qq, noise, max_steps)
+
+
+@numba.njit(cache=True)
+def riccati_table_of(f, qq, noise, max_steps):
+    """`riccati_table` for any one-step ``F`` and ``Q`` (4x4; a mission's motion,
+    `hptrack.models.mission.follow_tables`)."""
     det = noise[0, 0] * noise[1, 1] - noise[0, 1] * noise[1, 0]
     s = np.zeros((4, 4))
     s[0, 0] = noise[1, 1] / det
@@ -100,7 +107,9 @@ def riccati_table(q, tau, c_per_step, noise, max_steps):
         for r in range(4):
             for c in range(4):
                 th[j, r, c] = qq[r, c] + 0.5 * (t2[r, c] + t2[c, r])
-        if j >= 2:
+        # A G^-1 A' bounds what the initial covariance still adds; a motion whose velocity
+        # never reaches the position (a random walk) leaves G singular: no bound, no stop.
+        if j >= 2 and tg[j, 2, 2] > 0.0 and tg[j, 3, 3] > 0.0:
             for r in range(4):
                 for c in range(4):
                     m[r, c] = tg[j, r, c]

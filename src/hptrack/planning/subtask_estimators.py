@@ -29,10 +29,8 @@ from numba.extending import overload
 
 from hptrack._dispatch import registered
 from hptrack.coverage.estimator import coverage_outcome
-from hptrack.coverage.intercept import approach_step
 from hptrack.coverage.sharp_estimator import sharp_coverage_outcome
-from hptrack.models.mission import predict_covariance_on
-from hptrack.models.motion import mean_position_at
+from hptrack.models.mission import approach_step_to, predict_covariance_on
 
 _ESTIMATORS: dict[type, Callable] = {}
 ESTIMATORS: dict[str, type] = {}
@@ -104,10 +102,7 @@ def sharp_outcome(estimator, env, state, a, t, ic, work):
     intercept flight, and a find lasts the estimated duration from departure."""
     mission = env.mission
     sf, base_cov, base_step = state[1], state[2], state[3]
-    m = env.means[a]
-    tau = mission.time_step
-    x, y = mean_position_at(m, t * tau)
-    dx, dy = approach_step(sf[0], sf[1], x, y, m[2], m[3], mission.speed, tau, ic)
+    dx, dy = approach_step_to(mission, sf[0], sf[1], env.means[a], ic, t * mission.time_step)
     q = mission.process_noise[a]
     predict_covariance_on(mission, base_cov[a], q, t + ic - base_step[a], work)
     cutoff, p, expected = sharp_coverage_outcome(mission, work, q, env.n_steps - t - ic, ic, dx, dy)

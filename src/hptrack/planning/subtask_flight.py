@@ -17,7 +17,6 @@ import numpy as np
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.mission import steps_left
-from hptrack.models.motion import predicted_positions
 from hptrack.planning.subtask_mdp import subtask_feasible
 from hptrack.subtasks import ActionTable, Subtask, SubtaskAction
 
@@ -95,7 +94,8 @@ class SubtaskFlight:
             return self.coverage.next_waypoint(observation)
         if self.action.target is None:
             return observation.agent_position
-        return predicted_positions(observation.means[self.action.target], self.mission.time_step)
+        tau = self.mission.time_step
+        return self.mission.motion.mean_positions(observation.means[self.action.target], [tau])[0]
 
     def found(self, observation: Observation) -> bool:
         """Whether a pursuit's target is measured at ``observation``."""

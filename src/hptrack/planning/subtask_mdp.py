@@ -76,22 +76,24 @@ from typing import TYPE_CHECKING, NamedTuple
 import numba
 import numpy as np
 
-from hptrack.coverage.intercept import intercept_steps
 from hptrack.coverage.passes import pass_probability
 from hptrack.models.beliefs import logdet_xy
-from hptrack.models.measurement import update_covariance
 from hptrack.models.mission import (
     MAX_TARGETS,
     FollowTables,
     Mission,
     follow_tables,
+    intercept_steps_to,
+    mean_position_on,
+    mean_state_on,
     position_covariance_on,
     predict_covariance_on,
     reachable_before_budget,
     steps_left,
 )
-from hptrack.models.motion import mean_position_at
 from hptrack.models.riccati import measured_covariance
+from hptrack.models.sensor import footprint_radius, sensor_update_covariance
+from hptrack.models.state import velocity_of
 from hptrack.planning.mdp import MdpKernels, register_mdp
 from hptrack.planning.subtask_estimators import estimate_pursuit, estimator_of
 from hptrack.subtasks import ActionTable, dwell_number, is_dwell_index
@@ -419,28 +421,11 @@ def copy_state(env, src, dst):
 
 
 @numba.njit(cache=True)
-def intercept_from(mission, agent_x, agent_y, mean, elapsed):
-    """Whole intercept steps from ``(agent_x, agent_y)`` to the belief mean ``mean`` predicted
-    ``elapsed`` s ahead (``-1``: the target is faster than the agent)."""
-    x, y = mean_position_at(mean, elapsed)
-    return intercept_steps(
-        agent_x,
-        agent_y,
-        x,
-        y,
-        mean[2],
-        mean[3],
-        mission.speed,
-        mission.time_step,
-        mission.footprint_radius,
-    )
-
-
-@numba.njit(cache=True)
 def intercept_of(env, sf, a, t):
     """Whole intercept steps from the agent position ``sf`` at step ``t`` to target ``a``'s
     belief mean (``-1``: the target is faster than the agent)."""
-    return intercept_from(env.mission, sf[0], sf[1], env.means[a], t * env.mission.time_step)
+    mission = env.mission
+    return intercept_steps_to(mission, sf[0], sf[1], env.means[a], t * mission.time_step)
 
 
 @numba.njit(cache=True)
@@ -465,9 +450,10 @@ def subtask_feasible(mission, means, stays, a, mask, last, agent_x, agent_y, ela
     if a == last:
         return True
     m = means[a]
-    steps = intercept_from(mission, agent_x, agent_y, m, elapsed)
+    steps = intercept_steps_to(mission, agent_x, agent_y, m, elapsed)
+    vx, vy = velocity_of(m)
     return reachable_before_budget(steps, left) and (
-        steps > 0 or math.hypot(m[2], m[3]) < mission.speed
+        steps > 0 or math.hypot(vx, vy) < mission.vehicle.speed
     )
 
 
@@ -564,7 +550,7 @@ def apply_outcome(env, state, a, outcome, payload, work):
                 follow.length[a],
                 payload - 1,
                 x1,
-                mission.measurement_noise,
+                mission.sensor.measurement_noise,
                 prior,
                 work,
             )
@@ -573,14 +559,14 @@ def apply_outcome(env, state, a, outcome, payload, work):
                     base_cov[a, i, j] = prior[i, j]
         else:
             predict_covariance_on(mission, base_cov[a], q, end - base_step[a], prior)
-            update_covariance(prior, mission.measurement_noise, base_cov[a])
+            sensor_update_covariance(mission.sensor, prior, base_cov[a])
         base_step[a] = end
         si[I_LAST] = a
     else:
         if not env.keep_missed:
             si[I_MASK] &= ~(np.int64(1) << a)
         si[I_LAST] = -1
-    x, y = mean_position_at(env.means[a], end * mission.time_step)
+    x, y = mean_position_on(mission, env.means[a], end * mission.time_step)
     if env.credit_passes:
         credit_passes(env, state, a, x, y, end, work[4])
     si[I_STEP] = end
@@ -604,9 +590,9 @@ def credit_passes(env, state, a, end_x, end_y, end, prior):
         if b == a:
             continue
         m = env.means[b]
-        mx, my = mean_position_at(m, t * tau)
+        mx, my, mvx, mvy = mean_state_on(mission, m, t * tau)
         # the agent relative to b's mean: from (ox, oy), at (rx, ry) m/s
-        ox, oy, rx, ry = sf[0] - mx, sf[1] - my, vx - m[2], vy - m[3]
+        ox, oy, rx, ry = sf[0] - mx, sf[1] - my, vx - mvx, vy - mvy
         speed = math.sqrt(rx * rx + ry * ry)
         if speed * duration > 1e-9:
             dx, dy = rx / speed, ry / speed
@@ -619,11 +605,11 @@ def credit_passes(env, state, a, end_x, end_y, end, prior):
         q = mission.process_noise[b]
         sxx, sxy, syy = position_covariance_on(mission, base_cov[b], q, float(k - base_step[b]))
         p = pass_probability(
-            ox, oy, dx, dy, speed * duration, sxx, sxy, syy, mission.footprint_radius
+            ox, oy, dx, dy, speed * duration, sxx, sxy, syy, footprint_radius(mission.sensor)
         )
         if p >= PASS_CREDIT:
             predict_covariance_on(mission, base_cov[b], q, k - base_step[b], prior)
-            update_covariance(prior, mission.measurement_noise, base_cov[b])
+            sensor_update_covariance(mission.sensor, prior, base_cov[b])
             base_step[b] = k
             si[I_MASK] |= np.int64(1) << b
 

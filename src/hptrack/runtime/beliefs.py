@@ -5,8 +5,8 @@ time order and the belief at any recent time is exact.
 Per target ``i`` the history keeps a *base* (the belief after every measurement older than the
 horizon, at that measurement's time) and the measurements since, each with its posterior. A new
 measurement at time ``t`` is inserted in time order; the posteriors from there on are recomputed
-(predicted in closed form over each gap with `ConstantVelocityModel.predict`, Eq. (1), and
-updated with `kalman_update`). The belief at time ``T`` is the
+(predicted in closed form over each gap with the beliefs' motion, `BeliefMotion.predict`,
+Eq. (1), and updated with `kalman_update`). The belief at time ``T`` is the
 last posterior at or before ``T`` predicted to ``T``. The horizon is the newest measurement time
 minus the tolerance: a measurement older than it is refused.
 """
@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hptrack.models.belief_motion import BeliefMotion
 from hptrack.models.measurement import kalman_update
-from hptrack.models.motion import ConstantVelocityModel
 
 
 @dataclass
@@ -51,7 +51,7 @@ class BeliefTimeline:
         means: np.ndarray,
         covariances: np.ndarray,
         process_noise: np.ndarray,
-        motion: ConstantVelocityModel,
+        motion: BeliefMotion,
         tolerance_s: float,
         start_s: float = 0.0,
     ) -> None:

@@ -73,6 +73,7 @@ from hptrack.runtime.worker import (
     ThreadedRunner,
     observation,
 )
+from hptrack.scenario.io import file_data
 from hptrack.scenario.model import Scenario
 from hptrack.sim.record import EpisodeRecord
 
@@ -159,7 +160,7 @@ class MissionController:
             {
                 "kind": "header",
                 "version": LOG_VERSION,
-                "scenario": scenario.model_dump(mode="json"),
+                "scenario": file_data(scenario),
                 "planner": planner.name,
                 "planner_settings": planner.settings.as_json(),
                 "seed": self.seed,

@@ -209,10 +209,10 @@ class InputChecks:
             return DetectionCheck(("malformed", "position is not two numbers"), -1, noise)
         if not np.all(np.isfinite(z)):
             return DetectionCheck(("non-finite", f"position {z.tolist()}"), -1, noise)
-        centre, radius = self.area
+        centre, reach = self.area
         distance = float(np.hypot(*(z - centre)))
-        if not distance <= radius:
-            detail = f"{distance:.3g} m from the start, beyond the mission's {radius:.0f} m"
+        if not distance <= reach:
+            detail = f"{distance:.3g} m from the start, beyond the mission's {reach:.0f} m"
             return DetectionCheck(("outside the area", detail), -1, noise)
         if covariance is not None:
             problem, noise = self._noise(covariance, noise)

@@ -30,6 +30,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from hptrack.interface import InputError, Planner
+from hptrack.models.vehicle import move_towards
 from hptrack.runtime.controller import MissionController
 from hptrack.runtime.inputs import ControllerSettings
 from hptrack.runtime.log import MissionLog
@@ -37,7 +38,6 @@ from hptrack.runtime.worker import InlineRunner
 from hptrack.runtime.world import TrueTargets
 from hptrack.scenario.model import Scenario
 from hptrack.sim.record import EpisodeRecord
-from hptrack.sim.step import move_towards
 
 Probability = Annotated[float, Field(ge=0.0, le=1.0)]
 Seconds = Annotated[float, Field(ge=0.0, le=3600.0)]

@@ -14,7 +14,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from hptrack.interface import InputError, one_line, shown
-from hptrack.scenario.model import Scenario
+from hptrack.scenario.model import NOISE_FIELDS, Scenario
 
 
 class ScenarioError(InputError):
@@ -238,7 +238,8 @@ FIELD_COMMENTS = {
     "budget": "s, the mission's length",
     "seed": "drives the true initial states (when not given) and all noise",
     "process_noise_form": "the per-step Q: continuous or paper_text",
-    "truth_motion": "how the simulated targets truly move (planners assume constant velocity)",
+    "motion": "how the beliefs assume the targets move (and, by default, how they do)",
+    "truth_motion": "how the simulated targets truly move when not as motion says",
     "model": "constant_velocity, coordinated_turn, random_walk or ornstein_uhlenbeck",
     "turn_rate": "rad/s, counter-clockwise positive",
     "turn_rate_sd": "rad/s, spread of the per-target rates",
@@ -247,6 +248,11 @@ FIELD_COMMENTS = {
     "position": "m, [x, y]",
     "speed": "m/s",
     "sensor_diameter": "m, the footprint's diameter w",
+    "sensor": "what a look measures (the paper's footprint by default)",
+    "sensor.model": "footprint: measures every target within diameter / 2",
+    "diameter": "m, the footprint's diameter w",
+    "vehicle": "how the agent moves (the paper's holonomic point by default)",
+    "vehicle.model": "holonomic: straight at up to speed, any direction",
     "measurement_noise_std": "m per axis (R = std^2 I)",
     "measurement_noise_covariance": "m^2, R (2x2)",
     "mean": "prior [x, y, vx, vy]: m, m, m/s, m/s",
@@ -254,7 +260,8 @@ FIELD_COMMENTS = {
     "process_noise": "q, m^2/s^3",
     "truth": "true initial [x, y, vx, vy]: m, m, m/s, m/s",
 }
-"""The comment `save_scenario` writes after each field: its units and meaning."""
+"""The comment `save_scenario` writes after each field: its units and meaning (a key
+``block.field`` is that field of a top-level block, before the field's own name)."""
 
 SCENARIO_HEADER = (
     "# hptrack scenario (check it with: hptrack scenario check FILE); SI units: m, s, m/s\n"
@@ -274,17 +281,36 @@ _BlockMappings.add_representer(
 )
 
 
+def file_data(scenario: Scenario) -> dict:
+    """The scenario as the data of its file: every field, ``None`` left out; a ``sensor:`` or
+    ``vehicle:`` block holds the facts it stands for (the ``agent:`` block then leaves them
+    out, so that each is written once)."""
+    data = scenario.model_dump(mode="json", exclude_none=True)
+    if scenario.vehicle is not None:
+        data["vehicle"] = scenario.vehicle_spec().model_dump(mode="json", exclude_none=True)
+        data["agent"].pop("speed")
+    if scenario.sensor is not None:
+        data["sensor"] = scenario.sensor_spec().model_dump(mode="json", exclude_none=True)
+        for name in ("sensor_diameter", *NOISE_FIELDS):
+            data["agent"].pop(name, None)
+    return data
+
+
 def save_scenario(scenario: Scenario, path: str | Path) -> None:
     """Write a scenario as YAML (lists, not tuples, so any YAML reader can load it), each field
-    followed by a comment of its units (`FIELD_COMMENTS`); it loads back to the same
-    scenario."""
-    data = scenario.model_dump(mode="json", exclude_none=True)
+    followed by a comment of its units (`FIELD_COMMENTS`); it loads back to a scenario of the
+    same mission (`file_data`)."""
+    data = file_data(scenario)
     text = yaml.dump(
         data, Dumper=_BlockMappings, sort_keys=False, default_flow_style=None, width=math.inf
     )
     lines = [SCENARIO_HEADER.rstrip("\n")]
+    block = ""
     for line in text.splitlines():
         field = _FIELD_LINE.match(line)
-        comment = FIELD_COMMENTS.get(field.group(1)) if field else None
+        if field and not line.startswith(" "):
+            block = field.group(1)
+        name = field.group(1) if field else ""
+        comment = FIELD_COMMENTS.get(f"{block}.{name}", FIELD_COMMENTS.get(name))
         lines.append(f"{line.ljust(30)}  # {comment}" if comment else line)
     Path(path).write_text("\n".join(lines) + "\n")

@@ -30,10 +30,17 @@ from pydantic import (
 )
 
 from hptrack.interface import MissionSpec, Observation
+from hptrack.models.belief_motion import (
+    BeliefMotion,
+    ConstantVelocity,
+    OrnsteinUhlenbeckMotion,
+    RandomWalkMotion,
+)
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import MAX_TARGETS, steps_left
-from hptrack.models.motion import ConstantVelocityModel, ProcessNoiseForm
+from hptrack.models.motion import ProcessNoiseForm
+from hptrack.models.state import positions, speeds, velocities
 from hptrack.models.truth_motion import (
     ConstantVelocityTruth,
     CoordinatedTurn,
@@ -84,38 +91,103 @@ Matrix4 = tuple[Vector4, Vector4, Vector4, Vector4]
 _STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
 
 
+Speed = Annotated[Real, Field(ge=0.1, le=1000.0)]
+"""The vehicle's speed ``v_a``, m/s."""
+Diameter = Annotated[Real, Field(ge=0.01, le=1e5)]
+"""The footprint's diameter ``w``, m."""
+NoiseStd = Annotated[Real, Field(ge=1e-6, le=1e4)]
+"""The measurement noise per axis, m (``R = std^2 I``)."""
+DEFAULT_SPEED = 30.0
+DEFAULT_DIAMETER = 100.0
+DEFAULT_NOISE_STD = float(np.sqrt(10.0))
+NOISE_FIELDS = ("measurement_noise_std", "measurement_noise_covariance")
+"""The fields that give ``R`` (the covariance, when given, takes precedence)."""
+
+
+def _check_noise_covariance(value: Matrix2 | None) -> None:
+    """Refuse an ``R`` that is not symmetric positive definite within (1e-12, 1e8] m^2."""
+    if value is not None:
+        r = np.asarray(value, dtype=float)
+        if abs(r[0, 1] - r[1, 0]) > 1e-9 * max(float(np.max(np.abs(r))), 1.0):
+            raise ValueError(f"measurement_noise_covariance is not symmetric: {r.tolist()}")
+        eig = np.linalg.eigvalsh(r)
+        if eig[0] <= 1e-12 or eig[1] > 1e8:
+            raise ValueError(
+                "measurement_noise_covariance must be positive definite with "
+                f"eigenvalues in (1e-12, 1e8] m^2, got {r.tolist()}"
+            )
+
+
+def _noise_of(std: float, covariance: Matrix2 | None) -> np.ndarray:
+    """``R`` (2x2), m^2: ``covariance`` if given, else ``std^2 I``."""
+    if covariance is not None:
+        return np.array(covariance, dtype=float)
+    return std**2 * np.eye(2)
+
+
 class AgentSpec(BaseModel):
     """The UAV: start ``position`` (m), ``speed`` ``v_a`` (m/s), footprint ``sensor_diameter``
     ``w`` (m), and the measurement noise: ``measurement_noise_std`` per axis (m; ``R = std^2
-    I``) or a full 2x2 ``measurement_noise_covariance`` (m^2), which takes precedence."""
+    I``) or a full 2x2 ``measurement_noise_covariance`` (m^2), which takes precedence. The
+    speed is the vehicle's and the rest the sensor's: the ``vehicle:`` and ``sensor:`` blocks
+    of a scenario may give them instead (`VehicleSpec`, `SensorSpec`)."""
 
     model_config = _STRICT
 
     position: Vector2 = (0.0, 0.0)
-    speed: Annotated[Real, Field(ge=0.1, le=1000.0)] = 30.0
-    sensor_diameter: Annotated[Real, Field(ge=0.01, le=1e5)] = 100.0
-    measurement_noise_std: Annotated[Real, Field(ge=1e-6, le=1e4)] = float(np.sqrt(10.0))
+    speed: Speed = DEFAULT_SPEED
+    sensor_diameter: Diameter = DEFAULT_DIAMETER
+    measurement_noise_std: NoiseStd = DEFAULT_NOISE_STD
     measurement_noise_covariance: Matrix2 | None = None
 
     @model_validator(mode="after")
     def _noise(self) -> Self:
-        if self.measurement_noise_covariance is not None:
-            r = np.asarray(self.measurement_noise_covariance, dtype=float)
-            if abs(r[0, 1] - r[1, 0]) > 1e-9 * max(float(np.max(np.abs(r))), 1.0):
-                raise ValueError(f"measurement_noise_covariance is not symmetric: {r.tolist()}")
-            eig = np.linalg.eigvalsh(r)
-            if eig[0] <= 1e-12 or eig[1] > 1e8:
-                raise ValueError(
-                    "measurement_noise_covariance must be positive definite with "
-                    f"eigenvalues in (1e-12, 1e8] m^2, got {r.tolist()}"
-                )
+        _check_noise_covariance(self.measurement_noise_covariance)
         return self
 
     def noise_covariance(self) -> np.ndarray:
         """``R`` (2x2), m^2."""
-        if self.measurement_noise_covariance is not None:
-            return np.array(self.measurement_noise_covariance, dtype=float)
-        return self.measurement_noise_std**2 * np.eye(2)
+        return _noise_of(self.measurement_noise_std, self.measurement_noise_covariance)
+
+
+class FootprintSensorSpec(BaseModel):
+    """The paper's sensor (`hptrack.models.sensor.FootprintSensor`): a footprint of
+    ``diameter`` ``w`` (m) that measures every target inside it, with the noise
+    ``measurement_noise_std`` per axis (m; ``R = std^2 I``) or a full 2x2
+    ``measurement_noise_covariance`` (m^2), which takes precedence."""
+
+    model_config = _STRICT
+
+    model: Literal["footprint"] = "footprint"
+    diameter: Diameter = DEFAULT_DIAMETER
+    measurement_noise_std: NoiseStd = DEFAULT_NOISE_STD
+    measurement_noise_covariance: Matrix2 | None = None
+
+    @model_validator(mode="after")
+    def _noise(self) -> Self:
+        _check_noise_covariance(self.measurement_noise_covariance)
+        return self
+
+    def noise_covariance(self) -> np.ndarray:
+        """``R`` (2x2), m^2."""
+        return _noise_of(self.measurement_noise_std, self.measurement_noise_covariance)
+
+
+class HolonomicVehicleSpec(BaseModel):
+    """The paper's vehicle (`hptrack.models.vehicle.HolonomicVehicle`): a point that flies
+    straight at up to ``speed`` ``v_a`` (m/s) in any direction."""
+
+    model_config = _STRICT
+
+    model: Literal["holonomic"] = "holonomic"
+    speed: Speed = DEFAULT_SPEED
+
+
+SensorSpec = FootprintSensorSpec
+"""Which sensor (`hptrack.models.sensor`), by ``model`` (a second model makes this a union
+discriminated by ``model``, as `TruthMotionSpec`)."""
+VehicleSpec = HolonomicVehicleSpec
+"""Which vehicle (`hptrack.models.vehicle`), by ``model`` (as `SensorSpec`)."""
 
 
 class TargetSpec(BaseModel):
@@ -162,7 +234,8 @@ class TargetSpec(BaseModel):
 
 
 class ConstantVelocitySpec(BaseModel):
-    """The paper's constant-velocity truth (the default)."""
+    """The paper's constant velocity (the default), with the scenario's
+    ``process_noise_form``."""
 
     model_config = _STRICT
 
@@ -170,6 +243,9 @@ class ConstantVelocitySpec(BaseModel):
 
     def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
         return ConstantVelocityTruth()
+
+    def belief(self, time_step: float, process_noise_form: ProcessNoiseForm) -> tuple:
+        return ConstantVelocity(time_step if process_noise_form == "continuous" else 1.0)
 
 
 class CoordinatedTurnSpec(BaseModel):
@@ -201,6 +277,9 @@ class RandomWalkSpec(BaseModel):
     def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
         return RandomWalk(float(self.diffusion))
 
+    def belief(self, time_step: float, process_noise_form: ProcessNoiseForm) -> tuple:
+        return RandomWalkMotion(float(self.diffusion))
+
 
 class OrnsteinUhlenbeckSpec(BaseModel):
     """Targets whose velocity decays at ``damping`` 1/s (at least 1e-3, a time constant of at
@@ -214,6 +293,9 @@ class OrnsteinUhlenbeckSpec(BaseModel):
     def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
         return OrnsteinUhlenbeck(float(self.damping))
 
+    def belief(self, time_step: float, process_noise_form: ProcessNoiseForm) -> tuple:
+        return OrnsteinUhlenbeckMotion(float(self.damping))
+
 
 TruthMotionSpec = Annotated[
     ConstantVelocitySpec | CoordinatedTurnSpec | RandomWalkSpec | OrnsteinUhlenbeckSpec,
@@ -222,6 +304,15 @@ TruthMotionSpec = Annotated[
 """How the simulated targets truly move (`hptrack.models.truth_motion`), by ``model``; each
 spec's ``build(n_targets, rng)`` gives the part it stands for (random parameters drawn from
 ``rng``)."""
+
+MotionSpec = Annotated[
+    ConstantVelocitySpec | RandomWalkSpec | OrnsteinUhlenbeckSpec,
+    Field(discriminator="model"),
+]
+"""How the beliefs assume the targets move (`hptrack.models.belief_motion`), by ``model``, with
+the parameters of the truth motion of the same name; each spec's ``belief(time_step,
+process_noise_form)`` gives the mission record's motion part. Without a ``truth_motion`` the
+simulated targets move by the same model."""
 
 
 class Scenario(BaseModel):
@@ -233,12 +324,22 @@ class Scenario(BaseModel):
     budget: Annotated[Real, Field(gt=0.0)] = 900.0
     seed: Annotated[int, BeforeValidator(_not_bool), Strict(), Field(ge=0, lt=2**63)] = 0
     process_noise_form: ProcessNoiseForm = "continuous"
+    motion: MotionSpec | None = None
     truth_motion: TruthMotionSpec | None = None
     agent: AgentSpec = AgentSpec()
+    sensor: SensorSpec | None = None
+    vehicle: VehicleSpec | None = None
     targets: Annotated[list[TargetSpec], Field(min_length=1, max_length=MAX_TARGETS)]
 
     @model_validator(mode="after")
     def _consistent(self) -> Self:
+        model = self.motion_spec.model
+        if self.process_noise_form != "continuous" and model != "constant_velocity":
+            raise ValueError(
+                f"process_noise_form {self.process_noise_form!r} is a form of constant "
+                f"velocity's Q; motion.model is {model!r}"
+            )
+        self._check_world_given_once()
         steps = self.budget / self.time_step
         if self.budget < self.time_step:
             raise ValueError(
@@ -267,15 +368,15 @@ class Scenario(BaseModel):
             if target.id in seen:
                 raise ValueError(f"targets.{i}.id: duplicate target id {target.id!r}")
             seen.add(target.id)
-            speed = float(np.hypot(target.mean[2], target.mean[3]))
-            if speed >= self.agent.speed:
+            speed = float(speeds(np.array(target.mean)))
+            if speed >= self.vehicle_spec().speed:
                 raise ValueError(
                     f"targets.{i}.mean: target {target.id!r} mean speed {speed:g} m/s is not "
-                    f"below agent.speed {self.agent.speed:g} m/s"
+                    f"below {self._speed_field()} {self.vehicle_spec().speed:g} m/s"
                 )
             self._check_drift(i, "mean", target.mean)
             if target.truth is not None:
-                true_speed = float(np.hypot(target.truth[2], target.truth[3]))
+                true_speed = float(speeds(np.array(target.truth)))
                 if true_speed > MAX_TRUE_SPEED:
                     raise ValueError(
                         f"targets.{i}.truth: speed {true_speed:.3g} m/s is above "
@@ -298,14 +399,70 @@ class Scenario(BaseModel):
         self._check_variances(covs, " by the end of the budget")
         return self
 
+    def _speed_field(self) -> str:
+        """Where the vehicle's speed is written: ``vehicle.speed`` or ``agent.speed``."""
+        given = self.vehicle is not None and "speed" in self.vehicle.model_fields_set
+        return "vehicle.speed" if given else "agent.speed"
+
+    def _check_world_given_once(self) -> None:
+        """Refuse a fact that the ``agent:`` block and the ``sensor:`` or ``vehicle:`` block
+        give with different values (the blocks are the newer spelling of the agent's)."""
+        agent = self.agent.model_fields_set
+        if self.vehicle is not None and {"speed"} <= agent & self.vehicle.model_fields_set:
+            if self.vehicle.speed != self.agent.speed:
+                raise ValueError(
+                    f"vehicle.speed {self.vehicle.speed:g} m/s and agent.speed "
+                    f"{self.agent.speed:g} m/s disagree: give the speed once (vehicle.speed)"
+                )
+        if self.sensor is None:
+            return
+        given = self.sensor.model_fields_set
+        if "diameter" in given and "sensor_diameter" in agent:
+            if self.sensor.diameter != self.agent.sensor_diameter:
+                raise ValueError(
+                    f"sensor.diameter {self.sensor.diameter:g} m and agent.sensor_diameter "
+                    f"{self.agent.sensor_diameter:g} m disagree: give the diameter once "
+                    "(sensor.diameter)"
+                )
+        if given & set(NOISE_FIELDS) and agent & set(NOISE_FIELDS):
+            ours, theirs = self.sensor.noise_covariance(), self.agent.noise_covariance()
+            if not np.array_equal(ours, theirs):
+                raise ValueError(
+                    f"the sensor's R {ours.tolist()} m^2 and the agent's R {theirs.tolist()} "
+                    "m^2 disagree: give the measurement noise once (sensor.measurement_noise_std "
+                    "or sensor.measurement_noise_covariance)"
+                )
+
+    def vehicle_spec(self) -> HolonomicVehicleSpec:
+        """The vehicle the scenario flies: the ``vehicle:`` block, with ``agent.speed`` where
+        the block gives no speed (the default: the paper's holonomic point at 30 m/s)."""
+        vehicle = self.vehicle or HolonomicVehicleSpec()
+        if "speed" in vehicle.model_fields_set:
+            return vehicle
+        return vehicle.model_copy(update={"speed": self.agent.speed})
+
+    def sensor_spec(self) -> FootprintSensorSpec:
+        """The sensor the scenario flies: the ``sensor:`` block, with the ``agent:`` block's
+        diameter and noise where the block gives none (the default: the paper's 100 m
+        footprint, ``R = 10 I``)."""
+        sensor = self.sensor or FootprintSensorSpec()
+        given, update = sensor.model_fields_set, {}
+        if "diameter" not in given:
+            update["diameter"] = self.agent.sensor_diameter
+        if not given & set(NOISE_FIELDS):
+            update |= {name: getattr(self.agent, name) for name in NOISE_FIELDS}
+        return sensor.model_copy(update=update) if update else sensor
+
     def _check_drift(self, i: int, field: str, state: tuple[float, ...]) -> None:
         """Refuse a state whose constant-velocity path leaves the 10,000 km area in the
         budget."""
+        array = np.array(state, dtype=float)
+        position, velocity = positions(array).tolist(), velocities(array).tolist()
         for axis in (0, 1):
-            end = state[axis] + state[axis + 2] * self.budget
+            end = position[axis] + velocity[axis] * self.budget
             if abs(end) > MAX_COORDINATE_M:
                 raise ValueError(
-                    f"targets.{i}.{field}: at {state[axis + 2]:.3g} m/s the target is at "
+                    f"targets.{i}.{field}: at {velocity[axis]:.3g} m/s the target is at "
                     f"{end:.3g} m by the end of the budget, beyond the "
                     f"{MAX_COORDINATE_M:g} m area"
                 )
@@ -313,7 +470,7 @@ class Scenario(BaseModel):
     def _check_variances(self, covs: np.ndarray, when: str) -> None:
         """Refuse position variances the Kalman update cannot handle (`MAX_UPDATE_RATIO`)
         or wider than the area (`MAX_POSITION_VARIANCE`)."""
-        r_min = float(np.linalg.eigvalsh(self.agent.noise_covariance())[0])
+        r_min = float(np.linalg.eigvalsh(self.sensor_spec().noise_covariance())[0])
         limit = min(MAX_POSITION_VARIANCE, MAX_UPDATE_RATIO * r_min)
         largest = np.linalg.eigvalsh(covs[:, :2, :2])[:, -1]
         for i, value in enumerate(largest):
@@ -347,29 +504,42 @@ class Scenario(BaseModel):
         """Noise intensities ``q`` ``(n,)``."""
         return np.array([t.process_noise for t in self.targets], dtype=float)
 
-    def motion_model(self) -> ConstantVelocityModel:
-        return ConstantVelocityModel(self.time_step, self.process_noise_form)
+    @property
+    def motion_spec(self) -> ConstantVelocitySpec | RandomWalkSpec | OrnsteinUhlenbeckSpec:
+        """``motion``, constant velocity when not given."""
+        return self.motion or ConstantVelocitySpec()
+
+    def motion_part(self) -> tuple:
+        """The beliefs' motion, the mission record's part (`hptrack.models.belief_motion`)."""
+        return self.motion_spec.belief(self.time_step, self.process_noise_form)
+
+    def motion_model(self) -> BeliefMotion:
+        """The beliefs' motion (its numpy face)."""
+        return BeliefMotion(self.time_step, self.motion_part())
 
     def truth_motion_model(self, rng: np.random.Generator) -> tuple:
-        """The simulator's truth motion (`hptrack.models.truth_motion`); a coordinated turn
-        with ``turn_rate_sd > 0`` draws its rates from ``rng`` (nothing is drawn otherwise)."""
-        spec = self.truth_motion or ConstantVelocitySpec()
+        """The simulator's truth motion (`hptrack.models.truth_motion`; by default the model of
+        ``motion``); a coordinated turn with ``turn_rate_sd > 0`` draws its rates from ``rng``
+        (nothing is drawn otherwise)."""
+        spec = self.truth_motion or self.motion_spec
         return spec.build(len(self.targets), rng)
 
     def sensor_model(self) -> PositionMeasurementModel:
-        return PositionMeasurementModel(self.agent.noise_covariance(), self.agent.sensor_diameter)
+        sensor = self.sensor_spec()
+        return PositionMeasurementModel(sensor.noise_covariance(), sensor.diameter)
 
     def mission_spec(self) -> MissionSpec:
         """The static facts a planner may use."""
         return MissionSpec(
             time_step=self.time_step,
             budget=self.budget,
-            agent_speed=self.agent.speed,
-            sensor_diameter=self.agent.sensor_diameter,
-            measurement_noise=self.agent.noise_covariance(),
+            agent_speed=self.vehicle_spec().speed,
+            sensor_diameter=self.sensor_spec().diameter,
+            measurement_noise=self.sensor_spec().noise_covariance(),
             process_noise_form=self.process_noise_form,
             process_noise=self.process_noise(),
             target_ids=self.target_ids,
+            belief_motion=self.motion_part(),
         )
 
     def initial_observation(self) -> Observation:

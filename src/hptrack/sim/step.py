@@ -18,17 +18,16 @@ same seed gives the same mission as `hptrack.sim.episode.run_episode`.
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.beliefs import logdet_xy
-from hptrack.models.measurement import kalman_update
-from hptrack.models.mission import predict_covariance_on
-from hptrack.models.motion import mean_position_at
+from hptrack.models.mission import mean_state_on, predict_covariance_on
+from hptrack.models.sensor import sensor_measures, sensor_missed, sensor_update
+from hptrack.models.state import position_of, set_position, set_velocity
 from hptrack.models.truth_motion import advance_truth
+from hptrack.models.vehicle import vehicle_move
 from hptrack.scenario.model import Scenario
 
 BLOCK_STEPS = 256
@@ -47,49 +46,29 @@ def initial_true_states(scenario: Scenario, rng: np.random.Generator) -> np.ndar
 
 
 @numba.njit(cache=True)
-def move_agent(agent, waypoint, max_step):
-    """Holonomic move in place: straight towards ``waypoint`` by at most ``max_step`` m."""
-    dx = waypoint[0] - agent[0]
-    dy = waypoint[1] - agent[1]
-    dist = math.hypot(dx, dy)
-    if dist <= max_step:
-        agent[0] = waypoint[0]
-        agent[1] = waypoint[1]
-    else:
-        scale = max_step / dist
-        agent[0] = agent[0] + dx * scale
-        agent[1] = agent[1] + dy * scale
+def sense(sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z):
+    """Measure and update every target the ``sensor`` part measures from ``agent``
+    (`hptrack.models.sensor`); a target it does not measure gets the sensor's ``missed``.
 
-
-def move_towards(position: np.ndarray, waypoint: np.ndarray, max_step: float) -> np.ndarray:
-    """Holonomic move: a new position straight towards ``waypoint`` by at most ``max_step`` m
-    (`move_agent` on a copy)."""
-    agent = np.array(position, dtype=float)
-    move_agent(agent, np.asarray(waypoint, dtype=float), float(max_step))
-    return agent
-
-
-@numba.njit(cache=True)
-def sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, logdets, z):
-    """Measure and update every target within the footprint (``|p - agent|^2 <= radius2``).
-
-    Consumes two normals of ``e`` from ``e_pos`` per measured target (target order), writes
-    ``seen`` and the per-target ``log det Sigma^xy`` into ``logdets`` (``z``: a scratch ``(2,)``
-    for the measurement); returns the new ``e_pos`` and ``U``.
+    Consumes two normals of ``e`` from ``e_pos`` per measured target (target order; ``factor``
+    the Cholesky factor of ``R``), writes ``seen`` and the per-target ``log det Sigma^xy`` into
+    ``logdets`` (``z``: a scratch ``(2,)`` for the measurement); returns the new ``e_pos`` and
+    ``U``.
     """
     total = 0.0
     for i in range(truth.shape[0]):
-        dx = truth[i, 0] - agent[0]
-        dy = truth[i, 1] - agent[1]
-        inside = dx * dx + dy * dy <= radius2
+        x, y = position_of(truth[i])
+        inside = sensor_measures(sensor, agent[0], agent[1], x, y)
         seen[i] = inside
         if inside:
             e0 = e[e_pos]
             e1 = e[e_pos + 1]
             e_pos += 2
-            z[0] = truth[i, 0] + (e0 * factor[0, 0] + e1 * factor[0, 1])
-            z[1] = truth[i, 1] + (e0 * factor[1, 0] + e1 * factor[1, 1])
-            kalman_update(means[i], covs[i], z, noise, means[i], covs[i])
+            z[0] = x + (e0 * factor[0, 0] + e1 * factor[0, 1])
+            z[1] = y + (e0 * factor[1, 0] + e1 * factor[1, 1])
+            sensor_update(sensor, means[i], covs[i], z, means[i], covs[i])
+        else:
+            sensor_missed(sensor, means[i], covs[i])
         c = covs[i]
         logdets[i] = logdet_xy(c[0, 0], c[0, 1], c[1, 1])
         total += logdets[i]
@@ -107,30 +86,28 @@ def world_step(
     sqrt_q,
     means,
     covs,
-    sensor,
+    factor,
     e,
     e_pos,
     out,
 ):
-    """One simulator step in place (module docstring): move, true motion by ``truth_motion``
-    with the unit normals ``z_motion`` ``(n, 4)``, predict one step, sense (``sensor``: the
-    squared footprint radius and the Cholesky factor of ``R``; ``out``: `sense`'s ``seen``,
-    ``logdets`` and ``z``). Returns the new ``e_pos`` and ``U``."""
-    move_agent(agent, waypoint, mission.step_length)
+    """One simulator step in place (module docstring): move by the mission's vehicle, true
+    motion by ``truth_motion`` with the unit normals ``z_motion`` ``(n, 4)``, predict one step,
+    sense by the mission's sensor (``factor``: the Cholesky factor of ``R``; ``out``: `sense`'s
+    ``seen``, ``logdets`` and ``z``). Returns the new ``e_pos`` and ``U``."""
+    vehicle_move(mission.vehicle, agent, waypoint)
     advance_truth(truth_motion, mission, truth, z_motion, sqrt_q)
     tau = mission.time_step
     q = mission.process_noise
     steps = tau / tau
     elapsed = steps * tau
     for i in range(truth.shape[0]):
-        x, y = mean_position_at(means[i], elapsed)
-        means[i, 0] = x
-        means[i, 1] = y
+        x, y, vx, vy = mean_state_on(mission, means[i], elapsed)
+        set_position(means[i], x, y)
+        set_velocity(means[i], vx, vy)
         predict_covariance_on(mission, covs[i], q[i], steps, covs[i])
-    radius2, factor = sensor
     seen, logdets, z = out
-    noise = mission.measurement_noise
-    return sense(agent, truth, means, covs, radius2, noise, factor, e, e_pos, seen, logdets, z)
+    return sense(mission.sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z)
 
 
 class NormalBlock:
@@ -195,9 +172,7 @@ class World:
         self.covariances = np.ascontiguousarray(scenario.covariances())
         self.q = np.ascontiguousarray(mission.process_noise, dtype=float)
         self._sqrt_q = np.sqrt(self.q)
-        self._noise = np.array(mission.measurement_noise, dtype=float)
-        self._factor = np.linalg.cholesky(self._noise)
-        self._radius2 = mission.record.footprint_radius**2
+        self._factor = np.linalg.cholesky(np.array(mission.measurement_noise, dtype=float))
         self._motion = NormalBlock(np.random.default_rng(motion_seq), BLOCK_STEPS * n * 4)
         self._sensor = NormalBlock(np.random.default_rng(sensor_seq), BLOCK_STEPS * n * 2)
         self._waypoint = np.empty(2)
@@ -230,12 +205,11 @@ class World:
         n = self.n_targets
         self._sensor.ensure(2 * n)
         self._sensor.pos, self.uncertainty = sense(
+            self.mission.record.sensor,
             self.agent,
             self.truth,
             self.means,
             self.covariances,
-            self._radius2,
-            self._noise,
             self._factor,
             self._sensor.values,
             self._sensor.pos,
@@ -272,7 +246,7 @@ class World:
             self._sqrt_q,
             self.means,
             self.covariances,
-            (self._radius2, self._factor),
+            self._factor,
             sensor.values,
             sensor.pos,
             (self.seen, self.logdets, self._z),

@@ -1,0 +1,228 @@
+"""The vehicle part of the mission record (`hptrack.models.mission.Mission`): how the agent moves
+and how soon it can meet a moving point (paper Sec. III, IV-C "Node Expansion").
+
+A vehicle model is a ``NamedTuple`` class (its fields are its parameters, SI units) registered
+with `register_vehicle` and its compiled kernels (`VehicleKernels`). Compiled code calls them as
+``vehicle_*(vehicle, ...)``, dispatched at compile time on the vehicle's class (as the MDPs of
+`hptrack.planning.mdp`):
+
+* ``move(vehicle, agent, waypoint)``: one step of ``tau`` towards ``waypoint`` (2,), ``agent``
+  (2,) in place;
+* ``intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy) -> t``: the earliest time (s) at
+  which the agent can be where a point from ``(x, y)`` moving at ``(vx, vy)`` is (``inf``:
+  never);
+* ``approach_step(vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps) -> (dx, dy)``: the
+  agent's displacement per step relative to that point on an intercept flight of ``steps``
+  whole steps.
+
+The model: `HolonomicVehicle` (the paper's): a point that flies straight at up to ``v_a``.
+Interception, with ``d = mean - agent`` and the point's velocity ``v_hat``: the smallest
+``t >= 0`` with ``|d + v_hat t| = v_a t``, i.e. ``(v_a^2 - |v_hat|^2) t^2 - 2 (d . v_hat) t -
+|d|^2 = 0``, whose only non-negative root exists for every ``d`` when ``|v_hat| < v_a``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numba.extending import overload
+
+from hptrack._dispatch import registered
+
+
+class HolonomicVehicle(NamedTuple):
+    """A point that flies straight at up to its speed in any direction.
+
+    Attributes:
+        speed: ``v_a``, m/s.
+        step_length: the largest displacement per step ``v_a tau``, m.
+    """
+
+    speed: float
+    step_length: float
+
+
+VehiclePart = HolonomicVehicle
+"""The vehicle classes a mission record may hold (a union of the registered ones)."""
+
+
+class VehicleKernels(NamedTuple):
+    """The compiled kernels of a vehicle model (module docstring)."""
+
+    move: Callable
+    intercept_time: Callable
+    approach_step: Callable
+
+
+_VEHICLES: dict[type, VehicleKernels] = {}
+
+
+def register_vehicle(vehicle_class: type, kernels: VehicleKernels) -> None:
+    """Make ``kernels`` the motion of ``vehicle_class``."""
+    _VEHICLES[vehicle_class] = kernels
+
+
+def _kernel(vehicle, field: str):
+    return getattr(registered(_VEHICLES, vehicle, "vehicle model"), field).py_func
+
+
+def vehicle_move(vehicle, agent, waypoint):
+    """The registered ``move`` of ``vehicle``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+def vehicle_intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy):
+    """The registered ``intercept_time`` of ``vehicle``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+def vehicle_approach_step(vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps):
+    """The registered ``approach_step`` of ``vehicle``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(vehicle_move, inline="always")
+def _move(vehicle, agent, waypoint):
+    return _kernel(vehicle, "move")
+
+
+@overload(vehicle_intercept_time, inline="always")
+def _intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy):
+    return _kernel(vehicle, "intercept_time")
+
+
+@overload(vehicle_approach_step, inline="always")
+def _approach_step(vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps):
+    return _kernel(vehicle, "approach_step")
+
+
+@numba.njit(cache=True)
+def move_agent(agent, waypoint, max_step):
+    """Holonomic move in place: straight towards ``waypoint`` by at most ``max_step`` m."""
+    dx = waypoint[0] - agent[0]
+    dy = waypoint[1] - agent[1]
+    dist = math.hypot(dx, dy)
+    if dist <= max_step:
+        agent[0] = waypoint[0]
+        agent[1] = waypoint[1]
+    else:
+        scale = max_step / dist
+        agent[0] = agent[0] + dx * scale
+        agent[1] = agent[1] + dy * scale
+
+
+def move_towards(position: np.ndarray, waypoint: np.ndarray, max_step: float) -> np.ndarray:
+    """Holonomic move: a new position straight towards ``waypoint`` by at most ``max_step`` m
+    (`move_agent` on a copy)."""
+    agent = np.array(position, dtype=float)
+    move_agent(agent, np.asarray(waypoint, dtype=float), float(max_step))
+    return agent
+
+
+@numba.njit(cache=True)
+def intercept_time(
+    agent_x: float,
+    agent_y: float,
+    mean_x: float,
+    mean_y: float,
+    vel_x: float,
+    vel_y: float,
+    speed: float,
+) -> float:
+    """Smallest ``t >= 0`` (s) with ``|mean + vel t - agent| = speed t`` (closed form, module
+    docstring).
+
+    Positions in m, velocities in m/s. Returns ``inf`` when ``|vel| >= speed`` (the target cannot
+    be caught for sure) and ``0`` when the agent is on the mean.
+    """
+    dx = mean_x - agent_x
+    dy = mean_y - agent_y
+    closing = speed * speed - (vel_x * vel_x + vel_y * vel_y)
+    if closing <= 0.0:
+        return math.inf
+    dd = dx * dx + dy * dy
+    if dd == 0.0:
+        return 0.0
+    dv = dx * vel_x + dy * vel_y
+    root = math.sqrt(dv * dv + closing * dd)
+    # Two algebraically equal forms of the positive root; each avoids cancellation on its side.
+    if dv >= 0.0:
+        return (dv + root) / closing
+    return dd / (root - dv)
+
+
+@numba.njit(cache=True)
+def approach_step(
+    agent_x: float,
+    agent_y: float,
+    mean_x: float,
+    mean_y: float,
+    vel_x: float,
+    vel_y: float,
+    speed: float,
+    tau: float,
+    steps: int,
+) -> tuple:
+    """The agent's displacement per step relative to the belief mean during an intercept flight
+    of ``steps`` whole steps, m: ``v_a tau u - v_hat tau`` with ``u`` the unit vector towards the
+    mean at step ``steps``. ``(0, 0)`` when ``steps <= 0``."""
+    if steps <= 0:
+        return 0.0, 0.0
+    dx = mean_x + vel_x * steps * tau - agent_x
+    dy = mean_y + vel_y * steps * tau - agent_y
+    length = math.hypot(dx, dy)
+    return speed * tau * dx / length - vel_x * tau, speed * tau * dy / length - vel_y * tau
+
+
+@numba.njit(cache=True, inline="always")
+def holonomic_move(vehicle, agent, waypoint):
+    """`HolonomicVehicle`: `move_agent` by at most ``v_a tau``."""
+    move_agent(agent, waypoint, vehicle.step_length)
+
+
+@numba.njit(cache=True, inline="always")
+def holonomic_intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy):
+    """`HolonomicVehicle`: the closed-form `intercept_time` at ``v_a``."""
+    return intercept_time(agent_x, agent_y, x, y, vx, vy, vehicle.speed)
+
+
+@numba.njit(cache=True, inline="always")
+def holonomic_approach_step(vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps):
+    """`HolonomicVehicle`: `approach_step` at ``v_a``."""
+    return approach_step(agent_x, agent_y, x, y, vx, vy, vehicle.speed, tau, steps)
+
+
+register_vehicle(
+    HolonomicVehicle,
+    VehicleKernels(holonomic_move, holonomic_intercept_time, holonomic_approach_step),
+)
+
+
+def reach_times(
+    vehicle: HolonomicVehicle,
+    agent: np.ndarray,
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    radius: float,
+) -> np.ndarray:
+    """Earliest time, s, at which the ``vehicle`` flying straight at full speed from ``agent``
+    ``(2,)`` or ``(k, 2)`` comes within ``radius`` (m) of each point moving at constant
+    ``velocities`` ``(k, 2)`` (m/s) from ``positions`` ``(k, 2)`` (m); ``inf`` if it never does
+    (a point faster than the agent)."""
+    speed = vehicle.speed
+    d = positions - agent
+    v = velocities
+    a = np.einsum("ij,ij->i", v, v) - speed * speed
+    b = 2.0 * (np.einsum("ij,ij->i", d, v) - radius * speed)
+    c = np.einsum("ij,ij->i", d, d) - radius * radius
+    disc = b * b - 4.0 * a * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = np.where(
+            np.abs(a) > 1e-12, (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a), -c / b
+        )
+    root = np.where((disc < 0.0) | ~np.isfinite(root) | (root < 0.0), math.inf, root)
+    return np.where(c <= 0.0, 0.0, root)
