@@ -89,7 +89,7 @@ def test_anytime_search_returns_the_best_pass_and_exact_vi_is_exhaustive(
     means = [[100.0, 60.0, -2.0, 1.0], [-150.0, 100.0, 1.0, -1.0]]
     mission, obs = make_mission(2), make_observation(means)
     planner = planner_for(mission, obs, horizon=3)
-    mp = mean_positions(obs.means, 0.5, 30)
+    mp = mean_positions(obs.means, mission.motion, 30)
     passes = [planner.run_pass(obs, mp, 3, d, e) for d, e in planner.settings.passes()]
     assert len({p.cost for p in passes}) > 1
     plan, stats = planner.search(obs)

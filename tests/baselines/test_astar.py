@@ -31,7 +31,7 @@ def planner_for(mission, obs, **settings):
 def exhaustive_costs(planner, obs, horizon, kind):
     """Cost of every one of the 9^horizon sequences, in lexicographic order."""
     k = planner.settings.control_steps
-    mp = mean_positions(obs.means, 0.5, horizon * k)
+    mp = mean_positions(obs.means, planner.mission.motion, horizon * k)
     pos, covs = obs.agent_position[None], obs.covariances[None]
     total = np.zeros(1)
     previous = np.array([position_logdet(obs.covariances).sum()])

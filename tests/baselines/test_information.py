@@ -27,7 +27,7 @@ def setup(make_mission, make_observation, means, horizon=1, form="continuous", n
     mission = make_mission(len(means), form=form, noise=noise)
     obs = make_observation(means)
     steps = mission.step_length * step_directions(8)
-    return mission, obs, steps, mean_positions(obs.means, 0.5, horizon * K)
+    return mission, obs, steps, mean_positions(obs.means, mission.motion, horizon * K)
 
 
 def reference_rollout(mission, obs, agent_path):
@@ -43,9 +43,9 @@ def reference_rollout(mission, obs, agent_path):
     return covs, measured
 
 
-def test_mean_positions_are_open_loop_constant_velocity():
+def test_mean_positions_are_open_loop_constant_velocity(make_mission):
     means = np.array([[100.0, -50.0, -3.0, 2.0]])
-    got = mean_positions(means, 0.5, 4)
+    got = mean_positions(means, make_mission(1).motion, 4)
     np.testing.assert_array_equal(
         got[:, 0], [[100.0, -50.0], [98.5, -49.0], [97.0, -48.0], [95.5, -47.0], [94.0, -46.0]]
     )
