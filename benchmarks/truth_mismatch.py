@@ -39,6 +39,8 @@ TOLD = ("random_walk_5", "ou_0.01")
 """The truths a belief motion can hold (`hptrack.models.belief_motion`)."""
 PLANNERS = ("mcts", "greedy", "clairvoyant", "mcts_told")
 """The planners flown (``mcts_told``: ``mcts`` with the true model, on `TOLD` only)."""
+REGISTERED = {"mcts_told": "mcts"}
+"""The registered planner each variant of `PLANNERS` flies (the others are their own)."""
 FIELDS = ("planner", "planner_settings", "truth", "n", "seed", "U", "never_detected")
 """A row: its identity (the planner and its canonical settings, the truth, ``n``, the seed) and
 its results."""
@@ -71,10 +73,10 @@ def settings_of(planner: str, iterations: int):
     ``iterations`` simulations per decision)."""
     from hptrack.registry import planner_settings
 
-    searches = planner in ("mcts", "mcts_told")
+    registered = REGISTERED.get(planner, planner)
     return planner_settings(
-        "mcts" if planner == "mcts_told" else planner,
-        {"iterations": iterations} if searches else None,
+        registered,
+        {"iterations": iterations} if registered == "mcts" else None,
     )
 
 

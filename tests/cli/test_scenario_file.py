@@ -60,7 +60,7 @@ def test_every_field_round_trips_with_its_comment(tmp_path):
         m.group(1) for m in re.finditer(r"^\s*(?:- )?(\w+):.*  # ", text, flags=re.MULTILINE)
     }
     other_motions = {"diffusion", "damping"}  # the parameters of the other truth motions
-    blocks = {"sensor", "sensor.model", "diameter", "vehicle", "vehicle.model"}  # not set here
+    blocks = {"sensor", "sensor.model", "diameter", "vehicle", "vehicle.model", "motion"}  # unset
     assert written == set(FIELD_COMMENTS) - other_motions - blocks  # every field: its comment
     for motion, parameter in (("random_walk", "diffusion"), ("ornstein_uhlenbeck", "damping")):
         moving = type(base).model_validate(
