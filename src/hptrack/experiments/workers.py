@@ -96,7 +96,12 @@ def worker_pool(workers: int) -> ProcessPoolExecutor:
 def stop_workers(pool: ProcessPoolExecutor) -> None:
     """End ``pool`` now: its queued tasks are cancelled and its running ones killed."""
     processes = list((getattr(pool, "_processes", None) or {}).values())  # public in 3.14
+    # shutdown(wait=False) forgets the pool's manager thread, so a later shutdown(wait=True)
+    # would not wait for it; joined here, it has closed its wake-up pipe before the interpreter's
+    # exit hook writes to it (a race in Python 3.11 that printed a traceback after Ctrl-C)
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         process.kill()
-    pool.shutdown(wait=True)
+    if manager is not None:
+        manager.join()

@@ -126,24 +126,21 @@ def position_polynomials(cov, q, tau, c_per_step):
 
 
 @numba.njit(cache=True, inline="always")
+def _position_blocks(poly, k):
+    """``(sxx, syy, sxy)`` of ``Sigma^xy`` (m^2) after ``k`` steps from
+    `position_polynomials`' ``poly``, by Horner's rule."""
+    x3 = poly[9]
+    sxx = poly[0] + k * (poly[1] + k * (poly[2] + k * x3))
+    syy = poly[3] + k * (poly[4] + k * (poly[5] + k * x3))
+    sxy = poly[6] + k * (poly[7] + k * poly[8])
+    return sxx, syy, sxy
+
+
+@numba.njit(cache=True, inline="always")
 def position_det(poly, n):
     """``det Sigma^xy`` (m^4) after ``n`` steps from `position_polynomials`' ``poly``
-    (its first ten entries), by Horner's rule."""
-    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = (
-        poly[0],
-        poly[1],
-        poly[2],
-        poly[3],
-        poly[4],
-        poly[5],
-        poly[6],
-        poly[7],
-        poly[8],
-        poly[9],
-    )
-    sxx = x0 + n * (x1 + n * (x2 + n * x3))
-    syy = y0 + n * (y1 + n * (y2 + n * x3))
-    sxy = c0 + n * (c1 + n * c2)
+    (its first ten entries)."""
+    sxx, syy, sxy = _position_blocks(poly, n)
     return sxx * syy - sxy * sxy
 
 
@@ -151,25 +148,12 @@ def position_det(poly, n):
 def position_det_rate(poly, k):
     """``(det Sigma^xy, d det / dk)`` after ``k`` steps from `position_polynomials`'
     ``poly`` (m^4, m^4 per step)."""
-    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = (
-        poly[0],
-        poly[1],
-        poly[2],
-        poly[3],
-        poly[4],
-        poly[5],
-        poly[6],
-        poly[7],
-        poly[8],
-        poly[9],
-    )
-    sxx = x0 + k * (x1 + k * (x2 + k * x3))
-    syy = y0 + k * (y1 + k * (y2 + k * x3))
-    sxy = c0 + k * (c1 + k * c2)
+    sxx, syy, sxy = _position_blocks(poly, k)
+    x3 = poly[9]
     det_rate = (
-        (x1 + k * (2.0 * x2 + 3.0 * k * x3)) * syy
-        + sxx * (y1 + k * (2.0 * y2 + 3.0 * k * x3))
-        - 2.0 * sxy * (c1 + 2.0 * k * c2)
+        (poly[1] + k * (2.0 * poly[2] + 3.0 * k * x3)) * syy
+        + sxx * (poly[4] + k * (2.0 * poly[5] + 3.0 * k * x3))
+        - 2.0 * sxy * (poly[7] + 2.0 * k * poly[8])
     )
     return sxx * syy - sxy * sxy, det_rate
 
