@@ -42,6 +42,7 @@ from numba.extending import overload
 
 from hptrack._dispatch import registered
 from hptrack.models import motion as cv
+from hptrack.models.state import set_position, set_velocity
 
 
 class MotionKernels(NamedTuple):
@@ -58,9 +59,13 @@ class MotionKernels(NamedTuple):
             ``position_det`` evaluates ``det Sigma^xy`` after any number of steps.
         position_det: ``(motion, tau, poly, steps) -> det``, m^4.
         position_det_rate: ``(motion, tau, poly, steps) -> (det, d det / d steps)``.
-        step_matrices: ``(motion, tau, q, f, qq)``: one step's 4x4 ``F`` and ``Q``.
+        step_matrices: ``(motion, tau, q, f, qq)``: one step's ``d x d`` ``F`` and ``Q``.
+        predict_mean: ``(motion, tau, mean, elapsed, out)``, the whole predicted mean state
+            after ``elapsed`` s written into ``out`` (``out`` may be ``mean``).
         straight: whether the mean moves in a straight line at its velocity (then the
             intercept and the spiral's shift have closed forms).
+        state_size: ``d``, the length of a state: 4 for ``[x, y, vx, vy]``, 6 for
+            ``[x, y, vx, vy, ax, ay]`` (m, m/s, m/s^2; `hptrack.models.state`).
     """
 
     mean_state: Callable
@@ -70,7 +75,9 @@ class MotionKernels(NamedTuple):
     position_det: Callable
     position_det_rate: Callable
     step_matrices: Callable
+    predict_mean: Callable
     straight: bool
+    state_size: int
 
 
 _MOTIONS: dict[type, MotionKernels] = {}
@@ -120,8 +127,18 @@ def step_matrices(motion, tau, q, f, qq):
     raise NotImplementedError
 
 
+def predict_mean(motion, tau, mean, elapsed, out):
+    """The registered ``predict_mean`` (compiled code only)."""
+    raise NotImplementedError
+
+
 def moves_straight(motion):
     """The registered ``straight`` flag, a compile-time constant (compiled code only)."""
+    raise NotImplementedError
+
+
+def state_size(motion):
+    """The registered ``state_size``, a compile-time constant (compiled code only)."""
     raise NotImplementedError
 
 
@@ -160,11 +177,30 @@ def _step_matrices(motion, tau, q, f, qq):
     return _kernel(motion, "step_matrices")
 
 
+@overload(predict_mean)
+def _predict_mean(motion, tau, mean, elapsed, out):
+    return _kernel(motion, "predict_mean")
+
+
 @overload(moves_straight)
 def _moves_straight(motion):
     if registered(_MOTIONS, motion, "belief motion").straight:
         return lambda motion: True
     return lambda motion: False
+
+
+@overload(state_size)
+def _state_size(motion):
+    size = registered(_MOTIONS, motion, "belief motion").state_size
+    return lambda motion: size
+
+
+@numba.njit(cache=True, inline="always")
+def predict_mean_4(motion, tau, mean, elapsed, out):
+    """``predict_mean`` of a 4-D state from its model's ``mean_state`` (the registered one)."""
+    x, y, vx, vy = mean_state(motion, tau, mean, elapsed)
+    set_position(out, x, y)
+    set_velocity(out, vx, vy)
 
 
 # --- the one linear-Gaussian path ------------------------------------------------------------
@@ -292,7 +328,9 @@ register_motion(
         _polynomial_det,
         _polynomial_det_rate,
         _cv_step,
+        predict_mean_4,
         True,
+        4,
     ),
 )
 
@@ -354,7 +392,9 @@ register_motion(
         _polynomial_det,
         _polynomial_det_rate,
         _rw_step,
+        predict_mean_4,
         False,
+        4,
     ),
 )
 
@@ -488,7 +528,9 @@ register_motion(
         _ou_det,
         _ou_det_rate,
         _ou_step,
+        predict_mean_4,
         False,
+        4,
     ),
 )
 
@@ -497,11 +539,7 @@ register_motion(
 @numba.njit(cache=True)
 def _predict_stacked(motion, tau, means, covariances, q, steps, out_means, out_covs):
     for i in range(means.shape[0]):
-        x, y, vx, vy = mean_state(motion, tau, means[i], steps[i] * tau)
-        out_means[i, 0] = x
-        out_means[i, 1] = y
-        out_means[i, 2] = vx
-        out_means[i, 3] = vy
+        predict_mean(motion, tau, means[i], steps[i] * tau, out_means[i])
         predict_covariance(motion, tau, covariances[i], q[i], steps[i], out_covs[i])
 
 
@@ -532,7 +570,7 @@ class BeliefMotion:
         q: np.ndarray | float,
         duration: np.ndarray | float,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Predict stacked beliefs ``(n, 4)``, ``(n, 4, 4)`` over ``duration`` seconds (any
+        """Predict stacked beliefs ``(n, d)``, ``(n, d, d)`` over ``duration`` seconds (any
         non-negative duration); ``q`` (m^2/s^3) and ``duration`` scalars or one per target."""
         means = np.ascontiguousarray(means, dtype=float)
         n = means.shape[0]
@@ -540,8 +578,9 @@ class BeliefMotion:
         steps = np.ascontiguousarray(
             np.broadcast_to(np.asarray(duration, dtype=float) / self.time_step, (n,))
         )
-        out_means = np.empty((n, 4))
-        out_covs = np.empty((n, 4, 4))
+        d = self.state_size
+        out_means = np.empty((n, d))
+        out_covs = np.empty((n, d, d))
         _predict_stacked(
             self.part,
             self.time_step,
@@ -555,7 +594,7 @@ class BeliefMotion:
         return out_means, out_covs
 
     def mean_positions(self, mean: np.ndarray, elapsed: np.ndarray | list[float]) -> np.ndarray:
-        """Positions ``(len(elapsed), 2)`` of one belief mean ``(4,)`` after each of
+        """Positions ``(len(elapsed), 2)`` of one belief mean ``(d,)`` after each of
         ``elapsed`` seconds, m."""
         elapsed = np.ascontiguousarray(elapsed, dtype=float).reshape(-1)
         out = np.empty((elapsed.shape[0], 2))
@@ -566,6 +605,11 @@ class BeliefMotion:
     def straight(self) -> bool:
         """Whether the mean moves in a straight line at its velocity."""
         return registered_motion(self.part).straight
+
+    @property
+    def state_size(self) -> int:
+        """``d``, the length of a state under this motion (4 or 6)."""
+        return registered_motion(self.part).state_size
 
 
 def registered_motion(part: tuple) -> MotionKernels:

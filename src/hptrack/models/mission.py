@@ -268,6 +268,25 @@ def mean_state_on(mission, mean, elapsed):
 
 
 @numba.njit(cache=True, inline="always")
+def predict_mean_on(mission, mean, elapsed, out):
+    """The whole belief mean state predicted ``elapsed`` s ahead, written into ``out`` (which
+    may be ``mean``)."""
+    bm.predict_mean(mission.motion, mission.time_step, mean, elapsed, out)
+
+
+@numba.njit(cache=True, inline="always")
+def state_size_on(mission):
+    """``d``, the length of a belief state under the mission's motion (a compile-time
+    constant)."""
+    return bm.state_size(mission.motion)
+
+
+def state_size(mission: Mission) -> int:
+    """``d``, the length of a belief state under the mission's motion (4 or 6)."""
+    return registered_motion(mission.motion).state_size
+
+
+@numba.njit(cache=True, inline="always")
 def moves_straight_on(mission):
     """Whether the belief mean moves in a straight line at its velocity (constant velocity:
     then intercepts and spiral shifts have closed forms)."""

@@ -40,12 +40,26 @@ from hptrack.models.mission import motion_noise_factors_on
 from hptrack.models.motion import advance_true_state
 
 _TRUTH_MODELS: dict[type, Callable] = {}
+_TRUTH_STATE_SIZES: dict[type, int] = {}
 
 
-def register_truth_motion(model_class: type, advance: Callable) -> None:
+def register_truth_motion(model_class: type, advance: Callable, state_size: int = 4) -> None:
     """Make ``advance`` (a compiled kernel, module docstring) the true motion of
-    ``model_class``."""
+    ``model_class``, whose true states have ``state_size`` entries (4: ``[x, y, vx, vy]``, 6:
+    with ``[ax, ay]``; the kernel takes that many unit normals per target and step)."""
     _TRUTH_MODELS[model_class] = advance
+    _TRUTH_STATE_SIZES[model_class] = state_size
+
+
+def truth_state_size(model: tuple) -> int:
+    """The length of a true state under ``model`` (4 or 6).
+
+    Raises:
+        ValueError: ``model`` is not a registered truth motion.
+    """
+    if type(model) not in _TRUTH_STATE_SIZES:
+        raise ValueError(f"no truth motion registered for {model!r}")
+    return _TRUTH_STATE_SIZES[type(model)]
 
 
 def advance_truth(model, mission, truth, z, sqrt_q):
