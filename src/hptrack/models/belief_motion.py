@@ -27,6 +27,29 @@ models:
 The models other than constant velocity share one linear-Gaussian path (`linear_predict`),
 given their per-axis ``F(T)`` and ``Q(T)``. Under random walk and Ornstein-Uhlenbeck the mean's
 speed never exceeds its speed now (the intercept of `hptrack.coverage.intercept` relies on it).
+
+Two models carry the acceleration too, the state ``[x, y, vx, vy, ax, ay]`` (m, m/s, m/s^2;
+component ``c`` of axis ``a`` at ``2 c + a``), per axis ``[p, v, a]`` with
+``A = [[0, 1, 0], [0, 0, 1], [0, 0, -alpha]]`` and white noise of intensity ``q`` on the
+acceleration, so ``F(T) = [[1, T, f_pa], [0, 1, f_va], [0, 0, f_aa]]`` and
+``d Q_ij / dT = q f_i3(T) f_j3(T)``. They share a second, 3-component path (`linear3_predict`,
+`linear3_position`, `linear3_mean`, `fill_linear3_step`), and their priors grow from the
+scenarios' 4-D ones by `extended_prior`:
+
+* `SingerMotion` (Singer, 1970): ``da = -alpha a dt + dW`` with ``q = 2 alpha sigma_m^2``
+  (``sigma_m`` the stationary std of the acceleration). With ``u = alpha T``,
+  ``E1 = 1 - e^{-u}``, ``E2 = 1 - e^{-2u}``: ``f_pa = (u - E1) / alpha^2``,
+  ``f_va = E1 / alpha``, ``f_aa = e^{-u}``; ``Q = q [[(u^3/3 - u^2 + u - 2 u e^{-u} + E2/2) /
+  alpha^5, (u^2/2 - u + E1 + u e^{-u} - E2/2) / alpha^4, (E2/2 - u e^{-u}) / alpha^3],
+  [., phi(u) / alpha^3, E1^2 / (2 alpha^2)], [., ., E2 / (2 alpha)]]`` (`singer_axis_noise`;
+  below ``u = 1.5`` the cancelling entries are power series in ``u``). As ``alpha -> 0`` it
+  becomes constant acceleration with ``j = q``.
+* `ConstantAccelerationMotion` (Bar-Shalom's Wiener-process acceleration model, white jerk of
+  intensity ``j``): ``alpha = 0``, ``F = [[1, T, T^2/2], [0, 1, T], [0, 0, 1]]``,
+  ``Q = j [[T^5/20, T^4/8, T^3/6], [T^4/8, T^3/3, T^2/2], [T^3/6, T^2/2, T]]``.
+
+Their position covariance is a polynomial in ``T`` and ``f_pa(T)`` plus ``Q_pp(T)``
+(`accel_position_terms`, nineteen numbers).
 """
 
 from __future__ import annotations
@@ -34,6 +57,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import NamedTuple
 
 import numba
@@ -535,6 +559,442 @@ register_motion(
 )
 
 
+# --- the 3-component linear path: [x, y, vx, vy, ax, ay] ---------------------------------------
+@numba.njit(cache=True, inline="always")
+def linear3_predict(cov, f, noise, out):
+    """``out = F cov F' + Q`` on ``[x, y, vx, vy, ax, ay]`` for the per-axis upper-triangular
+    ``F = f = (f_pp, f_pv, f_pa, f_vv, f_va, f_aa)`` and symmetric
+    ``Q = noise = (q_pp, q_pv, q_pa, q_vv, q_va, q_aa)`` (``out`` may be ``cov``)."""
+    fpp, fpv, fpa, fvv, fva, faa = f
+    m = np.empty((6, 6))  # F cov
+    for j in range(6):
+        for axis in range(2):
+            p, v, a = cov[axis, j], cov[2 + axis, j], cov[4 + axis, j]
+            m[axis, j] = fpp * p + fpv * v + fpa * a
+            m[2 + axis, j] = fvv * v + fva * a
+            m[4 + axis, j] = faa * a
+    for i in range(6):
+        for axis in range(2):
+            p, v, a = m[i, axis], m[i, 2 + axis], m[i, 4 + axis]
+            out[i, axis] = p * fpp + v * fpv + a * fpa
+            out[i, 2 + axis] = v * fvv + a * fva
+            out[i, 4 + axis] = a * faa
+    for axis in range(2):
+        for r in range(3):
+            for c in range(3):
+                out[2 * r + axis, 2 * c + axis] += noise[_SYMMETRIC[r][c]]
+
+
+_SYMMETRIC = ((0, 1, 2), (1, 3, 4), (2, 4, 5))
+"""Where entry ``(r, c)`` of a symmetric 3x3 lies in ``(q_pp, q_pv, q_pa, q_vv, q_va, q_aa)``."""
+
+
+@numba.njit(cache=True, inline="always")
+def _row_cov_row(cov, fp, fv, fa, ax, ay):
+    """``r_ax cov r_ay'`` with ``r = (fp, fv, fa)`` on the rows of axis ``ax`` and the columns
+    of axis ``ay``."""
+    return (
+        fp * (fp * cov[ax, ay] + fv * cov[ax, 2 + ay] + fa * cov[ax, 4 + ay])
+        + fv * (fp * cov[2 + ax, ay] + fv * cov[2 + ax, 2 + ay] + fa * cov[2 + ax, 4 + ay])
+        + fa * (fp * cov[4 + ax, ay] + fv * cov[4 + ax, 2 + ay] + fa * cov[4 + ax, 4 + ay])
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def linear3_position(cov, f, noise):
+    """``(sxx, sxy, syy)`` of `linear3_predict`'s position block, without the 6x6."""
+    fp, fv, fa = f[0], f[1], f[2]
+    sxx = _row_cov_row(cov, fp, fv, fa, 0, 0) + noise[0]
+    sxy = _row_cov_row(cov, fp, fv, fa, 0, 1)
+    syy = _row_cov_row(cov, fp, fv, fa, 1, 1) + noise[0]
+    return sxx, sxy, syy
+
+
+@numba.njit(cache=True, inline="always")
+def linear3_mean(mean, f):
+    """The mean ``[x, y, vx, vy, ax, ay]`` moved by the per-axis ``F`` (a 6-tuple)."""
+    fpp, fpv, fpa, fvv, fva, faa = f
+    return (
+        fpp * mean[0] + fpv * mean[2] + fpa * mean[4],
+        fpp * mean[1] + fpv * mean[3] + fpa * mean[5],
+        fvv * mean[2] + fva * mean[4],
+        fvv * mean[3] + fva * mean[5],
+        faa * mean[4],
+        faa * mean[5],
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def fill_linear3_step(f, noise, f_out, q_out):
+    """6x6 ``F`` and ``Q`` from their per-axis blocks (`linear3_predict`'s tuples)."""
+    for i in range(6):
+        for j in range(6):
+            f_out[i, j] = 0.0
+            q_out[i, j] = 0.0
+    for axis in range(2):
+        for r in range(3):
+            for c in range(3):
+                q_out[2 * r + axis, 2 * c + axis] = noise[_SYMMETRIC[r][c]]
+                if c >= r:
+                    f_out[2 * r + axis, 2 * c + axis] = f[_SYMMETRIC[r][c]]
+
+
+@numba.njit(cache=True, inline="always")
+def accel_position_terms(cov, intensity):
+    """The position covariance after ``T`` s under a model with ``f_pp = 1``, ``f_pv = T``
+    (both of the acceleration models) as nineteen numbers
+    ``(x0, x1, x2, y0, y1, y2, c0, c1, c2, q, x3, x4, x5, y3, y4, y5, c3, c4, c5)``:
+    ``sxx = x0 + x1 T + x2 T^2 + f_pa (x3 + x4 T + x5 f_pa) + q Q_pp(T)`` at unit intensity
+    (``syy`` likewise, ``sxy`` from the ``c`` without the noise); ``x0``, ``y0``, ``c0`` are
+    the covariance now and ``q`` the model's intensity, as in the ten terms of the 4-D
+    models."""
+    return (
+        cov[0, 0],
+        2.0 * cov[0, 2],
+        cov[2, 2],
+        cov[1, 1],
+        2.0 * cov[1, 3],
+        cov[3, 3],
+        cov[0, 1],
+        cov[0, 3] + cov[2, 1],
+        cov[2, 3],
+        intensity,
+        2.0 * cov[0, 4],
+        2.0 * cov[2, 4],
+        cov[4, 4],
+        2.0 * cov[1, 5],
+        2.0 * cov[3, 5],
+        cov[5, 5],
+        cov[0, 5] + cov[4, 1],
+        cov[2, 5] + cov[4, 3],
+        cov[4, 5],
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def accel_det_rate(poly, tau, t, fpa, fva, noise_pp):
+    """``(det Sigma^xy, d det / d steps)`` from `accel_position_terms`' ``poly`` at ``T = t``
+    with ``f_pa(t)``, its rate ``f_va(t)`` and the unit-intensity ``Q_pp(t)`` (whose rate is
+    ``f_pa^2``)."""
+    q = poly[9]
+    sxx = poly[0] + t * (poly[1] + t * poly[2]) + fpa * (poly[10] + t * poly[11] + fpa * poly[12])
+    syy = poly[3] + t * (poly[4] + t * poly[5]) + fpa * (poly[13] + t * poly[14] + fpa * poly[15])
+    sxy = poly[6] + t * (poly[7] + t * poly[8]) + fpa * (poly[16] + t * poly[17] + fpa * poly[18])
+    sxx += q * noise_pp
+    syy += q * noise_pp
+    noise_rate = q * fpa * fpa
+    dxx = (
+        poly[1]
+        + 2.0 * t * poly[2]
+        + fva * (poly[10] + t * poly[11] + 2.0 * fpa * poly[12])
+        + fpa * poly[11]
+        + noise_rate
+    )
+    dyy = (
+        poly[4]
+        + 2.0 * t * poly[5]
+        + fva * (poly[13] + t * poly[14] + 2.0 * fpa * poly[15])
+        + fpa * poly[14]
+        + noise_rate
+    )
+    dxy = (
+        poly[7]
+        + 2.0 * t * poly[8]
+        + fva * (poly[16] + t * poly[17] + 2.0 * fpa * poly[18])
+        + fpa * poly[17]
+    )
+    det = sxx * syy - sxy * sxy
+    return det, tau * (dxx * syy + sxx * dyy - 2.0 * sxy * dxy)
+
+
+@numba.njit(cache=True, inline="always")
+def _predict_mean_6(f, mean, out):
+    x, y, vx, vy, ax, ay = linear3_mean(mean, f)  # read all before writing: out may be mean
+    out[0] = x
+    out[1] = y
+    out[2] = vx
+    out[3] = vy
+    out[4] = ax
+    out[5] = ay
+
+
+# --- Singer acceleration -------------------------------------------------------------------------
+class SingerMotion(NamedTuple):
+    """Singer's (1970) acceleration, pulled back to zero at ``alpha`` while driven by white noise
+    of intensity ``2 alpha sigma_m^2`` per axis (the targets' ``q`` is not used); state
+    ``[x, y, vx, vy, ax, ay]``. The mean's acceleration decays, so its speed stays bounded: at
+    most ``|v + a / alpha|`` of the mean now.
+
+    Attributes:
+        damping: ``alpha``, the rate at which the acceleration decays, 1/s (> 0).
+        acceleration_std: ``sigma_m``, the stationary std of each acceleration component,
+            m/s^2.
+    """
+
+    damping: float
+    acceleration_std: float
+
+
+SINGER_SERIES_BELOW = 1.5
+"""``alpha T`` below which `singer_axis_transition` and `singer_axis_noise` sum power series in
+``alpha T`` for the entries whose closed forms cancel (``f_pa``, ``Q_pp``, ``Q_pv``, ``Q_pa``)."""
+SINGER_SERIES_TERMS = 34
+"""Terms of those series (at ``u = 1.5`` the last is below 1e-20 of the sum)."""
+
+
+def _singer_series() -> np.ndarray:
+    """Rows: the coefficients of ``f_pa / T^2``, ``Q_pp / T^5``, ``Q_pv / T^4``, ``Q_pa / T^3``
+    (unit intensity) in powers of ``u = alpha T``, summed exactly in rationals:
+    ``Q_ij = int_0^T f_i3 f_j3 ds`` with ``alpha^{3-i} f_i3 = (u - 1 + e^{-u}, 1 - e^{-u},
+    e^{-u})`` at ``u = alpha s``."""
+    n = SINGER_SERIES_TERMS
+    top = n + 6
+
+    def gain(i, k):  # the u^k coefficient of alpha^{3-i} f_i3
+        if (i == 1 and k < 2) or (i == 2 and k < 1):
+            return Fraction(0)
+        term = Fraction((-1) ** k, math.factorial(k))
+        return -term if i == 2 else term
+
+    rows = [[Fraction(gain(1, k + 2)) for k in range(n)]]
+    for i, j, power in ((1, 1, 5), (1, 2, 4), (1, 3, 3)):
+        product = [sum(gain(i, k) * gain(j, m - k) for k in range(m + 1)) for m in range(top)]
+        # int_0^u w^m dw = u^{m+1} / (m + 1); the lowest power is u^power
+        rows.append([product[m] / (m + 1) for m in range(power - 1, power - 1 + n)])
+    return np.array([[float(c) for c in row] for row in rows])
+
+
+_SINGER_SERIES = _singer_series()
+
+
+@numba.njit(cache=True, inline="always")
+def _series(row, u):
+    total = 0.0
+    for k in range(SINGER_SERIES_TERMS - 1, -1, -1):
+        total = total * u + _SINGER_SERIES[row, k]
+    return total
+
+
+@numba.njit(cache=True)
+def singer_axis_transition(damping, duration):
+    """Per-axis ``F(T) = (1, T, f_pa, 1, f_va, f_aa)`` with ``u = alpha T``:
+    ``f_pa = (u - 1 + e^{-u}) / alpha^2``, ``f_va = (1 - e^{-u}) / alpha``, ``f_aa = e^{-u}``."""
+    t = duration
+    u = damping * t
+    e1 = -math.expm1(-u)
+    if u < SINGER_SERIES_BELOW:
+        fpa = t * t * _series(0, u)
+    else:
+        fpa = (u - e1) / (damping * damping)
+    return 1.0, t, fpa, 1.0, e1 / damping, math.exp(-u)
+
+
+@numba.njit(cache=True)
+def singer_axis_noise(damping, duration):
+    """Per-axis ``Q(T)`` at unit intensity, ``(q_pp, q_pv, q_pa, q_vv, q_va, q_aa)`` (module
+    docstring; power series in ``u = alpha T`` below `SINGER_SERIES_BELOW` for the first
+    three)."""
+    a = damping
+    t = duration
+    u = a * t
+    e1 = -math.expm1(-u)
+    e2 = -math.expm1(-2.0 * u)
+    qvv = ou_phi(u) / (a * a * a)
+    qva = e1 * e1 / (2.0 * a * a)
+    qaa = e2 / (2.0 * a)
+    if u < SINGER_SERIES_BELOW:
+        t3 = t * t * t
+        return t3 * t * t * _series(1, u), t3 * t * _series(2, u), t3 * _series(3, u), qvv, qva, qaa
+    ue = u * math.exp(-u)
+    a2 = a * a
+    qpp = (u * u * u / 3.0 - u * u + u - 2.0 * ue + 0.5 * e2) / (a2 * a2 * a)
+    qpv = (0.5 * u * u - u + e1 + ue - 0.5 * e2) / (a2 * a2)
+    qpa = (0.5 * e2 - ue) / (a2 * a)
+    return qpp, qpv, qpa, qvv, qva, qaa
+
+
+@numba.njit(cache=True, inline="always")
+def singer_intensity(motion):
+    """``q = 2 alpha sigma_m^2``, the white-noise intensity on each acceleration, m^2/s^5."""
+    return 2.0 * motion.damping * motion.acceleration_std * motion.acceleration_std
+
+
+@numba.njit(cache=True, inline="always")
+def _singer_axis(motion, duration):
+    f = singer_axis_transition(motion.damping, duration)
+    q = singer_intensity(motion)
+    pp, pv, pa, vv, va, aa = singer_axis_noise(motion.damping, duration)
+    return f, (q * pp, q * pv, q * pa, q * vv, q * va, q * aa)
+
+
+@numba.njit(cache=True, inline="always")
+def _singer_mean(motion, tau, mean, elapsed):
+    x, y, vx, vy, _, _ = linear3_mean(mean, singer_axis_transition(motion.damping, elapsed))
+    return x, y, vx, vy
+
+
+@numba.njit(cache=True, inline="always")
+def _singer_predict_mean(motion, tau, mean, elapsed, out):
+    _predict_mean_6(singer_axis_transition(motion.damping, elapsed), mean, out)
+
+
+@numba.njit(cache=True, inline="always")
+def _singer_predict(motion, tau, cov, q, steps, out):
+    f, noise = _singer_axis(motion, steps * tau)
+    linear3_predict(cov, f, noise, out)
+
+
+@numba.njit(cache=True, inline="always")
+def _singer_position(motion, tau, cov, q, steps):
+    f, noise = _singer_axis(motion, steps * tau)
+    return linear3_position(cov, f, noise)
+
+
+@numba.njit(cache=True, inline="always")
+def _singer_terms(motion, tau, cov, q):
+    return accel_position_terms(cov, singer_intensity(motion))
+
+
+@numba.njit(cache=True, inline="always")
+def _singer_det_rate(motion, tau, poly, steps):
+    t = steps * tau
+    f = singer_axis_transition(motion.damping, t)
+    noise_pp = singer_axis_noise(motion.damping, t)[0]
+    return accel_det_rate(poly, tau, t, f[2], f[4], noise_pp)
+
+
+@numba.njit(cache=True, inline="always")
+def _singer_det(motion, tau, poly, steps):
+    det, _ = _singer_det_rate(motion, tau, poly, steps)
+    return det
+
+
+@numba.njit(cache=True, inline="always")
+def _singer_step(motion, tau, q, f, qq):
+    per_axis, noise = _singer_axis(motion, tau)
+    fill_linear3_step(per_axis, noise, f, qq)
+
+
+register_motion(
+    SingerMotion,
+    MotionKernels(
+        _singer_mean,
+        _singer_predict,
+        _singer_position,
+        _singer_terms,
+        _singer_det,
+        _singer_det_rate,
+        _singer_step,
+        _singer_predict_mean,
+        False,
+        6,
+    ),
+)
+
+
+# --- constant acceleration (white jerk) ----------------------------------------------------------
+class ConstantAccelerationMotion(NamedTuple):
+    """Bar-Shalom's constant-acceleration (Wiener-process acceleration) model: white jerk of
+    intensity ``j`` per axis (the targets' ``q`` is not used); state ``[x, y, vx, vy, ax, ay]``.
+    The mean keeps its acceleration, so its speed grows without bound.
+
+    Attributes:
+        jerk_intensity: ``j``, the acceleration variance gained per second on each axis,
+            m^2/s^5.
+        acceleration_std: the prior std of each acceleration component, m/s^2 (used only by
+            `extended_prior`).
+    """
+
+    jerk_intensity: float
+    acceleration_std: float
+
+
+@numba.njit(cache=True)
+def ca_axis_transition(duration):
+    """Per-axis ``F(T) = (1, T, T^2 / 2, 1, T, 1)``."""
+    t = duration
+    return 1.0, t, 0.5 * t * t, 1.0, t, 1.0
+
+
+@numba.njit(cache=True)
+def ca_axis_noise(duration):
+    """Per-axis ``Q(T)`` at unit intensity: ``(T^5/20, T^4/8, T^3/6, T^3/3, T^2/2, T)``."""
+    t = duration
+    t2 = t * t
+    t3 = t2 * t
+    return t3 * t2 / 20.0, t2 * t2 / 8.0, t3 / 6.0, t3 / 3.0, 0.5 * t2, t
+
+
+@numba.njit(cache=True, inline="always")
+def _ca_axis(motion, duration):
+    j = motion.jerk_intensity
+    pp, pv, pa, vv, va, aa = ca_axis_noise(duration)
+    return ca_axis_transition(duration), (j * pp, j * pv, j * pa, j * vv, j * va, j * aa)
+
+
+@numba.njit(cache=True, inline="always")
+def _ca_mean(motion, tau, mean, elapsed):
+    x, y, vx, vy, _, _ = linear3_mean(mean, ca_axis_transition(elapsed))
+    return x, y, vx, vy
+
+
+@numba.njit(cache=True, inline="always")
+def _ca_predict_mean(motion, tau, mean, elapsed, out):
+    _predict_mean_6(ca_axis_transition(elapsed), mean, out)
+
+
+@numba.njit(cache=True, inline="always")
+def _ca_predict(motion, tau, cov, q, steps, out):
+    f, noise = _ca_axis(motion, steps * tau)
+    linear3_predict(cov, f, noise, out)
+
+
+@numba.njit(cache=True, inline="always")
+def _ca_position(motion, tau, cov, q, steps):
+    f, noise = _ca_axis(motion, steps * tau)
+    return linear3_position(cov, f, noise)
+
+
+@numba.njit(cache=True, inline="always")
+def _ca_terms(motion, tau, cov, q):
+    return accel_position_terms(cov, motion.jerk_intensity)
+
+
+@numba.njit(cache=True, inline="always")
+def _ca_det_rate(motion, tau, poly, steps):
+    t = steps * tau
+    return accel_det_rate(poly, tau, t, 0.5 * t * t, t, ca_axis_noise(t)[0])
+
+
+@numba.njit(cache=True, inline="always")
+def _ca_det(motion, tau, poly, steps):
+    det, _ = _ca_det_rate(motion, tau, poly, steps)
+    return det
+
+
+@numba.njit(cache=True, inline="always")
+def _ca_step(motion, tau, q, f, qq):
+    per_axis, noise = _ca_axis(motion, tau)
+    fill_linear3_step(per_axis, noise, f, qq)
+
+
+register_motion(
+    ConstantAccelerationMotion,
+    MotionKernels(
+        _ca_mean,
+        _ca_predict,
+        _ca_position,
+        _ca_terms,
+        _ca_det,
+        _ca_det_rate,
+        _ca_step,
+        _ca_predict_mean,
+        False,
+        6,
+    ),
+)
+
+
 # --- the numpy face ----------------------------------------------------------------------------
 @numba.njit(cache=True)
 def _predict_stacked(motion, tau, means, covariances, q, steps, out_means, out_covs):
@@ -621,3 +1081,28 @@ def registered_motion(part: tuple) -> MotionKernels:
     if type(part) not in _MOTIONS:
         raise ValueError(f"no belief motion registered for {part!r}")
     return _MOTIONS[type(part)]
+
+
+def extended_prior(part: tuple, mean: np.ndarray, covariance: np.ndarray):
+    """A prior ``(mean, covariance)`` for a state of ``part``'s size: unchanged (the same
+    objects) under a 4-D model; under a 6-D one (`SingerMotion`, `ConstantAccelerationMotion`)
+    a 4-D prior ``[x, y, vx, vy]`` gains a zero mean acceleration and the block
+    ``acceleration_std^2 I`` (m^2/s^4), uncorrelated with the position and velocity.
+
+    Raises:
+        ValueError: ``part`` is not a registered belief motion.
+    """
+    size = registered_motion(part).state_size
+    mean_in = np.asarray(mean, dtype=float)
+    if size == 4 or mean_in.shape[-1] == size:
+        return mean, covariance
+    cov_in = np.asarray(covariance, dtype=float)
+    extra = size - mean_in.shape[-1]
+    out_mean = np.concatenate([mean_in, np.zeros(mean_in.shape[:-1] + (extra,))], axis=-1)
+    out_cov = np.zeros(cov_in.shape[:-2] + (size, size))
+    d = cov_in.shape[-1]
+    out_cov[..., :d, :d] = cov_in
+    variance = float(part.acceleration_std) ** 2
+    for k in range(d, size):
+        out_cov[..., k, k] = variance
+    return out_mean, out_cov

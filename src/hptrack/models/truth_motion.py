@@ -20,7 +20,13 @@ time on the model's class. The models:
   position variance ``D t`` per axis (``D`` in m^2/s);
 * `OrnsteinUhlenbeck`: the velocity is pulled back to 0 at rate ``K`` (1/s) while driven by the
   target's ``q``: ``dv = -K v dt + sqrt(q) dW``, sampled exactly (the integrated
-  Ornstein-Uhlenbeck process); as ``K -> 0`` it becomes constant velocity.
+  Ornstein-Uhlenbeck process); as ``K -> 0`` it becomes constant velocity;
+* `SingerTruth` and `ConstantAccelerationTruth`: true states ``[x, y, vx, vy, ax, ay]`` (6
+  normals per target and step, ``z[i, 2 c + a]`` for component ``c`` of axis ``a``), sampled
+  exactly per axis, ``[p, v, a] <- F [p, v, a] + L z`` with ``L`` the Cholesky factor of the
+  per-axis ``Q(tau)`` of the belief models `hptrack.models.belief_motion.SingerMotion` and
+  `hptrack.models.belief_motion.ConstantAccelerationMotion` (one formula in one place); their
+  parameters carry the noise (``sqrt_q`` is not used).
 
 Beliefs and planners still assume constant velocity: these models change the truth only.
 """
@@ -36,6 +42,12 @@ import numpy as np
 from numba.extending import overload
 
 from hptrack._dispatch import registered
+from hptrack.models.belief_motion import (
+    ca_axis_noise,
+    ca_axis_transition,
+    singer_axis_noise,
+    singer_axis_transition,
+)
 from hptrack.models.mission import motion_noise_factors_on
 from hptrack.models.motion import advance_true_state
 
@@ -192,10 +204,88 @@ def advance_ornstein_uhlenbeck(model, mission, truth, z, sqrt_q):
         truth[i, 3] = decay * vy + r * (l21 * z[i, 1] + l22 * z[i, 3])
 
 
+class SingerTruth(NamedTuple):
+    """Singer's acceleration (`hptrack.models.belief_motion.SingerMotion`), 6-D true states.
+
+    Attributes:
+        damping: ``alpha``, the rate at which the acceleration decays, 1/s (> 0).
+        acceleration_std: ``sigma_m``, the stationary std of each acceleration component,
+            m/s^2.
+    """
+
+    damping: float
+    acceleration_std: float
+
+
+class ConstantAccelerationTruth(NamedTuple):
+    """White jerk (`hptrack.models.belief_motion.ConstantAccelerationMotion`), 6-D true states.
+
+    Attributes:
+        jerk_intensity: ``j``, the acceleration variance gained per second on each axis,
+            m^2/s^5.
+        acceleration_std: the prior std of each acceleration component, m/s^2 (not used by
+            the step).
+    """
+
+    jerk_intensity: float
+    acceleration_std: float
+
+
+@numba.njit(cache=True)
+def cholesky3(noise, scale):
+    """The lower Cholesky factor ``(l11, l21, l22, l31, l32, l33)`` of ``scale`` times the
+    symmetric 3x3 ``noise = (q11, q12, q13, q22, q23, q33)`` (a pivot that rounds below 0
+    counts as 0)."""
+    q11, q12, q13, q22, q23, q33 = noise
+    l11 = math.sqrt(max(q11, 0.0))
+    l21 = q12 / l11 if l11 > 0.0 else 0.0
+    l31 = q13 / l11 if l11 > 0.0 else 0.0
+    l22 = math.sqrt(max(q22 - l21 * l21, 0.0))
+    l32 = (q23 - l31 * l21) / l22 if l22 > 0.0 else 0.0
+    l33 = math.sqrt(max(q33 - l31 * l31 - l32 * l32, 0.0))
+    r = math.sqrt(scale)
+    return r * l11, r * l21, r * l22, r * l31, r * l32, r * l33
+
+
+@numba.njit(cache=True)
+def advance_linear3(f, factor, truth, z):
+    """``[p, v, a] <- F [p, v, a] + L z`` per axis of every 6-D state of ``truth``, with the
+    per-axis upper-triangular ``F = f = (f_pp, f_pv, f_pa, f_vv, f_va, f_aa)`` and the
+    Cholesky factor ``L = factor = (l11, l21, l22, l31, l32, l33)``."""
+    fpp, fpv, fpa, fvv, fva, faa = f
+    l11, l21, l22, l31, l32, l33 = factor
+    for i in range(truth.shape[0]):
+        for axis in range(2):
+            p, v, a = truth[i, axis], truth[i, 2 + axis], truth[i, 4 + axis]
+            z0, z1, z2 = z[i, axis], z[i, 2 + axis], z[i, 4 + axis]
+            truth[i, axis] = fpp * p + fpv * v + fpa * a + l11 * z0
+            truth[i, 2 + axis] = fvv * v + fva * a + l21 * z0 + l22 * z1
+            truth[i, 4 + axis] = faa * a + l31 * z0 + l32 * z1 + l33 * z2
+
+
+@numba.njit(cache=True)
+def advance_singer(model, mission, truth, z, sqrt_q):
+    """`SingerTruth`'s step, exact for any ``tau`` (``sqrt_q`` not used)."""
+    tau = mission.time_step
+    intensity = 2.0 * model.damping * model.acceleration_std * model.acceleration_std
+    factor = cholesky3(singer_axis_noise(model.damping, tau), intensity)
+    advance_linear3(singer_axis_transition(model.damping, tau), factor, truth, z)
+
+
+@numba.njit(cache=True)
+def advance_constant_acceleration(model, mission, truth, z, sqrt_q):
+    """`ConstantAccelerationTruth`'s step, exact for any ``tau`` (``sqrt_q`` not used)."""
+    tau = mission.time_step
+    factor = cholesky3(ca_axis_noise(tau), model.jerk_intensity)
+    advance_linear3(ca_axis_transition(tau), factor, truth, z)
+
+
 register_truth_motion(ConstantVelocityTruth, advance_constant_velocity)
 register_truth_motion(CoordinatedTurn, advance_coordinated_turn)
 register_truth_motion(RandomWalk, advance_random_walk)
 register_truth_motion(OrnsteinUhlenbeck, advance_ornstein_uhlenbeck)
+register_truth_motion(SingerTruth, advance_singer, 6)
+register_truth_motion(ConstantAccelerationTruth, advance_constant_acceleration, 6)
 
 
 @numba.njit(cache=True)
@@ -210,9 +300,9 @@ def sample_truth(
     q: np.ndarray,
     rng: np.random.Generator,
 ) -> np.ndarray:
-    """True states ``(n, 4)`` one step of ``model`` after ``states``, drawing ``(n, 4)`` unit
-    normals from ``rng`` (the numpy face of `advance_truth`; ``mission`` the record,
-    ``q`` the intensities, m^2/s^3)."""
+    """True states ``(n, d)`` one step of ``model`` after ``states`` (``d`` = 4, or 6 for the
+    acceleration models), drawing ``(n, d)`` unit normals from ``rng`` (the numpy face of
+    `advance_truth`; ``mission`` the record, ``q`` the intensities, m^2/s^3)."""
     out = np.array(states, dtype=float)
     z = rng.standard_normal(out.shape)
     _advance(model, mission, out, z, np.sqrt(np.asarray(q, dtype=float)))
