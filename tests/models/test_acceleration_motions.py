@@ -12,7 +12,7 @@ from scipy.linalg import expm
 
 from hptrack.models import belief_motion as bm
 from hptrack.models.belief_motion import (
-    SINGER_SERIES_BELOW,
+    SINGER_SERIES_BANDS,
     BeliefMotion,
     ConstantAccelerationMotion,
     ConstantVelocity,
@@ -150,24 +150,15 @@ def test_per_axis_transition_and_noise_are_van_loans(motion, duration):
     np.testing.assert_allclose(noise, q_ref, rtol=1e-10, atol=0.0)
 
 
+BAND_EDGES = [top * (1.0 - 1e-9) for top in SINGER_SERIES_BANDS] + list(SINGER_SERIES_BANDS)
+
+
 @pytest.mark.parametrize("damping", [1.0 / 60.0, 2.0])
-@pytest.mark.parametrize(
-    "u",
-    [
-        1e-6,
-        1e-4,
-        1e-2,
-        0.3,
-        1.0,
-        SINGER_SERIES_BELOW * (1.0 - 1e-9),
-        SINGER_SERIES_BELOW,
-        3.0,
-        30.0,
-    ],
-)
+@pytest.mark.parametrize("u", sorted([1e-6, 1e-4, 1e-3, 0.05, 0.3, 1.0, 3.0, 30.0] + BAND_EDGES))
 def test_singer_keeps_its_digits_at_every_damping_time(damping, u):
-    """Series below `SINGER_SERIES_BELOW`, closed forms above: every entry of ``F`` and ``Q``
-    to 1e-13 of a 60-digit Van Loan reference, from ``alpha T = 1e-6`` to 30."""
+    """Series below `SINGER_SERIES_BELOW` (each band's number of terms, both sides of each
+    band's edge), closed forms above: every entry of ``F`` and ``Q`` to 1e-13 of a 60-digit Van
+    Loan reference, from ``alpha T = 1e-6`` to 30."""
     duration = u / damping
     f_ref, q_ref = mp_van_loan(damping, 1.0, duration)
     f = upper(singer_axis_transition(damping, duration))

@@ -566,16 +566,17 @@ def linear3_predict(cov, f, noise, out):
     ``F = f = (f_pp, f_pv, f_pa, f_vv, f_va, f_aa)`` and symmetric
     ``Q = noise = (q_pp, q_pv, q_pa, q_vv, q_va, q_aa)`` (``out`` may be ``cov``)."""
     fpp, fpv, fpa, fvv, fva, faa = f
-    m = np.empty((6, 6))  # F cov
+    # out = F cov, column by column: each axis' three entries of a column read before written
     for j in range(6):
         for axis in range(2):
             p, v, a = cov[axis, j], cov[2 + axis, j], cov[4 + axis, j]
-            m[axis, j] = fpp * p + fpv * v + fpa * a
-            m[2 + axis, j] = fvv * v + fva * a
-            m[4 + axis, j] = faa * a
+            out[axis, j] = fpp * p + fpv * v + fpa * a
+            out[2 + axis, j] = fvv * v + fva * a
+            out[4 + axis, j] = faa * a
+    # out = out F', row by row, in place likewise (no scratch)
     for i in range(6):
         for axis in range(2):
-            p, v, a = m[i, axis], m[i, 2 + axis], m[i, 4 + axis]
+            p, v, a = out[i, axis], out[i, 2 + axis], out[i, 4 + axis]
             out[i, axis] = p * fpp + v * fpv + a * fpa
             out[i, 2 + axis] = v * fvv + a * fva
             out[i, 4 + axis] = a * faa
@@ -737,40 +738,68 @@ class SingerMotion(NamedTuple):
 
 SINGER_SERIES_BELOW = 1.5
 """``alpha T`` below which `singer_axis_transition` and `singer_axis_noise` sum power series in
-``alpha T`` for the entries whose closed forms cancel (``f_pa``, ``Q_pp``, ``Q_pv``, ``Q_pa``)."""
-SINGER_SERIES_TERMS = 34
-"""Terms of those series (at ``u = 1.5`` the last is below 1e-20 of the sum)."""
+``alpha T`` for the entries whose closed forms cancel (``f_pa``, ``Q_pp``, ``Q_pv``, ``Q_pa``,
+``Q_vv``)."""
+SINGER_SERIES_BANDS = (0.01, 0.1, 0.5, SINGER_SERIES_BELOW)
+"""Upper ends of the bands of ``alpha T`` that sum their own number of terms
+(`SINGER_SERIES_TERMS`)."""
+_SERIES_TOP = 40
 
 
-def _singer_series() -> np.ndarray:
-    """Rows: the coefficients of ``f_pa / T^2``, ``Q_pp / T^5``, ``Q_pv / T^4``, ``Q_pa / T^3``
-    (unit intensity) in powers of ``u = alpha T``, summed exactly in rationals:
+def _singer_series() -> tuple[np.ndarray, tuple[int, ...]]:
+    """Rows: the coefficients of ``f_pa / T^2``, ``Q_pp / T^5``, ``Q_pv / T^4``, ``Q_pa / T^3``,
+    ``Q_vv / T^3`` (unit intensity) in powers of ``u = alpha T``, exact fractions (integer sums
+    over factorials) rounded once:
     ``Q_ij = int_0^T f_i3 f_j3 ds`` with ``alpha^{3-i} f_i3 = (u - 1 + e^{-u}, 1 - e^{-u},
-    e^{-u})`` at ``u = alpha s``."""
-    n = SINGER_SERIES_TERMS
-    top = n + 6
+    e^{-u})`` at ``u = alpha s``; and per band of `SINGER_SERIES_BANDS` the terms after which
+    every row's tail (in absolute values, at the band's top) is below 2^-60 of its sum."""
+    top = _SERIES_TOP
 
-    def gain(i, k):  # the u^k coefficient of alpha^{3-i} f_i3
+    def sign(i, k):  # the u^k coefficient of alpha^{3-i} f_i3 is sign(i, k) / k!
         if (i == 1 and k < 2) or (i == 2 and k < 1):
-            return Fraction(0)
-        term = Fraction((-1) ** k, math.factorial(k))
-        return -term if i == 2 else term
+            return 0
+        return -((-1) ** k) if i == 2 else (-1) ** k
 
-    rows = [[Fraction(gain(1, k + 2)) for k in range(n)]]
-    for i, j, power in ((1, 1, 5), (1, 2, 4), (1, 3, 3)):
-        product = [sum(gain(i, k) * gain(j, m - k) for k in range(m + 1)) for m in range(top)]
+    rows = [[Fraction(sign(1, k + 2), math.factorial(k + 2)) for k in range(top)]]
+    for i, j, power in ((1, 1, 5), (1, 2, 4), (1, 3, 3), (2, 2, 3)):
+        # the w^m coefficient of f_i3 f_j3 is sum_k sign sign binom(m, k) / m!, and
         # int_0^u w^m dw = u^{m+1} / (m + 1); the lowest power is u^power
-        rows.append([product[m] / (m + 1) for m in range(power - 1, power - 1 + n)])
-    return np.array([[float(c) for c in row] for row in rows])
+        rows.append(
+            [
+                Fraction(
+                    sum(sign(i, k) * sign(j, m - k) * math.comb(m, k) for k in range(m + 1)),
+                    math.factorial(m + 1),
+                )
+                for m in range(power - 1, power - 1 + top)
+            ]
+        )
+    table = np.array([[float(c) for c in row] for row in rows])
+    lengths = []
+    for band in SINGER_SERIES_BANDS:
+        terms = np.abs(table) * band ** np.arange(top)
+        total = (table * band ** np.arange(top)).sum(axis=1)
+        tails = np.cumsum(terms[:, ::-1], axis=1)[:, ::-1]  # tails[r, n] = sum_{m >= n}
+        lengths.append(int(np.argmax(np.all(tails <= total[:, None] / 2.0**60, axis=0))))
+    return table, tuple(lengths)
 
 
-_SINGER_SERIES = _singer_series()
+_SINGER_SERIES, SINGER_SERIES_TERMS = _singer_series()
+# SINGER_SERIES_TERMS: the terms summed in each band of SINGER_SERIES_BANDS (8, 12, 18, 28)
 
 
 @numba.njit(cache=True, inline="always")
-def _series(row, u):
+def _series_terms(u):
+    """The terms `_series` sums at ``u`` (its band's)."""
+    for band in range(3):
+        if u < SINGER_SERIES_BANDS[band]:
+            return SINGER_SERIES_TERMS[band]
+    return SINGER_SERIES_TERMS[3]
+
+
+@numba.njit(cache=True, inline="always")
+def _series(row, u, terms):
     total = 0.0
-    for k in range(SINGER_SERIES_TERMS - 1, -1, -1):
+    for k in range(terms - 1, -1, -1):
         total = total * u + _SINGER_SERIES[row, k]
     return total
 
@@ -783,7 +812,7 @@ def singer_axis_transition(damping, duration):
     u = damping * t
     e1 = -math.expm1(-u)
     if u < SINGER_SERIES_BELOW:
-        fpa = t * t * _series(0, u)
+        fpa = t * t * _series(0, u, _series_terms(u))
     else:
         fpa = (u - e1) / (damping * damping)
     return 1.0, t, fpa, 1.0, e1 / damping, math.exp(-u)
@@ -793,18 +822,21 @@ def singer_axis_transition(damping, duration):
 def singer_axis_noise(damping, duration):
     """Per-axis ``Q(T)`` at unit intensity, ``(q_pp, q_pv, q_pa, q_vv, q_va, q_aa)`` (module
     docstring; power series in ``u = alpha T`` below `SINGER_SERIES_BELOW` for the first
-    three)."""
+    four)."""
     a = damping
     t = duration
     u = a * t
     e1 = -math.expm1(-u)
     e2 = -math.expm1(-2.0 * u)
-    qvv = ou_phi(u) / (a * a * a)
     qva = e1 * e1 / (2.0 * a * a)
     qaa = e2 / (2.0 * a)
     if u < SINGER_SERIES_BELOW:
+        n = _series_terms(u)
         t3 = t * t * t
-        return t3 * t * t * _series(1, u), t3 * t * _series(2, u), t3 * _series(3, u), qvv, qva, qaa
+        qpp = t3 * t * t * _series(1, u, n)
+        qpv = t3 * t * _series(2, u, n)
+        return qpp, qpv, t3 * _series(3, u, n), t3 * _series(4, u, n), qva, qaa
+    qvv = ou_phi(u) / (a * a * a)
     ue = u * math.exp(-u)
     a2 = a * a
     qpp = (u * u * u / 3.0 - u * u + u - 2.0 * ue + 0.5 * e2) / (a2 * a2 * a)
