@@ -723,8 +723,10 @@ def _predict_mean_6(f, mean, out):
 class SingerMotion(NamedTuple):
     """Singer's (1970) acceleration, pulled back to zero at ``alpha`` while driven by white noise
     of intensity ``2 alpha sigma_m^2`` per axis (the targets' ``q`` is not used); state
-    ``[x, y, vx, vy, ax, ay]``. The mean's acceleration decays, so its speed stays bounded: at
-    most ``|v + a / alpha|`` of the mean now.
+    ``[x, y, vx, vy, ax, ay]``. The mean's acceleration decays, so its speed stays bounded: its
+    velocity ``v + a (1 - e^{-alpha t}) / alpha`` runs along the segment from ``v`` to
+    ``v + a / alpha`` (of the mean now), so its speed is at most ``max(|v|, |v + a / alpha|)``
+    (which can exceed ``|v|``: the intercept's single-root assumption may not hold).
 
     Attributes:
         damping: ``alpha``, the rate at which the acceleration decays, 1/s (> 0).
