@@ -33,9 +33,15 @@ TRUTHS: dict[str, dict | None] = {
     "turn_random_0.02": {"model": "coordinated_turn", "turn_rate": 0.0, "turn_rate_sd": 0.02},
     "random_walk_5": {"model": "random_walk", "diffusion": 5.0},
     "ou_0.01": {"model": "ornstein_uhlenbeck", "damping": 0.01},
+    "singer_0.02": {"model": "singer", "damping": 0.02, "acceleration_std": 0.02},
+    "constant_acceleration": {
+        "model": "constant_acceleration",
+        "jerk_intensity": 1e-6,
+        "acceleration_std": 0.01,
+    },
 }
 """The truth motions flown, by the name the table gives them."""
-TOLD = ("random_walk_5", "ou_0.01")
+TOLD = ("random_walk_5", "ou_0.01", "singer_0.02", "constant_acceleration")
 """The truths a belief motion can hold (`hptrack.models.belief_motion`)."""
 PLANNERS = ("mcts", "greedy", "clairvoyant", "mcts_told")
 """The planners flown (``mcts_told``: ``mcts`` with the true model, on `TOLD` only)."""
@@ -111,7 +117,7 @@ def run(args: argparse.Namespace) -> None:
         (planner, truth, n, seed, args.iterations)
         for n in counts
         for seed in range(args.seeds)
-        for truth in TRUTHS
+        for truth in (args.truths.split(",") if args.truths else TRUTHS)
         for planner in args.planners.split(",")
         if planner != "mcts_told" or truth in TOLD
         if (planner, settings_of(planner, args.iterations).canonical(), truth, n, seed) not in done
@@ -219,10 +225,16 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=2000, help="mcts simulations/decision")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--planners", default=",".join(PLANNERS), help="comma-separated")
+    parser.add_argument(
+        "--truths", default="", help=f"comma-separated, of {', '.join(TRUTHS)} (default all)"
+    )
     parser.add_argument("--csv", required=True, help="the episodes' CSV (appended, resumed)")
     parser.add_argument("--report", action="store_true", help="write the table from the CSV")
     parser.add_argument("--out", default="docs/results/truth-mismatch")
     args = parser.parse_args()
+    unknown = set(args.truths.split(",")) - set(TRUTHS) if args.truths else set()
+    if unknown:
+        parser.error(f"--truths {','.join(sorted(unknown))}: not among {', '.join(TRUTHS)}")
     report(args) if args.report else run(args)
 
 

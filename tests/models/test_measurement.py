@@ -152,3 +152,37 @@ def test_logdet_kernel_matches_numpy():
     sign, expected = np.linalg.slogdet(cov[:2, :2])
     assert sign > 0
     assert logdet_xy(cov[0, 0], cov[0, 1], cov[1, 1]) == pytest.approx(expected, rel=1e-13)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_six_entry_state_takes_the_textbook_update(seed):
+    """A state with accelerations ``[x, y, vx, vy, ax, ay]``: the update of any length is the
+    textbook's (Joseph form), symmetric, the same in place, and agrees with the written-out 4-D
+    update on the 4-D block of a state whose accelerations are uncorrelated."""
+    rng = np.random.default_rng(200 + seed)
+    a = rng.normal(size=(6, 6)) * [30.0, 30.0, 1.0, 1.0, 0.1, 0.1]
+    cov = a @ a.T + np.diag([50.0, 50.0, 0.5, 0.5, 0.01, 0.01])
+    mean = rng.normal(size=6) * [300.0, 300.0, 2.0, 2.0, 0.1, 0.1]
+    z = mean[:2] + rng.normal(size=2) * 20.0
+    h = np.hstack([np.eye(2), np.zeros((2, 4))])
+    gain = cov @ h.T @ np.linalg.inv(h @ cov @ h.T + FULL_R)
+    joseph = (np.eye(6) - gain @ h) @ cov @ (np.eye(6) - gain @ h).T + gain @ FULL_R @ gain.T
+    mean_out, cov_out = np.empty(6), np.empty((6, 6))
+    kalman_update(mean, cov, z, FULL_R, mean_out, cov_out)
+    close(mean_out, mean + gain @ (z - h @ mean))
+    close(cov_out, joseph, rtol=1e-10)
+    np.testing.assert_array_equal(cov_out, cov_out.T)
+    only_cov = np.empty((6, 6))
+    update_covariance(cov, FULL_R, only_cov)
+    np.testing.assert_array_equal(only_cov, cov_out)
+    m, c = mean.copy(), cov.copy()
+    kalman_update(m, c, z, FULL_R, m, c)
+    np.testing.assert_array_equal(m, mean_out)
+    np.testing.assert_array_equal(c, cov_out)
+    block = cov.copy()
+    block[4:, :4] = block[:4, 4:] = 0.0
+    four = np.empty((4, 4))
+    update_covariance(np.ascontiguousarray(block[:4, :4]), FULL_R, four)
+    six = np.empty((6, 6))
+    update_covariance(block, FULL_R, six)
+    close(six[:4, :4], four, rtol=1e-12)

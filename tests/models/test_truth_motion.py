@@ -170,7 +170,7 @@ def _greedy():
             {"model": "ornstein_uhlenbeck", "damping": 0.0},
             "truth_motion.ornstein_uhlenbeck.damping",
         ),
-        ({"model": "singer"}, "truth_motion"),
+        ({"model": "jerky"}, "truth_motion"),
         ({"model": "random_walk", "sigma": 1.0}, "sigma"),
     ],
 )

@@ -98,12 +98,13 @@ class ArviSettings(PrimitiveSettings):
 
 @numba.njit(cache=True)
 def _dominated(kept: np.ndarray, new: np.ndarray, epsilon: float) -> bool:
-    """Whether ``kept <= new + epsilon I`` on every target block ``(n, 4, 4)``."""
-    diff = np.empty((4, 4))
+    """Whether ``kept <= new + epsilon I`` on every target block ``(n, d, d)``."""
+    d = kept.shape[1]
+    diff = np.empty((d, d))
     for i in range(kept.shape[0]):
         scale = 1.0
-        for r in range(4):
-            for c in range(4):
+        for r in range(d):
+            for c in range(d):
                 diff[r, c] = new[i, r, c] - kept[i, r, c]
                 scale = max(scale, abs(new[i, r, c]), abs(kept[i, r, c]))
             diff[r, r] += epsilon
@@ -177,7 +178,7 @@ def prune(
     Args:
         positions: ``(M, 2)`` agent positions, m.
         costs: ``(M,)`` accumulated costs.
-        covariances: ``(M, n, 4, 4)`` target covariances (``None`` when ``epsilon`` is
+        covariances: ``(M, n, d, d)`` target covariances (``None`` when ``epsilon`` is
             ``inf``).
         delta_m: position radius, m (``0`` prunes nothing; ``inf`` keeps only the cheapest
             node when ``epsilon`` is ``inf``).
@@ -191,7 +192,7 @@ def prune(
     if covariances is None:
         if not math.isinf(epsilon):
             raise ValueError("a finite epsilon needs the covariances")
-        covariances = np.empty((0, 0, 4, 4))
+        covariances = np.empty((0, 0, 1, 1))
     return _prune(
         np.ascontiguousarray(positions),
         np.ascontiguousarray(covariances),

@@ -158,7 +158,8 @@ class AStarPlanner(PrimitivePlanner):
         capacity = 1 + n_controls * params.max_expansions
         n_targets = observation.covariances.shape[0]
         positions = np.empty((capacity, 2))
-        covariances = np.empty((capacity, n_targets, 4, 4))
+        d = observation.covariances.shape[1]
+        covariances = np.empty((capacity, n_targets, d, d))
         uncertainty, g = np.empty(capacity), np.empty(capacity)
         levels, parents, controls = (np.empty(capacity, dtype=np.int64) for _ in range(3))
         positions[0] = observation.agent_position

@@ -64,9 +64,9 @@ class ClairvoyantPlanner:
         self, covs: np.ndarray, q: np.ndarray, arrive: np.ndarray, stay: np.ndarray, end: float
     ) -> np.ndarray:
         """``log det Sigma^xy`` at the budget's end ``end`` (s from now) of beliefs ``covs``
-        ``(k, 4, 4)`` met after ``arrive`` s and measured at every step of ``stay`` s."""
+        ``(k, d, d)`` met after ``arrive`` s and measured at every step of ``stay`` s."""
         motion, sensor, tau = self._mission.motion, self._mission.sensor, self._mission.time_step
-        zeros = np.zeros((covs.shape[0], 4))
+        zeros = np.zeros(covs.shape[:2])
         measured = np.minimum(np.floor(stay / tau + STEP_TOLERANCE).astype(int) + 1, SETTLED_STEPS)
         covs = motion.predict(zeros, covs, q, arrive)[1]
         for step in range(int(measured.max(initial=0))):

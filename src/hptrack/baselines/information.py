@@ -90,11 +90,12 @@ def rollout_children(
     reach = 0.0
     for c in range(n_controls):
         reach = max(reach, n_steps * math.hypot(step_displacements[c, 0], step_displacements[c, 1]))
-    p = np.empty((4, 4))
+    d = covariances.shape[2]
+    p = np.empty((d, d))
     # A target out of reach of every control of a node is only predicted; the prediction is
     # shared by that node's children, which are consecutive in ``children``.
     far_node = np.full(n_targets, -1, dtype=np.int64)
-    far_cov = np.empty((n_targets, 4, 4))
+    far_cov = np.empty((n_targets, d, d))
     far_logdet = np.empty(n_targets)
     for j in range(children.shape[0]):
         a = children[j] // n_controls
@@ -150,7 +151,8 @@ def _run_rollout(
     store: bool,
 ) -> tuple[np.ndarray, np.ndarray]:
     n_targets = covariances.shape[1]
-    out_covariances = np.empty((children.shape[0] if store else 0, n_targets, 4, 4))
+    d = covariances.shape[2]
+    out_covariances = np.empty((children.shape[0] if store else 0, n_targets, d, d))
     out_uncertainty = np.empty(children.shape[0])
     rollout_children(
         mission.record,
@@ -266,9 +268,10 @@ def bound_children(mission, follow, positions, covariances, start, boundaries, a
     step_length, sensing_range = mission.vehicle.step_length, sensor_reach(mission.sensor)
     n_nodes, n_targets = covariances.shape[:2]
     n_total = all_means.shape[0] - 1
-    p = np.empty((4, 4))
-    measured = np.empty((4, 4))
-    work = np.empty((3, 4, 4))
+    d = covariances.shape[2]
+    p = np.empty((d, d))
+    measured = np.empty((d, d))
+    work = np.empty((3, d, d))
     for j in range(n_nodes):
         for i in range(n_targets):
             first = n_total + 1

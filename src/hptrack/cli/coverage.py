@@ -161,11 +161,14 @@ def coverage(
 
         n = subtask.intercept.steps
         start_mean = subtask.intercept.start
+        if mission.motion.straight:
+            start_state = state_from(start_mean, velocities(means[0]))
+        else:  # the whole mean state predicted to the coverage's start
+            start_state = mission.motion.predict(means[:1], covs[:1], q, n * mission.time_step)[0][
+                0
+            ]
         end_mean, end_cov = mission.motion.predict(
-            state_from(start_mean, velocities(means[0]))[None],
-            subtask.start_covariance[None],
-            q,
-            est.cutoff_time,
+            start_state[None], subtask.start_covariance[None], q, est.cutoff_time
         )
         with writing(plot, "--plot"):
             save_plan_figure(
@@ -185,37 +188,44 @@ def coverage(
 
 MOTION_ADAPTER: TypeAdapter[MotionSpec] = TypeAdapter(MotionSpec)
 
-MotionName = Literal["constant_velocity", "random_walk", "ornstein_uhlenbeck"]
+MotionName = Literal[
+    "constant_velocity", "random_walk", "ornstein_uhlenbeck", "singer", "constant_acceleration"
+]
 """The belief motions ``validate-coverage`` offers (`hptrack.scenario.model.MotionSpec`)."""
 
 
-def motion_of(
-    name: str, diffusion: float, damping: float, process_noise_form: str
-) -> MotionSpec | None:
-    """The scenario ``motion:`` spec of ``--motion`` and its parameters (``None``: constant
-    velocity, the default).
+def motion_of(name: str, process_noise_form: str, **parameters: float | None) -> MotionSpec | None:
+    """The scenario ``motion:`` spec of ``--motion`` and its ``parameters`` (the options'
+    values by field name; ``None``: the model's default). ``None`` for constant velocity, the
+    default.
 
     Raises:
-        InputError: a parameter out of its range, naming the option.
+        InputError: a parameter out of its range, or given to a model without it, naming the
+            option.
     """
+    given = {field: value for field, value in parameters.items() if value is not None}
     if name == "constant_velocity":
+        if given:
+            field = next(iter(given))
+            raise InputError(f"--{field.replace('_', '-')} is not a parameter of --motion {name}")
         return None
     if process_noise_form != "continuous":
         raise InputError(
             f"--process-noise-form {process_noise_form} is a form of constant velocity's Q, "
             f"not of --motion {name}"
         )
-    data = {"model": name}
-    if name == "random_walk":
-        data["diffusion"] = diffusion
-    else:
-        data["damping"] = damping
+    fields = MOTION_ADAPTER.validate_python({"model": name}).model_fields
+    for field in given:
+        if field not in fields:
+            raise InputError(f"--{field.replace('_', '-')} is not a parameter of --motion {name}")
+    data = {"model": name, **given}
     try:
         return MOTION_ADAPTER.validate_python(data)
     except ValidationError as err:
-        option = "--diffusion" if name == "random_walk" else "--damping"
+        field = str(err.errors()[0]["loc"][-1])
         reason = one_line(err.errors()[0]["msg"])
-        raise InputError(f"{option}: {reason} (value {shown(data.popitem()[1])})") from None
+        value = data.get(field)
+        raise InputError(f"--{field.replace('_', '-')}: {reason} (value {shown(value)})") from None
 
 
 def validate_coverage(
@@ -242,23 +252,46 @@ def validate_coverage(
         typer.Option(help="The targets' motion, for beliefs and truth alike."),
     ] = "constant_velocity",
     diffusion: Annotated[
-        float, typer.Option(help="Random walk: position variance per second per axis, m^2/s.")
-    ] = 5.0,
+        float | None,
+        typer.Option(help="random_walk: position variance per second per axis, m^2/s [5]."),
+    ] = None,
     damping: Annotated[
-        float, typer.Option(help="Ornstein-Uhlenbeck: the velocity's decay rate, 1/s.")
-    ] = 0.01,
+        float | None,
+        typer.Option(
+            help="ornstein_uhlenbeck: the velocity's decay rate [0.01]; singer: the "
+            "acceleration's [0.02], 1/s."
+        ),
+    ] = None,
+    acceleration_std: Annotated[
+        float | None,
+        typer.Option(
+            help="singer: the acceleration's stationary spread [0.02]; constant_acceleration: "
+            "its prior spread [0.01], m/s^2 per axis."
+        ),
+    ] = None,
+    jerk_intensity: Annotated[
+        float | None,
+        typer.Option(help="constant_acceleration: the white jerk's intensity, m^2/s^5 [1e-6]."),
+    ] = None,
     budget: Annotated[
         float | None,
         typer.Option(
-            help="Mission budget, s from the start (delay included); needed by random_walk "
-            "and ornstein_uhlenbeck, whose P_cdf may never stop rising."
+            help="Mission budget, s from the start (delay included); needed by every motion "
+            "but constant_velocity, whose P_cdf may never stop rising."
         ),
     ] = None,
 ) -> None:
     """Estimator-accuracy experiment (paper Sec. V-A): MAPE of P_find and E[T_find] per delay,
     for the paper's estimator and the sharp one on the same simulated runs."""
     check_seed(seed)
-    motion_spec = motion_of(motion, diffusion, damping, process_noise_form)
+    motion_spec = motion_of(
+        motion,
+        process_noise_form,
+        diffusion=diffusion,
+        damping=damping,
+        acceleration_std=acceleration_std,
+        jerk_intensity=jerk_intensity,
+    )
     if motion != "constant_velocity" and budget is None:
         raise InputError(
             f"--motion {motion} needs a --budget (s): its P_cdf may never stop rising, so "

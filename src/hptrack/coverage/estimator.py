@@ -66,7 +66,7 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
 
     Args:
         mission: the mission record (time step, agent speed, footprint, ``Q`` form).
-        cov: 4x4 belief covariance at the start of the coverage.
+        cov: ``d x d`` belief covariance at the start of the coverage.
         q: process noise intensity (m^2/s^3).
         max_steps: coverage steps left in the budget (truncates ``t_cutoff``); negative when the
             budget ends before the coverage starts.
@@ -78,7 +78,8 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
     """
     if max_steps < 0:
         return 0.0, 0.0, 0.0
-    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials_on(mission, cov, q)
+    poly = position_polynomials_on(mission, cov, q)
+    x0, y0, c0 = poly[0], poly[3], poly[6]  # the position covariance now
     speed, diameter, tau = mission.vehicle.speed, mission.sensor.diameter, mission.time_step
     area0 = math.pi * 0.25 * diameter * diameter  # S_cover(k) = area0 + k area1
     area1 = speed * diameter * tau
@@ -87,7 +88,6 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
     area = area0
     det = x0 * y0 - c0 * c0
     cdf_sum = 0.0  # sum_{j<k} P_cdf(j)
-    poly = (x0, x1, x2, y0, y1, y2, c0, c1, c2, x3)
     while k < max_steps:
         next_det = position_det_on(mission, poly, k + 1.0)
         next_area = area + area1
@@ -147,15 +147,15 @@ class CoverageEstimate:
 
 
 def check_state_covariance(covariance: np.ndarray) -> np.ndarray:
-    """A finite, symmetric, positive semi-definite 4x4 covariance whose 2x2 position block is
-    positive definite, as a float array.
+    """A finite, symmetric, positive semi-definite ``d x d`` covariance (``d`` 4 or 6, a state
+    with accelerations) whose 2x2 position block is positive definite, as a float array.
 
     Raises:
         ValueError: naming what is wrong.
     """
     cov = np.asarray(covariance, dtype=float)
-    if cov.shape != (4, 4) or not np.all(np.isfinite(cov)):
-        raise ValueError(f"covariance must be a finite 4x4 matrix, got {cov.tolist()}")
+    if cov.shape not in ((4, 4), (6, 6)) or not np.all(np.isfinite(cov)):
+        raise ValueError(f"covariance must be a finite 4x4 or 6x6 matrix, got {cov.tolist()}")
     scale = max(float(np.max(np.abs(cov))), 1.0)
     if np.max(np.abs(cov - cov.T)) > 1e-9 * scale:
         raise ValueError(f"covariance is not symmetric: {cov.tolist()}")

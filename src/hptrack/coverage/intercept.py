@@ -36,6 +36,7 @@ from hptrack.models.mission import (
     intercept_flight_on,
     mean_position_at_on,
     mission_moves_straight,
+    state_size,
 )
 from hptrack.models.state import position_of, speeds, velocity_of
 
@@ -80,8 +81,9 @@ def plan_intercept(mission: Mission, agent_position: np.ndarray, mean: np.ndarra
     """
     agent = _finite_vector("agent_position", agent_position)
     state = np.asarray(mean, dtype=float)
-    if state.shape != (4,) or not np.all(np.isfinite(state)):
-        raise ValueError(f"mean must be 4 finite numbers [x, y, vx, vy], got {mean!r}")
+    d = state_size(mission)
+    if state.shape != (d,) or not np.all(np.isfinite(state)):
+        raise ValueError(f"mean must be {d} finite numbers (a state), got {mean!r}")
     x, y = position_of(state)
     vx, vy = velocity_of(state)
     if mission_moves_straight(mission):

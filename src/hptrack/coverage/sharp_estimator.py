@@ -190,20 +190,21 @@ def flight_detection_sum(cov, flight_steps, approach_x, approach_y, radius):
 @numba.njit(cache=True, inline="always")
 def _outer_area_ratio(mission, poly, scale, area_ab, perimeter, radius):
     """``h_out``: the parallel body of the loop at ``scale`` over ``pi sqrt(det Sigma^xy)`` at
-    the time of that loop, ``scale^2 / scale_rate`` steps into the coverage (``poly[10]``)."""
-    steps = scale * scale / poly[10]
+    the time of that loop, ``scale^2 / scale_rate`` steps into the coverage (``poly`` is the
+    motion's position terms and ``scale_rate``)."""
+    steps = scale * scale / poly[1]
     area = area_ab * scale * scale + radius * perimeter * scale + math.pi * radius * radius
-    return area / (math.pi * math.sqrt(position_det_on(mission, poly, steps)))
+    return area / (math.pi * math.sqrt(position_det_on(mission, poly[0], steps)))
 
 
 @numba.njit(cache=True, inline="always")
 def _outer_growing(mission, poly, k, area_ab, perimeter, radius):
     """Whether ``h_out`` grows at ``k > 0`` steps: ``2 S_out' det > S_out det'``."""
-    rate = poly[10]
+    rate = poly[1]
     scale = math.sqrt(rate * k)
     area = area_ab * scale * scale + radius * perimeter * scale + math.pi * radius * radius
     area_rate = rate * (area_ab + 0.5 * radius * perimeter / scale)
-    det, det_rate = position_det_rate_on(mission, poly, k)
+    det, det_rate = position_det_rate_on(mission, poly[0], k)
     return 2.0 * area_rate * det > area * det_rate
 
 
@@ -221,9 +222,7 @@ def _outer_peak(mission, poly, cutoff, area_ab, perimeter, radius):
             lo = mid
         else:
             hi = mid
-    return lo, _outer_area_ratio(
-        mission, poly, math.sqrt(poly[10] * lo), area_ab, perimeter, radius
-    )
+    return lo, _outer_area_ratio(mission, poly, math.sqrt(poly[1] * lo), area_ab, perimeter, radius)
 
 
 @numba.njit(cache=True)
@@ -232,13 +231,13 @@ def _found_ratio(
 ):
     """``h_F(k)``: the normalised area found by step ``k`` (module docstring); ``start`` is the
     start footprint's, ``h_out(0)``."""
-    scale = math.sqrt(poly[10] * k)
+    scale = math.sqrt(poly[1] * k)
     total = 0.0
     for i in range(ALPHA_FRACTIONS.shape[0]):
         passed = scale - pitch * 2.0 * math.pi * ALPHA_FRACTIONS[i]
         if passed <= 0.0:
             value = start
-        elif passed * passed / poly[10] >= peak_steps:
+        elif passed * passed / poly[1] >= peak_steps:
             value = peak_ratio
         else:
             value = _outer_area_ratio(mission, poly, passed, area_ab, perimeter, radius)
@@ -285,7 +284,7 @@ def sharp_coverage_outcome(
 
     Args:
         mission: the mission record (time step, agent speed, footprint, ``Q`` form).
-        cov: 4x4 belief covariance at the start of the coverage (the end of the flight).
+        cov: ``d x d`` belief covariance at the start of the coverage (the end of the flight).
         q: process noise intensity (m^2/s^3).
         max_steps: coverage steps left in the budget (truncates ``t_cutoff``); negative when the
             budget ends before the coverage starts.
@@ -301,7 +300,8 @@ def sharp_coverage_outcome(
     """
     if max_steps < 0:
         return 0.0, 0.0, 0.0
-    x0, x1, x2, y0, y1, y2, c0, c1, c2, x3 = position_polynomials_on(mission, cov, q)
+    terms = position_polynomials_on(mission, cov, q)
+    x0, y0, c0 = terms[0], terms[3], terms[6]  # the position covariance now
     speed, tau, diameter = mission.vehicle.speed, mission.time_step, mission.sensor.diameter
     radius = 0.5 * diameter
     tr = 0.5 * (x0 + y0)
@@ -311,14 +311,14 @@ def sharp_coverage_outcome(
     perimeter = ellipse_perimeter(semi_a, semi_b)
     area_ab = math.pi * semi_a * semi_b
     # path length v_a tau k = P s^2 / (4 pi b): s^2 = scale_rate k
-    poly = (x0, x1, x2, y0, y1, y2, c0, c1, c2, x3, 4.0 * math.pi * pitch * speed * tau / perimeter)
+    poly = (terms, 4.0 * math.pi * pitch * speed * tau / perimeter)
     # The paper's t_cutoff (Eq. (8)), step by step with coverage_outcome's arithmetic.
     area1 = speed * diameter * tau  # S_cover(k) = area + k area1
     area = math.pi * radius * radius
     det = x0 * y0 - c0 * c0
     k = 0
     while k < max_steps:
-        next_det = position_det_on(mission, poly, k + 1.0)
+        next_det = position_det_on(mission, terms, k + 1.0)
         next_area = area + area1
         if not ratio_grows(area, det, next_area, next_det):
             break

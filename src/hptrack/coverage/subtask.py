@@ -42,8 +42,9 @@ class CoverageSubtask:
 
     Args:
         agent_position: ``(2,)`` agent position when the sub-task starts, m.
-        mean: ``(4,)`` pursued target's belief mean now (m, m/s).
-        covariance: ``(4, 4)`` its belief covariance now.
+        mean: ``(d,)`` pursued target's belief mean now (m, m/s, m/s^2; ``d`` the motion's
+            state size).
+        covariance: ``(d, d)`` its belief covariance now.
         q: its process noise intensity, m^2/s^3.
         mission: the mission facts (speed, footprint, time step, ``Q`` form).
         remaining_budget: budget left now, s; ``None`` for a coverage that runs to
@@ -75,8 +76,9 @@ class CoverageSubtask:
                 f"target_index {target_index} out of range for {mission.n_targets} targets"
             )
         mean = np.asarray(mean, dtype=float)
-        if mean.shape != (4,) or not np.all(np.isfinite(mean)):
-            raise ValueError(f"mean must be 4 finite numbers [x, y, vx, vy], got {mean!r}")
+        d = mission.motion.state_size
+        if mean.shape != (d,) or not np.all(np.isfinite(mean)):
+            raise ValueError(f"mean must be {d} finite numbers (a state), got {mean!r}")
         if remaining_budget is not None and math.isnan(remaining_budget):
             raise ValueError("remaining_budget is NaN")
         m = mission

@@ -50,6 +50,7 @@ from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.experiments.workers import worker_pool
 from hptrack.interface import InputError, MissionSpec
 from hptrack.jsonout import json_text
+from hptrack.models.belief_motion import extended_prior
 from hptrack.models.sensor import measured_mask, sensor_measures
 from hptrack.models.state import position_of, positions, velocities
 from hptrack.models.truth_motion import ConstantVelocityTruth, advance_truth
@@ -200,8 +201,8 @@ class CoveragePlan:
     """The fixed agent path and estimate of one case and delay.
 
     Attributes:
-        mean: ``(4,)`` belief mean at departure.
-        covariance: ``(4, 4)`` belief covariance at departure.
+        mean: ``(d,)`` belief mean at departure (``d`` the motion's state size).
+        covariance: ``(d, d)`` belief covariance at departure.
         intercept_steps: whole steps of the intercept flight ``n``.
         estimate: the coverage estimate from the covariance at the start of the coverage.
         path: ``(n + t_cutoff + 1, 2)`` agent positions from departure to ``t_cutoff``, m.
@@ -227,8 +228,11 @@ def plan_coverage(
     coverage sub-task (intercept, spiral) to ``t_cutoff`` (or the end of ``budget`` s from
     the start)."""
     agent = np.zeros(2) if agent_position is None else np.asarray(agent_position, dtype=float)
+    prior_mean, prior_cov = extended_prior(
+        mission.motion.part, case.mean[None], case.covariance[None]
+    )
     means, covs = mission.motion.predict(
-        case.mean[None], case.covariance[None], case.q, delay_steps * mission.time_step
+        prior_mean, prior_cov, case.q, delay_steps * mission.time_step
     )
     mean, cov = means[0], covs[0]
     single = replace(mission, process_noise=np.array([case.q]), target_ids=("case",))
@@ -259,7 +263,7 @@ def _advance_block(
     first_spiral,
 ):
     """Advance the ``active`` runs through steps ``first_step ..`` by the ``truth`` motion
-    with unit normal ``noise`` ``(runs, steps, 4)`` and record detections; a run stops at its
+    with unit normal ``noise`` ``(runs, steps, d)`` and record detections; a run stops at its
     first detection on the spiral (step >= ``flight_steps``). ``mission`` is the mission
     record, ``sqrt_q`` ``(1,)``."""
     for a in range(active.shape[0]):
@@ -303,7 +307,7 @@ def first_detections(
     step = 1
     while step < total and active.size:
         block = min(BLOCK_STEPS, total - step)
-        noise = rng.standard_normal((active.size, block, 4))
+        noise = rng.standard_normal((active.size, block, states.shape[1]))
         _advance_block(
             truth,
             mission.record,

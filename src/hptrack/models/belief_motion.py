@@ -79,8 +79,9 @@ class MotionKernels(NamedTuple):
         predict_covariance: ``(motion, tau, cov, q, steps, out)``, ``out = F cov F' + Q``
             (``out`` may be ``cov``).
         position_covariance: ``(motion, tau, cov, q, steps) -> (sxx, sxy, syy)``.
-        position_terms: ``(motion, tau, cov, q) -> poly``, ten numbers from which
-            ``position_det`` evaluates ``det Sigma^xy`` after any number of steps.
+        position_terms: ``(motion, tau, cov, q) -> poly``, numbers (ten for a 4-D state,
+            nineteen for a 6-D one; entries 0, 3, 6 are ``sxx``, ``syy``, ``sxy`` now) from
+            which ``position_det`` evaluates ``det Sigma^xy`` after any number of steps.
         position_det: ``(motion, tau, poly, steps) -> det``, m^4.
         position_det_rate: ``(motion, tau, poly, steps) -> (det, d det / d steps)``.
         step_matrices: ``(motion, tau, q, f, qq)``: one step's ``d x d`` ``F`` and ``Q``.

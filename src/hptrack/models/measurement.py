@@ -68,7 +68,11 @@ def _gain(cov, noise):
 @numba.njit(cache=True)
 def update_covariance(cov, noise, out):
     """Posterior covariance of a position measurement with noise ``R = noise`` (2x2):
-    ``out = P - P H' (H P H' + R)^-1 H P`` (symmetric by construction; ``out`` may be ``cov``)."""
+    ``out = P - P H' (H P H' + R)^-1 H P`` (symmetric by construction; ``out`` may be ``cov``;
+    written out for 4-D states, any other length takes `_update_any`)."""
+    if cov.shape[0] != 4:
+        _update_any(cov[0], cov, cov[0], noise, cov[0], out, False)
+        return
     (g00, g01, g10, g11, g20, g21, g30, g31, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33) = (
         _gain(cov, noise)
     )
@@ -85,10 +89,53 @@ def update_covariance(cov, noise, out):
 
 
 @numba.njit(cache=True)
+def _update_any(mean, cov, z, noise, mean_out, cov_out, with_mean):
+    """The update of `kalman_update` for a state of any length ``d`` (``H = [I 0]``; the
+    written-out 4-D update is `update_covariance`): ``K = P[:, :2] S^-1``, ``P+ = P - K P[:2]``
+    symmetrised, ``m+ = m + K (z - m[:2])``."""
+    d = cov.shape[0]
+    s00 = cov[0, 0] + noise[0, 0]
+    s01 = 0.5 * (cov[0, 1] + cov[1, 0]) + 0.5 * (noise[0, 1] + noise[1, 0])
+    s11 = cov[1, 1] + noise[1, 1]
+    det = s00 * s11 - s01 * s01
+    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+    gain = np.empty((d, 2))
+    for r in range(d):
+        p0 = 0.5 * (cov[r, 0] + cov[0, r])
+        p1 = 0.5 * (cov[r, 1] + cov[1, r])
+        gain[r, 0] = p0 * i00 + p1 * i01
+        gain[r, 1] = p0 * i01 + p1 * i11
+    if with_mean:
+        ex = z[0] - mean[0]
+        ey = z[1] - mean[1]
+        for r in range(d):
+            mean_out[r] = mean[r] + gain[r, 0] * ex + gain[r, 1] * ey
+    cross = np.empty((2, d))  # H P, symmetrised
+    for c in range(d):
+        cross[0, c] = 0.5 * (cov[0, c] + cov[c, 0])
+        cross[1, c] = 0.5 * (cov[1, c] + cov[c, 1])
+    for r in range(d):
+        for c in range(r, d):
+            pr = 0.5 * (cov[r, c] + cov[c, r])
+            v = pr - 0.5 * (
+                gain[r, 0] * cross[0, c]
+                + gain[r, 1] * cross[1, c]
+                + gain[c, 0] * cross[0, r]
+                + gain[c, 1] * cross[1, r]
+            )
+            cov_out[r, c] = v
+            cov_out[c, r] = v
+
+
+@numba.njit(cache=True)
 def kalman_update(mean, cov, z, noise, mean_out, cov_out):
     """Kalman update of one belief with a position measurement ``z`` (2,) of noise ``R``:
     ``mean_out = m + K (z - H m)``, ``cov_out`` as `update_covariance`. The outputs may be
-    the inputs (in place)."""
+    the inputs (in place). States of 6 entries (a motion with accelerations) take the update
+    of any length."""
+    if cov.shape[0] != 4:
+        _update_any(mean, cov, z, noise, mean_out, cov_out, True)
+        return
     g = _gain(cov, noise)
     ex = z[0] - mean[0]
     ey = z[1] - mean[1]
@@ -172,7 +219,7 @@ class PositionMeasurementModel:
     def update(
         self, means: np.ndarray, covariances: np.ndarray, measurements: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Kalman update of stacked beliefs ``(m, 4)``, ``(m, 4, 4)`` with ``z`` ``(m, 2)``."""
+        """Kalman update of stacked beliefs ``(m, d)``, ``(m, d, d)`` with ``z`` ``(m, 2)``."""
         new_means = np.array(means, dtype=float)
         new_covs = np.array(covariances, dtype=float)
         _update_stacked(

@@ -237,8 +237,9 @@ def position_covariance_on(mission, cov, q, steps):
 
 @numba.njit(cache=True, inline="always")
 def position_polynomials_on(mission, cov, q):
-    """The motion's ten position terms of ``cov`` (for constant velocity the polynomials of
-    `hptrack.models.motion.position_polynomials`), read by `position_det_on`."""
+    """The motion's position terms of ``cov``, read by `position_det_on`: a tuple whose entries
+    0, 3 and 6 are ``sxx``, ``syy``, ``sxy`` now (for constant velocity the polynomials of
+    `hptrack.models.motion.position_polynomials`)."""
     return bm.position_terms(mission.motion, mission.time_step, cov, q)
 
 
@@ -333,7 +334,7 @@ def _step_matrices_on(mission, q, f, qq):
 
 class FollowTables(NamedTuple):
     """Every target's `riccati_table` (measured at every step),
-    stacked: ``a``, ``g``, ``h`` ``(n, L, 4, 4)`` and ``length`` ``(n,)`` valid entries."""
+    stacked: ``a``, ``g``, ``h`` ``(n, L, d, d)`` and ``length`` ``(n,)`` valid entries."""
 
     a: np.ndarray
     g: np.ndarray
@@ -346,14 +347,15 @@ def follow_tables(mission: Mission, max_steps: int | None = None) -> FollowTable
     them once per mission; a table holds for any shorter horizon."""
     steps = mission.n_steps if max_steps is None else int(max_steps)
     tables = []
+    d = state_size(mission)
     for q in mission.process_noise:
-        f, qq = np.empty((4, 4)), np.empty((4, 4))
+        f, qq = np.empty((d, d)), np.empty((d, d))
         _step_matrices_on(mission, float(q), f, qq)
         tables.append(riccati_table_of(f, qq, mission.sensor.measurement_noise, steps))
     lengths = np.array([t[3] for t in tables], dtype=np.int64)
     top = int(lengths.max()) if lengths.size else 1
     stacked = [
-        np.stack([t[k][:top] for t in tables]) if tables else np.zeros((0, 1, 4, 4))
+        np.stack([t[k][:top] for t in tables]) if tables else np.zeros((0, 1, d, d))
         for k in range(3)
     ]
     return FollowTables(stacked[0], stacked[1], stacked[2], lengths)

@@ -240,6 +240,9 @@ class ConstantVelocityModel:
     time_step: float = 0.5
     process_noise_form: ProcessNoiseForm = "continuous"
 
+    state_size = 4
+    """The length of its states ``[x, y, vx, vy]``."""
+
     @property
     def c_per_step(self) -> float:
         """Lower-right block of the per-step ``Q`` divided by ``q``."""

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from hptrack.models.linalg import matmul4, solve4
+from hptrack.models.linalg import matmul_square, solve_square
 from hptrack.models.measurement import update_covariance
 from hptrack.models.motion import fill_process_noise, fill_transition
 
@@ -28,7 +28,7 @@ CONVERGED_TOLERANCE = 1e-13
 """Relative size below which the initial covariance no longer affects ``T^j(X)``."""
 
 WORK_SLOTS = 3
-"""4x4 scratch matrices `measured_covariance` needs."""
+"""``d x d`` scratch matrices `measured_covariance` needs."""
 
 
 @numba.njit(cache=True)
@@ -57,69 +57,74 @@ def riccati_table(q, tau, c_per_step, noise, max_steps):
 
 @numba.njit(cache=True)
 def riccati_table_of(f, qq, noise, max_steps):
-    """`riccati_table` for any one-step ``F`` and ``Q`` (4x4; a mission's motion,
-    `hptrack.models.mission.follow_tables`)."""
+    """`riccati_table` for any one-step ``F`` and ``Q`` (a mission's motion,
+    `hptrack.models.mission.follow_tables`); ``d x d`` for a state of ``d`` entries."""
+    d = f.shape[0]
     det = noise[0, 0] * noise[1, 1] - noise[0, 1] * noise[1, 0]
-    s = np.zeros((4, 4))
+    s = np.zeros((d, d))
     s[0, 0] = noise[1, 1] / det
     s[1, 1] = noise[0, 0] / det
     s[0, 1] = s[1, 0] = -0.5 * (noise[0, 1] + noise[1, 0]) / det
     cap = max_steps + 1
-    ta = np.zeros((cap, 4, 4))
-    tg = np.zeros((cap, 4, 4))
-    th = np.zeros((cap, 4, 4))
-    for i in range(4):
+    ta = np.zeros((cap, d, d))
+    tg = np.zeros((cap, d, d))
+    th = np.zeros((cap, d, d))
+    for i in range(d):
         ta[0, i, i] = 1.0
-    m = np.empty((4, 4))
-    rhs = np.empty((4, 8))
-    sol = np.empty((4, 8))
-    ma = np.empty((4, 4))
-    mh = np.empty((4, 4))
-    t1 = np.empty((4, 4))
-    t2 = np.empty((4, 4))
+    m = np.empty((d, d))
+    rhs = np.empty((d, 2 * d))
+    sol = np.empty((d, 2 * d))
+    ma = np.empty((d, d))
+    mh = np.empty((d, d))
+    t1 = np.empty((d, d))
+    t2 = np.empty((d, d))
     length = cap
     for j in range(1, cap):
         a1, g1, h1 = ta[j - 1], tg[j - 1], th[j - 1]
-        matmul4(h1, s, m, False)
-        for r in range(4):
+        matmul_square(h1, s, m, False)
+        for r in range(d):
             m[r, r] += 1.0
-            for c in range(4):
+            for c in range(d):
                 rhs[r, c] = a1[r, c]
-                rhs[r, 4 + c] = h1[r, c]
-        solve4(m, rhs, sol)  # [M^-1 A_j, M^-1 H_j]
-        for r in range(4):
-            for c in range(4):
+                rhs[r, d + c] = h1[r, c]
+        solve_square(m, rhs, sol)  # [M^-1 A_j, M^-1 H_j]
+        for r in range(d):
+            for c in range(d):
                 ma[r, c] = sol[r, c]
-                mh[r, c] = sol[r, 4 + c]
-        matmul4(f, ma, ta[j], False)
-        matmul4(s, ma, t1, False)
-        for r in range(4):  # G_{j+1} = G_j + A_j' (S M^-1 A_j), symmetrised
-            for c in range(4):
+                mh[r, c] = sol[r, d + c]
+        matmul_square(f, ma, ta[j], False)
+        matmul_square(s, ma, t1, False)
+        for r in range(d):  # G_{j+1} = G_j + A_j' (S M^-1 A_j), symmetrised
+            for c in range(d):
                 acc = 0.0
-                for k in range(4):
+                for k in range(d):
                     acc += a1[k, r] * t1[k, c]
                 t2[r, c] = acc
-        for r in range(4):
-            for c in range(4):
+        for r in range(d):
+            for c in range(d):
                 tg[j, r, c] = g1[r, c] + 0.5 * (t2[r, c] + t2[c, r])
-        matmul4(f, mh, t1, False)
-        matmul4(t1, f, t2, True)
-        for r in range(4):
-            for c in range(4):
+        matmul_square(f, mh, t1, False)
+        matmul_square(t1, f, t2, True)
+        for r in range(d):
+            for c in range(d):
                 th[j, r, c] = qq[r, c] + 0.5 * (t2[r, c] + t2[c, r])
-        # A G^-1 A' bounds what the initial covariance still adds; a motion whose velocity
-        # never reaches the position (a random walk) leaves G singular: no bound, no stop.
-        if j >= 2 and tg[j, 2, 2] > 0.0 and tg[j, 3, 3] > 0.0:
-            for r in range(4):
-                for c in range(4):
+        # A G^-1 A' bounds what the initial covariance still adds (G is invertible once every
+        # derivative has reached the position); a motion whose velocity never reaches the
+        # position (a random walk) leaves G singular: no bound, no stop.
+        invertible = j >= d // 2  # as many measured steps as the state has derivatives
+        for i in range(2, d):
+            invertible = invertible and tg[j, i, i] > 0.0
+        if invertible:
+            for r in range(d):
+                for c in range(d):
                     m[r, c] = tg[j, r, c]
                     t2[r, c] = ta[j, c, r]
-            solve4(m, t2, t1)  # G^-1 A'
-            matmul4(ta[j], t1, t2, False)
+            solve_square(m, t2, t1)  # G^-1 A'
+            matmul_square(ta[j], t1, t2, False)
             bound = 0.0
             scale = 0.0
-            for r in range(4):
-                for c in range(4):
+            for r in range(d):
+                for c in range(d):
                     bound = max(bound, abs(t2[r, c]))
                     scale = max(scale, abs(th[j, r, c]))
             if bound <= CONVERGED_TOLERANCE * scale:
@@ -134,21 +139,22 @@ def measured_covariance(maps_a, maps_g, maps_h, length, j, predicted, noise, out
     covariance ``predicted`` to the first of them: ``update(T^j(predicted))``.
 
     ``maps_*`` and ``length`` are one target's `riccati_table`; ``j`` beyond the table is
-    clamped (the map has converged). ``work`` is ``(>= 3, 4, 4)`` scratch; ``out`` must not alias
+    clamped (the map has converged). ``work`` is ``(>= 3, d, d)`` scratch; ``out`` must not alias
     ``predicted``.
     """
+    d = predicted.shape[0]
     k = min(j, length - 1)
     a, g, h = maps_a[k], maps_g[k], maps_h[k]
     m, w, aw = work[0], work[1], work[2]
-    matmul4(predicted, g, m, True)  # m = x g' = (I + g x)' - I, as g and x are symmetric
-    for r in range(4):
+    matmul_square(predicted, g, m, True)  # m = x g' = (I + g x)' - I, as g and x are symmetric
+    for r in range(d):
         m[r, r] += 1.0
-        for c in range(4):
+        for c in range(d):
             aw[r, c] = predicted[r, c]
-    solve4(m, aw, w)  # w = (I + g x)'^-1 x = (x (I + g x)^-1)'
-    matmul4(a, w, aw, True)  # a x (I + g x)^-1
-    matmul4(aw, a, m, True)
-    for r in range(4):
-        for c in range(4):
+    solve_square(m, aw, w)  # w = (I + g x)'^-1 x = (x (I + g x)^-1)'
+    matmul_square(a, w, aw, True)  # a x (I + g x)^-1
+    matmul_square(aw, a, m, True)
+    for r in range(d):
+        for c in range(d):
             out[r, c] = h[r, c] + 0.5 * (m[r, c] + m[c, r])
     update_covariance(out, noise, out)

@@ -89,6 +89,8 @@ from hptrack.models.mission import (
     position_covariance_on,
     predict_covariance_on,
     reachable_before_budget,
+    state_size,
+    state_size_on,
     steps_left,
 )
 from hptrack.models.riccati import measured_covariance
@@ -160,7 +162,7 @@ class SubtaskEnv(NamedTuple):
     Attributes:
         mission: the mission record.
         follow: the targets' Riccati tables (measured at every step).
-        means: ``(n, 4)`` belief means at the root, m and m/s.
+        means: ``(n, d)`` belief means at the root, m and m/s (m/s^2).
         n_steps: ``N``, the steps left in the budget at the root.
         estimator: the outcome estimator, a registered instance
             (`hptrack.planning.subtask_estimators`).
@@ -191,8 +193,9 @@ class PlanningProblem:
     Attributes:
         mission: the mission record (`hptrack.interface.MissionSpec.record`).
         agent_position: ``(2,)`` agent position, m.
-        means: ``(n, 4)`` belief means ``[x, y, vx, vy]``, m and m/s.
-        covariances: ``(n, 4, 4)`` belief covariances.
+        means: ``(n, d)`` belief means ``[x, y, vx, vy]`` (with ``[ax, ay]`` when ``d = 6``,
+            the mission's `hptrack.models.mission.state_size`), m, m/s, m/s^2.
+        covariances: ``(n, d, d)`` belief covariances.
         remaining_budget: time left, s (the search plans `steps_left` steps).
         available: ``(n,)`` targets still in the action list (not missed); default all.
         last_found: the target found by the sub-task that just ended, if any (choosing it again
@@ -216,7 +219,8 @@ class PlanningProblem:
 
     def __post_init__(self) -> None:
         n = self.mission.process_noise.shape[0]
-        checks = {"agent_position": (2,), "means": (n, 4), "covariances": (n, 4, 4)}
+        d = state_size(self.mission)
+        checks = {"agent_position": (2,), "means": (n, d), "covariances": (n, d, d)}
         arrays = {name: _frozen(getattr(self, name), name) for name in checks}
         if not 1 <= n <= MAX_TARGETS:
             raise ValueError(f"the mission must have 1 to {MAX_TARGETS} targets, got {n}")
@@ -389,9 +393,10 @@ def _frozen(value, name: str) -> np.ndarray:
     return array
 
 
-def new_work() -> np.ndarray:
-    """Scratch space for the kernels' 4x4 temporaries."""
-    return np.empty((WORK_SLOTS, 4, 4))
+def new_work(state_size: int = 4) -> np.ndarray:
+    """Scratch space for the kernels' ``d x d`` temporaries (``d = state_size``, the
+    mission's `hptrack.models.mission.state_size`)."""
+    return np.empty((WORK_SLOTS, state_size, state_size))
 
 
 def new_memo(n_targets: int, n_steps: int) -> Memo:
@@ -413,10 +418,11 @@ def copy_state(env, src, dst):
         di[i] = si[i]
     df[0] = sf[0]
     df[1] = sf[1]
+    d = state_size_on(env.mission)
     for a in range(base_cov.shape[0]):
         dstep[a] = base_step[a]
-        for i in range(4):
-            for j in range(4):
+        for i in range(d):
+            for j in range(d):
                 dcov[a, i, j] = base_cov[a, i, j]
 
 
@@ -495,7 +501,7 @@ def expand_action(env, state, a, work):
     Returns ``(p_find, find_steps, miss_steps)``: the probability of the find outcome and the
     sub-task's duration for each outcome, in steps. Following (``a`` was just found) has
     ``p_find = 1`` and lasts to the end of the budget; the dwell has ``p_find = 1`` and lasts
-    ``dwell_steps``. ``work`` is ``(>= 1, 4, 4)`` scratch.
+    ``dwell_steps``. ``work`` is ``(>= 1, d, d)`` scratch.
     """
     si, sf = state[0], state[1]
     t = si[I_STEP]
@@ -528,7 +534,7 @@ def apply_outcome(env, state, a, outcome, payload, work):
     Found: ``a``'s covariance becomes the posterior of a measurement at the end step (or, when
     following or dwelling, the covariance measured at every step to the end). Missed: ``a``
     leaves the action list. The agent ends at the pursued target's estimated position; other
-    beliefs are implicit (they grow from their base). ``work`` is ``(>= 5, 4, 4)`` scratch.
+    beliefs are implicit (they grow from their base). ``work`` is ``(>= 5, d, d)`` scratch.
     """
     mission = env.mission
     si, sf, base_cov, base_step = state
@@ -554,8 +560,9 @@ def apply_outcome(env, state, a, outcome, payload, work):
                 prior,
                 work,
             )
-            for i in range(4):
-                for j in range(4):
+            d = state_size_on(mission)
+            for i in range(d):
+                for j in range(d):
                     base_cov[a, i, j] = prior[i, j]
         else:
             predict_covariance_on(mission, base_cov[a], q, end - base_step[a], prior)
@@ -579,7 +586,7 @@ def credit_passes(env, state, a, end_x, end_y, end, prior):
     """Measure every target other than ``a`` that the flight from the agent's position (at the
     state's step) to ``(end_x, end_y)`` (at step ``end``) passes over with probability at least
     `PASS_CREDIT`, at the step of the closest approach to its belief mean, and put it back
-    in the action list (``passes="credit"``). ``prior`` is 4x4 scratch."""
+    in the action list (``passes="credit"``). ``prior`` is ``d x d`` scratch."""
     mission = env.mission
     si, sf, base_cov, base_step = state
     t = si[I_STEP]

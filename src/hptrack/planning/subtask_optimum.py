@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from hptrack.models.mission import state_size
 from hptrack.planning.subtask_mdp import (
     FIND,
     MISS,
@@ -62,7 +63,7 @@ class _Expectimax:
 
     def __init__(self, env, max_nodes: int) -> None:
         self.env, self.max_nodes, self.nodes = env, max_nodes, 0
-        self.work = new_work()
+        self.work = new_work(state_size(env.mission))
         self.n_actions = env.means.shape[0] + env.stay_steps.shape[0]
 
     def solve(self, state, actions=None) -> tuple[dict[int, float], list[tuple[int, float, int]]]:

@@ -12,7 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 import numpy as np
 
-from hptrack.models.mission import mission_record
+from hptrack.models.mission import mission_record, state_size
 from hptrack.planning import subtask_mdp
 from hptrack.planning.search import (
     PAPER_SEARCH,
@@ -90,7 +90,7 @@ def search(
             root,
             subtask_mdp.n_actions(problem.n_targets, subtask),
             problem.n_steps + 2,
-            subtask_mdp.new_work(),
+            subtask_mdp.new_work(state_size(problem.mission)),
             options,
             iterations=iterations,
             time_limit=time_limit,

@@ -38,8 +38,8 @@ class BeliefTimeline:
     """Beliefs over ``n`` targets with per-target measurement histories (module docstring).
 
     Args:
-        means: ``(n, 4)`` prior means at time ``start_s``.
-        covariances: ``(n, 4, 4)`` prior covariances.
+        means: ``(n, d)`` prior means at time ``start_s`` (``d`` the motion's state size).
+        covariances: ``(n, d, d)`` prior covariances.
         process_noise: ``(n,)`` ``q``, m^2/s^3.
         motion: the motion model.
         tolerance_s: how far behind the newest measurement a measurement may be, s.
@@ -93,8 +93,8 @@ class BeliefTimeline:
             int(seq),
             np.array(z, dtype=float),
             np.ascontiguousarray(noise, dtype=float),
-            np.empty(4),
-            np.empty((4, 4)),
+            np.empty(self._motion.state_size),
+            np.empty((self._motion.state_size,) * 2),
         )
         self._keys[i].insert(pos, key)
         self._entries[i].insert(pos, entry)
@@ -125,12 +125,13 @@ class BeliefTimeline:
                 self._base_t[i], self._base_mean[i], self._base_cov[i] = e.t, e.mean, e.cov
 
     def at(self, time_s: float) -> tuple[np.ndarray, np.ndarray]:
-        """Beliefs ``(n, 4)``, ``(n, 4, 4)`` at ``time_s`` from every measurement taken at or
+        """Beliefs ``(n, d)``, ``(n, d, d)`` at ``time_s`` from every measurement taken at or
         before it (a target whose base is newer is given at its base time)."""
         n = len(self._entries)
         src_t = np.empty(n)
-        src_mean = np.empty((n, 4))
-        src_cov = np.empty((n, 4, 4))
+        d = self._motion.state_size
+        src_mean = np.empty((n, d))
+        src_cov = np.empty((n, d, d))
         for i in range(n):
             pos = bisect.bisect_right(self._keys[i], (float(time_s), np.iinfo(np.int64).max))
             src_t[i], src_mean[i], src_cov[i] = self._state_before(i, pos)

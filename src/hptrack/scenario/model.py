@@ -15,7 +15,7 @@ the 10,000 km area for the whole budget. Errors name the field and the value.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Self
+from typing import Annotated, Any, ClassVar, Literal, Self
 
 import numpy as np
 from pydantic import (
@@ -32,9 +32,12 @@ from pydantic import (
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.belief_motion import (
     BeliefMotion,
+    ConstantAccelerationMotion,
     ConstantVelocity,
     OrnsteinUhlenbeckMotion,
     RandomWalkMotion,
+    SingerMotion,
+    extended_prior,
 )
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import PositionMeasurementModel
@@ -42,10 +45,12 @@ from hptrack.models.mission import MAX_TARGETS, steps_left
 from hptrack.models.motion import ProcessNoiseForm
 from hptrack.models.state import positions, speeds, velocities
 from hptrack.models.truth_motion import (
+    ConstantAccelerationTruth,
     ConstantVelocityTruth,
     CoordinatedTurn,
     OrnsteinUhlenbeck,
     RandomWalk,
+    SingerTruth,
 )
 
 MAX_STEPS = 1_000_000
@@ -238,6 +243,7 @@ class ConstantVelocitySpec(BaseModel):
     ``process_noise_form``."""
 
     model_config = _STRICT
+    state_size: ClassVar[int] = 4
 
     model: Literal["constant_velocity"] = "constant_velocity"
 
@@ -254,6 +260,7 @@ class CoordinatedTurnSpec(BaseModel):
     ``N(turn_rate, turn_rate_sd^2)``; the constant-velocity noise is kept."""
 
     model_config = _STRICT
+    state_size: ClassVar[int] = 4
 
     model: Literal["coordinated_turn"]
     turn_rate: Annotated[Real, Field(ge=-1.0, le=1.0)] = 0.02
@@ -270,6 +277,7 @@ class RandomWalkSpec(BaseModel):
     """Targets whose position diffuses by ``diffusion`` m^2/s per axis, with no velocity."""
 
     model_config = _STRICT
+    state_size: ClassVar[int] = 4
 
     model: Literal["random_walk"]
     diffusion: Annotated[Real, Field(gt=0.0, le=1e6)] = 5.0
@@ -286,6 +294,7 @@ class OrnsteinUhlenbeckSpec(BaseModel):
     most 1000 s) while driven by their ``process_noise``."""
 
     model_config = _STRICT
+    state_size: ClassVar[int] = 4
 
     model: Literal["ornstein_uhlenbeck"]
     damping: Annotated[Real, Field(ge=1e-3, le=10.0)] = 0.01
@@ -297,8 +306,52 @@ class OrnsteinUhlenbeckSpec(BaseModel):
         return OrnsteinUhlenbeckMotion(float(self.damping))
 
 
+class SingerSpec(BaseModel):
+    """Targets whose acceleration decays at ``damping`` 1/s (a manoeuvre time of ``1 /
+    damping`` s) while driven so that its stationary spread is ``acceleration_std`` m/s^2 per
+    axis (Singer's model); the state gains ``[ax, ay]``, drawn at the start from
+    ``N(0, acceleration_std^2)``. The targets' ``process_noise`` is not used."""
+
+    model_config = _STRICT
+    state_size: ClassVar[int] = 6
+
+    model: Literal["singer"]
+    damping: Annotated[Real, Field(ge=1e-4, le=10.0)] = 0.02
+    acceleration_std: Annotated[Real, Field(gt=0.0, le=10.0)] = 0.02
+
+    def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
+        return SingerTruth(float(self.damping), float(self.acceleration_std))
+
+    def belief(self, time_step: float, process_noise_form: ProcessNoiseForm) -> tuple:
+        return SingerMotion(float(self.damping), float(self.acceleration_std))
+
+
+class ConstantAccelerationSpec(BaseModel):
+    """Targets that keep their acceleration, changed by a white jerk of ``jerk_intensity``
+    m^2/s^5 per axis; the state gains ``[ax, ay]``, drawn at the start from
+    ``N(0, acceleration_std^2)``. The targets' ``process_noise`` is not used."""
+
+    model_config = _STRICT
+    state_size: ClassVar[int] = 6
+
+    model: Literal["constant_acceleration"]
+    jerk_intensity: Annotated[Real, Field(ge=0.0, le=1.0)] = 1e-6
+    acceleration_std: Annotated[Real, Field(gt=0.0, le=10.0)] = 0.01
+
+    def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
+        return ConstantAccelerationTruth(float(self.jerk_intensity), float(self.acceleration_std))
+
+    def belief(self, time_step: float, process_noise_form: ProcessNoiseForm) -> tuple:
+        return ConstantAccelerationMotion(float(self.jerk_intensity), float(self.acceleration_std))
+
+
 TruthMotionSpec = Annotated[
-    ConstantVelocitySpec | CoordinatedTurnSpec | RandomWalkSpec | OrnsteinUhlenbeckSpec,
+    ConstantVelocitySpec
+    | CoordinatedTurnSpec
+    | RandomWalkSpec
+    | OrnsteinUhlenbeckSpec
+    | SingerSpec
+    | ConstantAccelerationSpec,
     Field(discriminator="model"),
 ]
 """How the simulated targets truly move (`hptrack.models.truth_motion`), by ``model``; each
@@ -306,7 +359,11 @@ spec's ``build(n_targets, rng)`` gives the part it stands for (random parameters
 ``rng``)."""
 
 MotionSpec = Annotated[
-    ConstantVelocitySpec | RandomWalkSpec | OrnsteinUhlenbeckSpec,
+    ConstantVelocitySpec
+    | RandomWalkSpec
+    | OrnsteinUhlenbeckSpec
+    | SingerSpec
+    | ConstantAccelerationSpec,
     Field(discriminator="model"),
 ]
 """How the beliefs assume the targets move (`hptrack.models.belief_motion`), by ``model``, with
@@ -493,19 +550,31 @@ class Scenario(BaseModel):
         return steps_left(self.time_step, self.budget)
 
     def means(self) -> np.ndarray:
-        """Prior means ``(n, 4)``."""
-        return np.array([t.mean for t in self.targets], dtype=float)
+        """Prior means ``(n, d)``: the file's ``[x, y, vx, vy]``, with zero accelerations
+        under a motion that has them (``d = 6``)."""
+        return self._priors()[0]
 
     def covariances(self) -> np.ndarray:
-        """Prior covariances ``(n, 4, 4)``."""
-        return np.array([t.covariance for t in self.targets], dtype=float)
+        """Prior covariances ``(n, d, d)``: the file's, with the motion's
+        ``acceleration_std^2`` block under a motion that has accelerations."""
+        return self._priors()[1]
+
+    def _priors(self) -> tuple[np.ndarray, np.ndarray]:
+        means = np.array([t.mean for t in self.targets], dtype=float).reshape(-1, 4)
+        covs = np.array([t.covariance for t in self.targets], dtype=float).reshape(-1, 4, 4)
+        return extended_prior(self.motion_part(), means, covs)
+
+    @property
+    def truth_spec(self) -> TruthMotionSpec:
+        """How the simulated targets truly move: ``truth_motion``, else ``motion``'s model."""
+        return self.truth_motion or self.motion_spec
 
     def process_noise(self) -> np.ndarray:
         """Noise intensities ``q`` ``(n,)``."""
         return np.array([t.process_noise for t in self.targets], dtype=float)
 
     @property
-    def motion_spec(self) -> ConstantVelocitySpec | RandomWalkSpec | OrnsteinUhlenbeckSpec:
+    def motion_spec(self) -> MotionSpec:
         """``motion``, constant velocity when not given."""
         return self.motion or ConstantVelocitySpec()
 
@@ -521,8 +590,7 @@ class Scenario(BaseModel):
         """The simulator's truth motion (`hptrack.models.truth_motion`; by default the model of
         ``motion``); a coordinated turn with ``turn_rate_sd > 0`` draws its rates from ``rng``
         (nothing is drawn otherwise)."""
-        spec = self.truth_motion or self.motion_spec
-        return spec.build(len(self.targets), rng)
+        return self.truth_spec.build(len(self.targets), rng)
 
     def sensor_model(self) -> PositionMeasurementModel:
         sensor = self.sensor_spec()

@@ -45,10 +45,11 @@ def run_episode(
     stored = sorted(set(range(0, n_steps + 1, belief_stride)) | {n_steps})
     store_at = {k: j for j, k in enumerate(stored)}
     agent_paths = np.empty((n_steps + 1, mission.n_vehicles, 2))
-    true_states = np.empty((n_steps + 1, n, 4))
+    d_true, d = world.truth.shape[1], world.means.shape[1]
+    true_states = np.empty((n_steps + 1, n, d_true))
     detections = np.zeros((n_steps + 1, n), dtype=bool)
-    belief_means = np.empty((len(stored), n, 4))
-    belief_covs = np.empty((len(stored), n, 4, 4))
+    belief_means = np.empty((len(stored), n, d))
+    belief_covs = np.empty((len(stored), n, d, d))
 
     def store(k: int) -> None:
         agent_paths[k], true_states[k], detections[k] = world.agents, world.truth, world.seen
@@ -86,9 +87,10 @@ def run_episode(
     )
 
 
-def record_bytes(n_targets: int, n_steps: int, belief_stride: int = 1) -> int:
+def record_bytes(n_targets: int, n_steps: int, belief_stride: int = 1, state_size: int = 4) -> int:
     """Memory an `EpisodeRecord` of a mission needs, bytes (to refuse one that does not
-    fit before it starts)."""
-    per_step = 8 * (2 + 4 * n_targets) + n_targets
+    fit before it starts; ``state_size`` the larger of the true and belief states')."""
+    d = state_size
+    per_step = 8 * (2 + d * n_targets) + n_targets
     stored = n_steps // belief_stride + 2
-    return (n_steps + 1) * per_step + stored * 8 * 20 * n_targets
+    return (n_steps + 1) * per_step + stored * 8 * (d + d * d) * n_targets

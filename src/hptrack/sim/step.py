@@ -10,7 +10,8 @@ Sensing also happens at step 0. The kernels call the model kernels of `hptrack.m
 
 Randomness is the simulator's: ``SeedSequence(seed).spawn(4)`` gives the streams of the true
 initial states, the target motion, the measurement noise and the planner. The motion stream gives
-``n x 4`` unit normals per step and the measurement stream ``2`` per measured target, in target
+``n x d`` unit normals per step (``d`` the true state's size, 4 unless the truth motion has
+accelerations) and the measurement stream ``2`` per measured target, in target
 order. A Generator's normals do not depend on how the draws are split, so `World` draws
 them in blocks (`NormalBlock`) and the kernels consume them in the simulator's order: the
 same seed gives the same mission as `hptrack.sim.episode.run_episode`.
@@ -23,9 +24,9 @@ import numpy as np
 
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.beliefs import logdet_xy
-from hptrack.models.mission import mean_state_on, predict_covariance_on
+from hptrack.models.mission import predict_covariance_on, predict_mean_on
 from hptrack.models.sensor import sensor_measures, sensor_missed, sensor_update
-from hptrack.models.state import position_of, set_position, set_velocity
+from hptrack.models.state import position_of
 from hptrack.models.truth_motion import advance_truth
 from hptrack.models.vehicle import vehicle_move
 from hptrack.scenario.model import Scenario
@@ -35,13 +36,21 @@ BLOCK_STEPS = 256
 
 
 def initial_true_states(scenario: Scenario, rng: np.random.Generator) -> np.ndarray:
-    """True initial states ``(n, 4)``: given ones, or draws from each target's prior."""
-    states = np.empty((len(scenario.targets), 4))
+    """True initial states ``(n, d)``: given ones, or draws from each target's prior; a truth
+    motion with accelerations (``d = 6``) then draws every target's ``[ax, ay]`` from
+    ``N(0, acceleration_std^2)`` per axis (so positions and velocities do not depend on it)."""
+    spec = scenario.truth_spec
+    d = spec.state_size
+    states = np.empty((len(scenario.targets), d))
     for i, target in enumerate(scenario.targets):
         if target.truth is not None:
-            states[i] = target.truth
+            states[i, :4] = target.truth
         else:
-            states[i] = rng.multivariate_normal(target.mean, target.covariance, method="cholesky")
+            states[i, :4] = rng.multivariate_normal(
+                target.mean, target.covariance, method="cholesky"
+            )
+    if d > 4:
+        states[:, 4:] = spec.acceleration_std * rng.standard_normal((len(scenario.targets), d - 4))
     return states
 
 
@@ -92,7 +101,7 @@ def world_step(
     out,
 ):
     """One simulator step in place (module docstring): move by the mission's vehicle, true
-    motion by ``truth_motion`` with the unit normals ``z_motion`` ``(n, 4)``, predict one step,
+    motion by ``truth_motion`` with the unit normals ``z_motion`` ``(n, d)``, predict one step,
     sense by the mission's sensor (``factor``: the Cholesky factor of ``R``; ``out``: `sense`'s
     ``seen``, ``logdets`` and ``z``). Returns the new ``e_pos`` and ``U``."""
     vehicle_move(mission.vehicle, agent, waypoint)
@@ -102,9 +111,7 @@ def world_step(
     steps = tau / tau
     elapsed = steps * tau
     for i in range(truth.shape[0]):
-        x, y, vx, vy = mean_state_on(mission, means[i], elapsed)
-        set_position(means[i], x, y)
-        set_velocity(means[i], vx, vy)
+        predict_mean_on(mission, means[i], elapsed, means[i])
         predict_covariance_on(mission, covs[i], q[i], steps, covs[i])
     seen, logdets, z = out
     return sense(mission.sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z)
@@ -143,10 +150,10 @@ class World:
         step_index: current step ``k``.
         agents: ``(m, 2)`` the vehicles' positions, m (``m = 1``: the scenario's agent).
         agent: ``(2,)`` the first vehicle's position, m (a view of ``agents``).
-        truth: ``(n, 4)`` true target states.
+        truth: ``(n, d)`` true target states (``d`` the truth motion's state size).
         truth_motion: how they move (`hptrack.models.truth_motion`; random parameters such
             as turn rates drawn after the initial states, from the same stream).
-        means, covariances: ``(n, 4)``, ``(n, 4, 4)`` beliefs.
+        means, covariances: ``(n, d)``, ``(n, d, d)`` beliefs (``d`` the beliefs' motion's).
         seen: ``(n,)`` which targets were measured at this step.
         logdets: ``(n,)`` per-target ``log det Sigma^xy``.
         uncertainty: ``U = sum(logdets)``.
@@ -173,7 +180,10 @@ class World:
         self.q = np.ascontiguousarray(mission.process_noise, dtype=float)
         self._sqrt_q = np.sqrt(self.q)
         self._factor = np.linalg.cholesky(np.array(mission.measurement_noise, dtype=float))
-        self._motion = NormalBlock(np.random.default_rng(motion_seq), BLOCK_STEPS * n * 4)
+        self._truth_size = self.truth.shape[1]
+        self._motion = NormalBlock(
+            np.random.default_rng(motion_seq), BLOCK_STEPS * n * self._truth_size
+        )
         self._sensor = NormalBlock(np.random.default_rng(sensor_seq), BLOCK_STEPS * n * 2)
         self._waypoint = np.empty(2)
         self._z = np.empty(2)
@@ -229,10 +239,11 @@ class World:
             raise RuntimeError("the mission's budget is spent; start a new World")
         n = self.n_targets
         motion, sensor = self._motion, self._sensor
-        motion.ensure(4 * n)
+        d = self._truth_size
+        motion.ensure(d * n)
         sensor.ensure(2 * n)
-        z = motion.values[motion.pos : motion.pos + 4 * n].reshape(n, 4)
-        motion.pos += 4 * n
+        z = motion.values[motion.pos : motion.pos + d * n].reshape(n, d)
+        motion.pos += d * n
         wp = self._waypoint
         wp[0] = waypoint_x
         wp[1] = waypoint_y
