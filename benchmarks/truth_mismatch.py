@@ -33,15 +33,15 @@ TRUTHS: dict[str, dict | None] = {
     "turn_random_0.02": {"model": "coordinated_turn", "turn_rate": 0.0, "turn_rate_sd": 0.02},
     "random_walk_5": {"model": "random_walk", "diffusion": 5.0},
     "ou_0.01": {"model": "ornstein_uhlenbeck", "damping": 0.01},
-    "singer_0.02": {"model": "singer", "damping": 0.02, "acceleration_std": 0.02},
-    "constant_acceleration": {
+    "singer_0.002": {"model": "singer", "damping": 0.02, "acceleration_std": 0.002},
+    "ca_0.001": {
         "model": "constant_acceleration",
-        "jerk_intensity": 1e-6,
-        "acceleration_std": 0.01,
+        "jerk_intensity": 1e-8,
+        "acceleration_std": 0.001,
     },
 }
 """The truth motions flown, by the name the table gives them."""
-TOLD = ("random_walk_5", "ou_0.01", "singer_0.02", "constant_acceleration")
+TOLD = ("random_walk_5", "ou_0.01", "singer_0.002", "ca_0.001")
 """The truths a belief motion can hold (`hptrack.models.belief_motion`)."""
 PLANNERS = ("mcts", "greedy", "clairvoyant", "mcts_told")
 """The planners flown (``mcts_told``: ``mcts`` with the true model, on `TOLD` only)."""

@@ -65,7 +65,9 @@ def benchmark(
         str,
         typer.Option(
             help="The targets' motion, for beliefs and truth: constant_velocity (the paper's), "
-            "random_walk:D (D m^2/s) or ornstein_uhlenbeck:K (K 1/s)."
+            "random_walk:D (D m^2/s), ornstein_uhlenbeck:K (K 1/s), singer:ALPHA:SIGMA (1/s, "
+            "m/s^2) or constant_acceleration:J:SIGMA (m^2/s^5, m/s^2); values left out take "
+            "the model's defaults."
         ),
     ] = "constant_velocity",
     iterations: Annotated[

@@ -265,13 +265,13 @@ def validate_coverage(
     acceleration_std: Annotated[
         float | None,
         typer.Option(
-            help="singer: the acceleration's stationary spread [0.02]; constant_acceleration: "
-            "its prior spread [0.01], m/s^2 per axis."
+            help="singer: the acceleration's stationary spread [0.002]; constant_acceleration: "
+            "its prior spread [0.001], m/s^2 per axis."
         ),
     ] = None,
     jerk_intensity: Annotated[
         float | None,
-        typer.Option(help="constant_acceleration: the white jerk's intensity, m^2/s^5 [1e-6]."),
+        typer.Option(help="constant_acceleration: the white jerk's intensity, m^2/s^5 [1e-8]."),
     ] = None,
     budget: Annotated[
         float | None,

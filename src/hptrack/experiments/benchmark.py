@@ -86,13 +86,20 @@ class BenchmarkConfig:
         ]
 
 
-MOTION_PARAMETERS = {"random_walk": "diffusion", "ornstein_uhlenbeck": "damping"}
-"""The one parameter of each belief motion a benchmark's ``motion`` label names."""
+MOTION_PARAMETERS = {
+    "random_walk": ("diffusion",),
+    "ornstein_uhlenbeck": ("damping",),
+    "singer": ("damping", "acceleration_std"),
+    "constant_acceleration": ("jerk_intensity", "acceleration_std"),
+}
+"""The parameters of each belief motion a benchmark's ``motion`` label names, in order."""
 
 
 def motion_label(label: str) -> dict | None:
-    """The scenario ``motion:`` block of a label ``MODEL:VALUE`` (``random_walk:5``: diffusion
-    5 m^2/s; ``ornstein_uhlenbeck:0.01``: damping 0.01 1/s); ``None`` for ``""`` or
+    """The scenario ``motion:`` block of a label ``MODEL:VALUE[:VALUE]`` (``random_walk:5``:
+    diffusion 5 m^2/s; ``ornstein_uhlenbeck:0.01``: damping 0.01 1/s; ``singer:0.02:0.05``:
+    damping 0.02 1/s, acceleration_std 0.05 m/s^2; ``constant_acceleration:1e-6``: jerk
+    intensity 1e-6 m^2/s^5; values left out take the model's defaults); ``None`` for ``""`` or
     ``constant_velocity``.
 
     Raises:
@@ -100,16 +107,23 @@ def motion_label(label: str) -> dict | None:
     """
     if label in ("", "constant_velocity"):
         return None
-    model, _, value = label.partition(":")
+    model, *values = label.split(":")
     if model not in MOTION_PARAMETERS:
         raise InputError(
             f"--motion {label!r}: the model is one of constant_velocity, "
-            f"{', '.join(f'{m}:VALUE' for m in MOTION_PARAMETERS)}"
+            f"{', '.join(m + ':VALUE' * len(p) for m, p in MOTION_PARAMETERS.items())}"
+        )
+    fields = MOTION_PARAMETERS[model]
+    if len(values) > len(fields):
+        raise InputError(
+            f"--motion {label!r}: {model} takes at most {len(fields)} values ({', '.join(fields)})"
         )
     block: dict = {"model": model}
-    if value:
+    for field, value in zip(fields, values, strict=False):
+        if not value:
+            continue
         try:
-            block[MOTION_PARAMETERS[model]] = float(value)
+            block[field] = float(value)
         except ValueError:
             raise InputError(f"--motion {label!r}: {value!r} is not a number") from None
     return block

@@ -317,7 +317,7 @@ class SingerSpec(BaseModel):
 
     model: Literal["singer"]
     damping: Annotated[Real, Field(ge=1e-4, le=10.0)] = 0.02
-    acceleration_std: Annotated[Real, Field(gt=0.0, le=10.0)] = 0.02
+    acceleration_std: Annotated[Real, Field(gt=0.0, le=10.0)] = 0.002
 
     def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
         return SingerTruth(float(self.damping), float(self.acceleration_std))
@@ -335,8 +335,8 @@ class ConstantAccelerationSpec(BaseModel):
     state_size: ClassVar[int] = 6
 
     model: Literal["constant_acceleration"]
-    jerk_intensity: Annotated[Real, Field(ge=0.0, le=1.0)] = 1e-6
-    acceleration_std: Annotated[Real, Field(gt=0.0, le=10.0)] = 0.01
+    jerk_intensity: Annotated[Real, Field(ge=0.0, le=1.0)] = 1e-8
+    acceleration_std: Annotated[Real, Field(gt=0.0, le=10.0)] = 0.001
 
     def build(self, n_targets: int, rng: np.random.Generator) -> tuple:
         return ConstantAccelerationTruth(float(self.jerk_intensity), float(self.acceleration_std))
