@@ -246,3 +246,37 @@ def test_the_wall_time_leaves_out_the_warm_up_and_the_result_is_the_same(monkeyp
     alone = run_episode(scenario_for(first), benchmark.planner_for(first))
     assert rows[0].uncertainty == rows[2].uncertainty == alone.uncertainty
     assert rows[0].detections == int(alone.detections.sum())
+
+
+@pytest.mark.parametrize(
+    ("label", "block"),
+    [
+        ("", None),
+        ("constant_velocity", None),
+        ("random_walk:5", {"model": "random_walk", "diffusion": 5.0}),
+        ("ornstein_uhlenbeck", {"model": "ornstein_uhlenbeck"}),
+        ("singer:0.05:0.01", {"model": "singer", "damping": 0.05, "acceleration_std": 0.01}),
+        ("singer::0.01", {"model": "singer", "acceleration_std": 0.01}),
+        ("constant_acceleration:1e-7", {"model": "constant_acceleration", "jerk_intensity": 1e-7}),
+    ],
+)
+def test_a_motion_label_names_the_scenarios_motion_block(label, block):
+    from hptrack.experiments.benchmark import motion_label
+
+    assert motion_label(label) == block
+
+
+@pytest.mark.parametrize(
+    ("label", "said"),
+    [
+        ("spin:1", "the model is one of"),
+        ("singer:0.1:0.2:0.3", "at most 2 values"),
+        ("random_walk:x", "'x' is not a number"),
+    ],
+)
+def test_a_bad_motion_label_is_one_line(label, said):
+    from hptrack.experiments.benchmark import motion_label
+
+    with pytest.raises(InputError, match=said) as err:
+        motion_label(label)
+    assert "\n" not in str(err.value)

@@ -170,3 +170,32 @@ def test_the_terminal_table_names_the_papers_published_table(capsys, monkeypatch
         ["0", "3", "1.00", "2.00", "3.58", "4.00", "5.00", "5.18"],
         ["300", "3", "1.50", "2.50", "-", "4.50", "5.50", "-"],
     ]
+
+
+def test_an_accelerating_motion_runs_with_its_parameters_in_the_identity(cli, tmp_path):
+    out = tmp_path / "singer"
+    args = ["validate-coverage", "--cases", "2", "--runs", "100", "--delays", "0,100"]
+    args += ["--motion", "singer", "--damping", "0.05", "--acceleration-std", "0.003"]
+    result = cli(*args, "--budget", "600", "--out", str(out))
+    assert result.code == 0, result.out + result.err
+    config = json.loads((out / "config.json").read_text())
+    assert config["motion"] == {"model": "singer", "damping": 0.05, "acceleration_std": 0.003}
+
+
+@pytest.mark.parametrize(
+    ("extra", "said"),
+    [
+        (["--motion", "singer"], "needs a --budget"),
+        (["--motion", "singer", "--diffusion", "5", "--budget", "900"], "--diffusion is not"),
+        (["--damping", "0.1"], "--damping is not a parameter of --motion constant_velocity"),
+        (["--motion", "singer", "--damping", "-1", "--budget", "900"], "--damping:"),
+        (
+            ["--motion", "constant_acceleration", "--jerk-intensity", "2", "--budget", "900"],
+            "--jerk-intensity:",
+        ),
+    ],
+)
+def test_bad_motion_options_exit_with_one_line(cli, tmp_path, extra, said):
+    result = cli(*["validate-coverage", "--cases", "2", "--out", str(tmp_path / "x"), *extra])
+    text = (result.out + result.err).strip()
+    assert result.code == 2 and said in text and "\n" not in text, text

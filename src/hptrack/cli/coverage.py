@@ -214,7 +214,7 @@ def motion_of(name: str, process_noise_form: str, **parameters: float | None) ->
             f"--process-noise-form {process_noise_form} is a form of constant velocity's Q, "
             f"not of --motion {name}"
         )
-    fields = MOTION_ADAPTER.validate_python({"model": name}).model_fields
+    fields = type(MOTION_ADAPTER.validate_python({"model": name})).model_fields
     for field in given:
         if field not in fields:
             raise InputError(f"--{field.replace('_', '-')} is not a parameter of --motion {name}")

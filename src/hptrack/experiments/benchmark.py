@@ -119,11 +119,11 @@ def motion_label(label: str) -> dict | None:
             f"--motion {label!r}: {model} takes at most {len(fields)} values ({', '.join(fields)})"
         )
     block: dict = {"model": model}
-    for field, value in zip(fields, values, strict=False):
+    for name, value in zip(fields, values, strict=False):
         if not value:
             continue
         try:
-            block[field] = float(value)
+            block[name] = float(value)
         except ValueError:
             raise InputError(f"--motion {label!r}: {value!r} is not a number") from None
     return block
