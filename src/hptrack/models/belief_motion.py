@@ -1137,6 +1137,8 @@ def extended_prior(part: tuple, mean: np.ndarray, covariance: np.ndarray):
     out_cov = np.zeros(cov_in.shape[:-2] + (size, size))
     d = cov_in.shape[-1]
     out_cov[..., :d, :d] = cov_in
+    if not isinstance(part, SingerMotion | ConstantAccelerationMotion):
+        raise ValueError(f"{part!r} has no prior spread of its accelerations")
     variance = float(part.acceleration_std) ** 2
     for k in range(d, size):
         out_cov[..., k, k] = variance

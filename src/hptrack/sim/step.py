@@ -29,7 +29,7 @@ from hptrack.models.sensor import sensor_measures, sensor_missed, sensor_update
 from hptrack.models.state import position_of
 from hptrack.models.truth_motion import advance_truth
 from hptrack.models.vehicle import vehicle_move
-from hptrack.scenario.model import Scenario
+from hptrack.scenario.model import ConstantAccelerationSpec, Scenario, SingerSpec
 
 BLOCK_STEPS = 256
 """Steps of random normals drawn at a time."""
@@ -49,7 +49,7 @@ def initial_true_states(scenario: Scenario, rng: np.random.Generator) -> np.ndar
             states[i, :4] = rng.multivariate_normal(
                 target.mean, target.covariance, method="cholesky"
             )
-    if d > 4:
+    if isinstance(spec, SingerSpec | ConstantAccelerationSpec):
         states[:, 4:] = spec.acceleration_std * rng.standard_normal((len(scenario.targets), d - 4))
     return states
 
