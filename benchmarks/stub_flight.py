@@ -110,7 +110,7 @@ def summary(records: list[dict], header: dict) -> dict:
         message = r.get("message", "")
         if message.startswith("taking off to "):
             walls["takeoff"] = r["wall"]
-        if message.startswith("at ") and message.endswith(" m"):
+        if message.startswith("take-off done: "):  # PX4's TAKEOFF -> HOLD at the altitude
             walls["altitude"] = r["wall"]
         if message.startswith("offboard started"):
             walls["offboard"] = r["wall"]
