@@ -87,17 +87,23 @@ def straight_leg_speeds(
 
 def subtasks(records: list[dict]) -> list[str]:
     """The sub-tasks flown, in order (``"pursue p1"``, ``"follow p1"``...), from the flown
-    plans: a new one at each change of kind, target or start step."""
+    plans: a new one at each change of kind, target or start step. A plan's sub-task is
+    `hptrack.subtasks.Subtask.to_json`'s ``{"kind", "target", "start_step", ...}``, or in older
+    logs ``{"target" | "follow" | "dwell": id, "since_step", ...}``."""
     out: list[str] = []
     last = None
     for r in records:
         if r["kind"] == "plan" and r["status"] == "ok" and not r.get("after_end"):
             sub = r["subtask"] or {}
-            kind = next((k for k in ("target", "follow", "dwell") if k in sub), None)
-            key = (kind, sub.get(kind), sub.get("since_step"))
+            if "kind" in sub:
+                kind, target, start = sub["kind"], sub.get("target"), sub.get("start_step")
+            else:
+                kind = next((k for k in ("target", "follow", "dwell") if k in sub), None)
+                target, start = sub.get(kind), sub.get("since_step")
+                kind = "pursue" if kind == "target" else kind
+            key = (kind, target, start)
             if key != last:
-                name = "none" if kind is None else f"{kind} {sub[kind]}"
-                out.append(name.replace("target", "pursue"))
+                out.append(" ".join(str(x) for x in (kind, target) if x is not None) or "none")
                 last = key
     return out
 
@@ -110,7 +116,7 @@ def summary(records: list[dict], header: dict) -> dict:
         message = r.get("message", "")
         if message.startswith("taking off to "):
             walls["takeoff"] = r["wall"]
-        if message.startswith("at ") and message.endswith(" m"):
+        if message.startswith("take-off done: "):  # PX4's TAKEOFF -> HOLD at the altitude
             walls["altitude"] = r["wall"]
         if message.startswith("offboard started"):
             walls["offboard"] = r["wall"]
@@ -123,7 +129,7 @@ def summary(records: list[dict], header: dict) -> dict:
             accepted[r["target"]] = accepted.get(r["target"], 0) + 1
     end = next((r for r in records if r["kind"] == "end"), {})
     flown = subtasks(records)
-    targets = [s.split()[1] for s in flown if s != "none"]
+    targets = [s.split()[1] for s in flown if len(s.split()) == 2]
 
     def between(start: str, end: str) -> float | None:
         return walls[end] - walls[start] if start in walls and end in walls else None

@@ -49,6 +49,7 @@ _end = _FLOOD.end_process
 _wait_for_offboard = _FLOOD.wait_for_offboard
 CLI = _FLOOD.CLI
 _straight_leg_speeds = _benchmark("stub_flight").straight_leg_speeds
+_stub_flight_summary = _benchmark("stub_flight").summary
 
 
 @pytest.fixture
@@ -120,6 +121,12 @@ def test_a_dry_run_plans_before_offboard_flies_the_planned_speed_ends_in_hold_an
     modes = [r["mode"] for r in records if r["kind"] == "mode" and r["seq"] > offboard["seq"]]
     assert "waiting for the first plan" not in modes and "fallback" not in modes
     assert not _records(log, "late")
+
+    # the benchmark's figures read the take-off's end from the log: offboard started within
+    # 2 s of the take-off's end (issue 34), after a take-off to 10 m of 5 to 30 s
+    figures = _stub_flight_summary(records, read_log(log).header)
+    assert 5.0 <= figures["takeoff_s"] <= 30.0, figures
+    assert 0.0 <= figures["offboard_after_altitude_s"] <= 2.0, figures
 
     # on the PX4-like stub (0.8 of its velocity setpoint), the flown speed on straight legs is
     # the planned 8 m/s within 10 % (the median); no leg is slower by more than 10 %, and none

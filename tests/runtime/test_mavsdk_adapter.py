@@ -121,12 +121,12 @@ def _said(flight, kind=None):
     return [r for r in flight.log.records if kind is None or r["kind"] == kind]
 
 
-def _take_off_with(flight, steps):
-    """`_watch_take_off` while ``steps`` (``(delay s, changes)``) change the vehicle's state:
-    ``height`` (m), ``mode`` (a `FlightMode` name), ``armed``, ``position`` (``False``: no
-    more position messages)."""
+def _take_off_with(flight, steps, ground=0.0):
+    """`_watch_take_off` from the height ``ground`` (m) while ``steps`` (``(delay s,
+    changes)``) change the vehicle's state: ``height`` (m), ``mode`` (a `FlightMode` name),
+    ``armed``, ``position`` (``False``: no more position messages)."""
     vehicle = flight.vehicle
-    vehicle.position_ned, vehicle.received_at = np.zeros(3), time.monotonic()
+    vehicle.position_ned, vehicle.received_at = np.array([0.0, 0.0, -ground]), time.monotonic()
     feeding = {"on": True}
 
     async def drive():
@@ -189,6 +189,27 @@ def test_a_take_off_is_done_on_takeoff_to_hold_at_the_altitude_and_fails_at_once
     assert TAKEOFF_DONE_TOLERANCE_M == 1.0
     flight = _flight(flight_scenario, altitude_m=10.0, lost_link_s=0.5, takeoff_timeout_s=2.0)
     result = _take_off_with(flight, CLIMB + then)
+    if outcome is None:
+        assert result is None
+    else:
+        assert outcome in result, result
+
+
+@pytest.mark.parametrize(
+    ("ground", "hold_at", "outcome"),
+    [
+        (-0.8, 8.5, None),  # PX4 took off from 0.8 m below its local origin, 9.3 m up
+        (0.8, 9.5, "left TAKEOFF for HOLD at 9.5 m"),  # 8.7 m above where it began
+    ],
+)
+def test_a_take_off_is_measured_from_where_it_began(flight_scenario, ground, hold_at, outcome):
+    """PX4 takes off to the altitude above its home (where it armed), not above its local
+    origin: PX4 SIH once armed low enough to end its take-off 18.9 m above the origin, 1.1 m
+    below a 20 m mission altitude, and the flight was refused as a failed take-off."""
+    flight = _flight(flight_scenario, altitude_m=10.0, lost_link_s=0.5, takeoff_timeout_s=2.0)
+    climb = [(0.0, {"mode": "HOLD"}), (0.1, {"armed": True}), (0.1, {"mode": "TAKEOFF"})]
+    climb += [(0.1, {"height": hold_at}), (0.1, {"mode": "HOLD"})]
+    result = _take_off_with(flight, climb, ground=ground)
     if outcome is None:
         assert result is None
     else:

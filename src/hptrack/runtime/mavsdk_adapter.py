@@ -163,8 +163,11 @@ WAIT_PROGRESS_S = 5.0
 """How often ``fly`` says it is still waiting for the autopilot, s (at least twice in a shorter
 wait)."""
 TAKEOFF_DONE_TOLERANCE_M = 1.0
-"""A take-off that ends (TAKEOFF -> HOLD) at most this below the mission altitude is done (PX4
-ends its take-off within ``NAV_MC_ALT_RAD``, 0.8 m by default), m."""
+"""A take-off that ends (TAKEOFF -> HOLD) at most this below the mission altitude, counted from
+the height where it began, is done, m. PX4 ends its take-off within ``NAV_MC_ALT_RAD`` (0.8 m by
+default) of the altitude above its home, which it sets at arming, and the local position's
+height there is rarely 0 (PX4 SIH's EKF puts it some tenths of a metre above or below its local
+origin)."""
 OFFBOARD_CONFIRM_S = 2.0
 """How long ``fly`` streams setpoints after starting offboard for the vehicle to report
 OFFBOARD, s (a heartbeat once a second shows the change within about 1 s)."""
@@ -1040,6 +1043,7 @@ async def _take_off(flight: _Flight, system: Any) -> None:
     options = flight.options
     action = ActionAsync(system)
     step = "arming"
+    ground_m = flight.height_m()  # PX4 takes off from here (its home, set at arming)
     try:
         flight.say("arming")
         await action.arm()
@@ -1053,7 +1057,7 @@ async def _take_off(flight: _Flight, system: Any) -> None:
             plain_error(err, step, f"the vehicle reports {flight.mode_name()}")
         ) from None
 
-    failure = await _watch_take_off(flight)
+    failure = await _watch_take_off(flight, ground_m)
     if failure is not None:
         if failure.endswith("(switched to hold)"):
             with contextlib.suppress(ActionError):
@@ -1063,17 +1067,21 @@ async def _take_off(flight: _Flight, system: Any) -> None:
             reason="interrupted" if failure.startswith("interrupted") else "take-off failed",
         )
     flight.say(
-        f"take-off done: {flight.mode_name()} at {flight.height_m():.1f} m",
+        f"take-off done: {flight.mode_name()} at {flight.height_m():.1f} m "
+        f"({flight.height_m() - ground_m:.1f} m above where it began)",
         altitude_m=flight.height_m(),
+        ground_m=ground_m,
     )
 
 
-async def _watch_take_off(flight: _Flight) -> str | None:
+async def _watch_take_off(flight: _Flight, ground_m: float | None = None) -> str | None:
     """Wait for the take-off's end (TAKEOFF -> HOLD within `TAKEOFF_DONE_TOLERANCE_M` of the
-    altitude); ``None`` when it is done, else why it failed, at once: a disarm, a mode other
-    than HOLD after TAKEOFF (or HOLD too low), no position for ``lost_link_s``, Ctrl-C, or the
-    take-off timeout."""
+    altitude above ``ground_m``, the height where the take-off began, default the height now);
+    ``None`` when it is done, else why it failed, at once: a disarm, a mode other than HOLD
+    after TAKEOFF (or HOLD too low), no position for ``lost_link_s``, Ctrl-C, or the take-off
+    timeout."""
     options, vehicle = flight.options, flight.vehicle
+    ground_m = flight.height_m() if ground_m is None else ground_m
     began = time.monotonic()
     armed_seen = taking_off_seen = False
     while True:
@@ -1085,7 +1093,7 @@ async def _watch_take_off(flight: _Flight) -> str | None:
         )
         armed_seen = armed_seen or vehicle.armed
         taking_off_seen = taking_off_seen or mode == FlightMode.TAKEOFF
-        high = height >= options.altitude_m - TAKEOFF_DONE_TOLERANCE_M
+        high = height - ground_m >= options.altitude_m - TAKEOFF_DONE_TOLERANCE_M
         if flight.stop.is_set():
             return f"interrupted {where} (switched to hold)"
         if not vehicle.armed and (armed_seen or taking_off_seen):
