@@ -59,10 +59,16 @@ def test_every_field_round_trips_with_its_comment(tmp_path):
     written = {
         m.group(1) for m in re.finditer(r"^\s*(?:- )?(\w+):.*  # ", text, flags=re.MULTILINE)
     }
-    other_motions = {"diffusion", "damping"}  # the parameters of the other truth motions
+    # the parameters of the other truth motions
+    other_motions = {"diffusion", "damping", "acceleration_std", "jerk_intensity"}
     blocks = {"sensor", "sensor.model", "diameter", "vehicle", "vehicle.model", "motion"}  # unset
     assert written == set(FIELD_COMMENTS) - other_motions - blocks  # every field: its comment
-    for motion, parameter in (("random_walk", "diffusion"), ("ornstein_uhlenbeck", "damping")):
+    for motion, parameter in (
+        ("random_walk", "diffusion"),
+        ("ornstein_uhlenbeck", "damping"),
+        ("singer", "acceleration_std"),
+        ("constant_acceleration", "jerk_intensity"),
+    ):
         moving = type(base).model_validate(
             {**base.model_dump(), "truth_motion": {"model": motion, parameter: 0.5}}
         )
