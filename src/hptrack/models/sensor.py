@@ -422,6 +422,34 @@ def detecting_sensor(
 
 
 @numba.njit(cache=True)
+def draws_detection(sensor):
+    """Whether ``sensor`` draws a uniform per target inside its footprint (`sensor_draws`, for
+    Python callers)."""
+    return sensor_draws(sensor)
+
+
+@numba.njit(cache=True)
+def _detected(sensor, agent, positions, u, out):
+    for i in range(positions.shape[0]):
+        ax, ay, x, y = agent[0], agent[1], positions[i, 0], positions[i, 1]
+        out[i] = sensor_measures(sensor, ax, ay, x, y) and sensor_detects(
+            sensor, ax, ay, x, y, u[i]
+        )
+
+
+def detected_mask(
+    sensor: tuple, agent_position: np.ndarray, positions: np.ndarray, uniforms: np.ndarray
+) -> np.ndarray:
+    """Which positions ``(n, 2)`` (m) a look from ``agent_position`` detects, given one uniform
+    in ``[0, 1)`` per position ``(n,)``: measured (`measured_mask`) and ``sensor_detects``."""
+    points = np.ascontiguousarray(np.asarray(positions, dtype=float).reshape(-1, 2))
+    out = np.empty(points.shape[0], dtype=np.bool_)
+    u = np.ascontiguousarray(np.asarray(uniforms, dtype=float).reshape(-1))
+    _detected(sensor, np.asarray(agent_position, dtype=float), points, u, out)
+    return out
+
+
+@numba.njit(cache=True)
 def _measured(sensor, agent, positions, out):
     for i in range(positions.shape[0]):
         out[i] = sensor_measures(sensor, agent[0], agent[1], positions[i, 0], positions[i, 1])

@@ -32,6 +32,7 @@ from hptrack.interface import MissionSpec, Observation
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.mission import predict_covariance_on, predict_mean_on
 from hptrack.models.sensor import (
+    draws_detection,
     sensor_detects,
     sensor_draws,
     sensor_measures,
@@ -45,12 +46,6 @@ from hptrack.scenario.model import Scenario
 
 BLOCK_STEPS = 256
 """Steps of random normals drawn at a time."""
-
-
-@numba.njit(cache=True)
-def draws_detection(sensor):
-    """Whether ``sensor`` draws a uniform per target inside its footprint (`sensor_draws`)."""
-    return sensor_draws(sensor)
 
 
 def initial_true_states(scenario: Scenario, rng: np.random.Generator) -> np.ndarray:
