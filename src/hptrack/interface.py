@@ -112,6 +112,10 @@ class MissionSpec:
         belief_motion: how the beliefs assume the targets move, a registered part of
             `hptrack.models.belief_motion`; ``None``: constant velocity with
             ``process_noise_form``.
+        detection_probability: the chance that a look detects a target inside the footprint,
+            independently at each look: a number in ``(0, 1]`` or a table of rows ``[distance
+            from the footprint's centre, m; Pd]`` (`hptrack.models.sensor.detection_table`);
+            1, the paper's sensor, by default.
     """
 
     time_step: float = 0.5
@@ -124,6 +128,7 @@ class MissionSpec:
     target_ids: tuple[str, ...] = ()
     n_vehicles: int = 1
     belief_motion: tuple | None = None
+    detection_probability: float | tuple[tuple[float, float], ...] = 1.0
     record: Mission = field(init=False, repr=False)
     """The mission's constants as the compiled kernels take them (built and validated once,
     with the spec)."""
@@ -144,6 +149,7 @@ class MissionSpec:
             self.process_noise,
             self.process_noise_form == "continuous",
             self.belief_motion,
+            self.detection_probability,
         )
         object.__setattr__(self, "measurement_noise", record.sensor.measurement_noise)
         object.__setattr__(self, "process_noise", record.process_noise)

@@ -41,6 +41,7 @@ from hptrack.experiments.coverage_validation import (
 )
 from hptrack.interface import InputError, MissionSpec, one_line, shown
 from hptrack.models.motion import ProcessNoiseForm
+from hptrack.models.sensor import detection_table as checked_detection
 from hptrack.models.state import state_from, velocities
 from hptrack.scenario import load_scenario
 from hptrack.scenario.model import MotionSpec
@@ -228,6 +229,40 @@ def motion_of(name: str, process_noise_form: str, **parameters: float | None) ->
         raise InputError(f"--{field.replace('_', '-')}: {reason} (value {shown(value)})") from None
 
 
+def detection_of(probability: float, table: str | None) -> float | tuple[tuple[float, float], ...]:
+    """The ``detection_probability`` of ``--detection-probability`` or ``--detection-table``
+    (comma-separated ``distance_m:Pd`` rows, e.g. ``0:0.9,30:0.8,50:0.5``); 1 when neither.
+
+    Raises:
+        InputError: both given, a row that is not two numbers, or a value the sensor refuses
+            (`hptrack.models.sensor.detection_table`), naming the option.
+    """
+    if table is None:
+        try:
+            checked_detection(probability)
+        except ValueError as err:
+            raise InputError(f"--detection-probability: {err}") from None
+        return float(probability)
+    if probability != 1.0:
+        raise InputError("give --detection-probability or --detection-table, not both")
+    rows = []
+    for part in table.split(","):
+        cells = part.split(":")
+        try:
+            if len(cells) != 2:
+                raise ValueError
+            rows.append((float(cells[0]), float(cells[1])))
+        except ValueError:
+            raise InputError(
+                f"--detection-table expects comma-separated distance_m:Pd rows, got {table!r}"
+            ) from None
+    try:
+        checked_detection(rows)
+    except ValueError as err:
+        raise InputError(f"--detection-table: {err}") from None
+    return tuple(rows)
+
+
 def validate_coverage(
     cases: Annotated[int, typer.Option(help="Random single-target cases.")] = 1000,
     runs: Annotated[int, typer.Option(help="Sampled trajectories per case and delay.")] = 10000,
@@ -280,10 +315,25 @@ def validate_coverage(
             "but constant_velocity, whose P_cdf may never stop rising."
         ),
     ] = None,
+    detection_probability: Annotated[
+        float,
+        typer.Option(
+            help="Chance that a look detects a target inside the footprint, each step "
+            "independently, in (0, 1] (1: the paper's sensor); estimators and runs alike."
+        ),
+    ] = 1.0,
+    detection_table: Annotated[
+        str | None,
+        typer.Option(
+            help="Pd by distance from the footprint's centre instead: comma-separated "
+            "distance_m:Pd rows from 0 m, e.g. 0:0.9,30:0.8,50:0.5 (linear, the last held)."
+        ),
+    ] = None,
 ) -> None:
     """Estimator-accuracy experiment (paper Sec. V-A): MAPE of P_find and E[T_find] per delay,
     for the paper's estimator and the sharp one on the same simulated runs."""
     check_seed(seed)
+    detection = detection_of(detection_probability, detection_table)
     motion_spec = motion_of(
         motion,
         process_noise_form,
@@ -313,7 +363,7 @@ def validate_coverage(
         runs=runs,
         delays=_parse_delays(delays),
         seed=seed,
-        mission=MissionSpec(process_noise_form=process_noise_form),
+        mission=MissionSpec(process_noise_form=process_noise_form, detection_probability=detection),
         motion=motion_spec,
         budget=budget,
     )
@@ -322,8 +372,9 @@ def validate_coverage(
     for delay in config.delays:
         if budget is not None and delay >= budget:
             raise InputError(f"--delays {delay:g} s is not before --budget {budget:g} s")
+    sensing = "" if detection == 1.0 else f"detection probability: {detection}; "
     console.print(
-        f"motion: {motion}; Q form: {process_noise_form}; {cases} cases x "
+        f"motion: {motion}; Q form: {process_noise_form}; {sensing}{cases} cases x "
         f"{len(config.delays)} delays x {runs} runs; {workers} worker(s); results in {out}"
     )
     start = time.perf_counter()

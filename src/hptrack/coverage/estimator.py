@@ -12,6 +12,25 @@ and ``E[T_find]`` is the expected finding time given the target is found by ``t_
 measured from the start of the coverage. When the remaining budget ends first, everything is
 truncated at the budget's end.
 
+A sensor that detects a target inside its footprint with a probability below one
+(`hptrack.models.sensor.DetectingFootprintSensor`) sweeps an effective width ``W = eta w``
+instead of ``w`` (``eta`` its ``find_factor``, `hptrack.models.sensor.pass_detection_factor`:
+the integral over the lateral offset of one straight pass's chance of a detection, over the same
+with certain detection). The covered area becomes ``eta S_cover(k)``:
+
+    P_cdf(k) = 1 - exp(-eta S_cover(k) / (2 pi sqrt(det Sigma^xy(k)))),
+
+``t_cutoff`` is unchanged (``eta`` does not change where ``S_cover / sqrt(det)`` stops growing) and
+``E[T_find]`` follows from this CDF. The other form, ``p_max = eta P_cdf(t_cutoff)`` with
+``E[T_find]`` unchanged (one pass reaches a target and detects it with ``eta``, a miss is final),
+is rejected: the spiral's passes overlap (its loops are ``w`` apart along the belief's major axis,
+closer along the minor one, and the targets drift across them), so a target one pass missed is
+often detected by the next, and the Monte Carlo of the spiral finds about as much more as the
+sweep-width form says (``docs/model.md``, "Sensor and measurement"). A constant per-step ``Pd =
+p`` is not ``W = p w``: a target near a pass's line is inside the footprint for about ``w / (v_a
+tau)`` looks and is all but surely detected. With the paper's sensor ``eta = 1`` and every number
+is what it was, bit for bit.
+
 `coverage_outcome` is the compiled kernel used by the tree search: O(t_cutoff) arithmetic
 with the covariance in closed form (for constant velocity polynomials in the step count; for
 other belief motions the motion's own terms, `hptrack.models.mission.position_det_on`), one
@@ -39,6 +58,7 @@ from hptrack.models.mission import (
     position_polynomials_on,
     steps_left,
 )
+from hptrack.models.sensor import sensor_find_factor
 
 MAX_COVERAGE_STEPS = 10_000_000
 """Cap on ``t_cutoff`` when no budget is given; reaching it means the belief does not grow."""
@@ -53,7 +73,8 @@ def ratio_grows(area, det, next_area, next_det):
 
 @numba.njit(cache=True)
 def _covered_ratio(mission, cov, q, k):
-    """``S_cover(k) / sqrt(det Sigma^xy(k))`` (dimensionless)."""
+    """``S_cover(k) / sqrt(det Sigma^xy(k))`` (dimensionless; the footprint's, without the
+    sensor's ``find_factor``)."""
     sxx, sxy, syy = position_covariance_on(mission, cov, q, k)
     speed, diameter, tau = mission.vehicle.speed, mission.sensor.diameter, mission.time_step
     area = speed * diameter * k * tau + math.pi * 0.25 * diameter * diameter
@@ -73,8 +94,8 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
 
     Returns:
         ``(cutoff_steps, p_find, expected_steps)``: ``t_cutoff`` in steps, ``p_max`` and
-        ``E[T_find]`` in steps from the start of the coverage; ``(0, 0, 0)`` when
-        ``max_steps < 0``.
+        ``E[T_find]`` in steps from the start of the coverage (the covered area times the
+        sensor's ``find_factor``, 1 for the paper's); ``(0, 0, 0)`` when ``max_steps < 0``.
     """
     if max_steps < 0:
         return 0.0, 0.0, 0.0
@@ -84,6 +105,7 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
     area0 = math.pi * 0.25 * diameter * diameter  # S_cover(k) = area0 + k area1
     area1 = speed * diameter * tau
     inv_two_pi = 1.0 / (2.0 * math.pi)
+    factor = sensor_find_factor(mission.sensor)  # W / w (1: the paper's sensor, exactly)
     k = 0
     area = area0
     det = x0 * y0 - c0 * c0
@@ -93,11 +115,11 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
         next_area = area + area1
         if not ratio_grows(area, det, next_area, next_det):
             break
-        cdf_sum -= math.expm1(-area * inv_two_pi / math.sqrt(det))
+        cdf_sum -= math.expm1(-(factor * area) * inv_two_pi / math.sqrt(det))
         k += 1
         area = next_area
         det = next_det
-    p = -math.expm1(-area * inv_two_pi / math.sqrt(det))
+    p = -math.expm1(-(factor * area) * inv_two_pi / math.sqrt(det))
     # E[T | T <= K] = sum_k k (P(k) - P(k-1)) / P(K) = (K P(K) - sum_{j<K} P(j)) / P(K)
     expected = (k * p - cdf_sum) / p
     return float(k), p, expected
@@ -105,10 +127,12 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
 
 @numba.njit(cache=True)
 def coverage_cdf(mission, cov: np.ndarray, q: float, n_steps: int) -> np.ndarray:
-    """``P_cdf(k)`` for ``k = 0 .. n_steps - 1`` (no cutoff applied), for plots and reports."""
+    """``P_cdf(k)`` for ``k = 0 .. n_steps - 1`` (no cutoff applied; the covered area times the
+    sensor's ``find_factor``, 1 for the paper's), for plots and reports."""
     out = np.empty(n_steps)
+    factor = sensor_find_factor(mission.sensor)
     for k in range(n_steps):
-        ratio = _covered_ratio(mission, cov, q, float(k))
+        ratio = factor * _covered_ratio(mission, cov, q, float(k))
         out[k] = -math.expm1(-ratio / (2.0 * math.pi))
     return out
 
@@ -120,7 +144,8 @@ class CoverageEstimate:
     Attributes:
         cutoff_steps: ``t_cutoff`` in steps from the start of the coverage (truncated by the
             budget when ``budget_limited``).
-        p_find: ``p_max = P_cdf(t_cutoff)``; 0 when the budget ends before the coverage starts.
+        p_find: ``p_max = P_cdf(t_cutoff)``; 0 when the budget ends before the coverage
+            starts.
         expected_time: ``E[T_find]`` given the target is found by ``t_cutoff``, s from the start
             of the coverage.
         cdf: ``P_cdf(k)`` for ``k = 0 .. cutoff_steps`` (empty when the coverage never starts).

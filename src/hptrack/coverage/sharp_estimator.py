@@ -46,7 +46,13 @@ find probability is ``F(K)`` and the expected finding time
     E = ((n + K) F(K) - sum_{j<n} F_flight(j) - sum_{k<K} F(k)) / F(K)
 
 is counted in steps from the start of the sub-task (departure), the flight included: the
-sub-task's duration given a find. `sharp_coverage_outcome` is the compiled kernel (cost
+sub-task's duration given a find. A sensor that detects with a probability below one sweeps the
+effective width ``eta w`` (``eta`` its ``find_factor``), as in the paper's estimator
+(`hptrack.coverage.estimator`, where the choice of this form is argued): the found mass
+``-log(1 - F)`` of every step scales by ``eta``, ``F_eta(k) = 1 - (1 - F(k))^eta``, and the
+expected time follows from ``F_eta`` (the flight's sum of ``F_flight`` scaled by ``F_eta(0) /
+F(0)``, an approximation); ``t_cutoff`` is unchanged. `sharp_coverage_outcome` is the compiled
+kernel (cost
 ``O(t_cutoff)`` cheap steps plus a fixed number of quadrature evaluations, no allocation);
 `estimate_sharp` its validated Python wrapper.
 """
@@ -62,6 +68,7 @@ import numpy as np
 from hptrack.coverage.estimator import estimate_coverage, ratio_grows
 from hptrack.interface import MissionSpec
 from hptrack.models.mission import position_det_on, position_det_rate_on, position_polynomials_on
+from hptrack.models.sensor import sensor_find_factor
 
 PHASE_NODES = 2
 """Gauss-Legendre nodes in the phase of the last pass ``alpha``."""
@@ -246,6 +253,17 @@ def _found_ratio(
 
 
 @numba.njit(cache=True, inline="always")
+def swept_share(found, factor):
+    """``1 - (1 - F)^eta``: a find probability ``F`` of the footprint's width when the sensor
+    sweeps ``eta`` of it (``F`` itself, exactly, when ``eta = 1``)."""
+    if factor == 1.0:
+        return found
+    if found >= 1.0:
+        return 1.0
+    return -math.expm1(factor * math.log1p(-found))
+
+
+@numba.njit(cache=True, inline="always")
 def _found(
     mission,
     poly,
@@ -267,7 +285,7 @@ def _found(
     p = -math.expm1(-0.5 * h)
     if flight_steps > 0:
         p += strip_mass(h, strip)
-    return p
+    return swept_share(p, sensor_find_factor(mission.sensor))
 
 
 @numba.njit(cache=True)
@@ -294,7 +312,8 @@ def sharp_coverage_outcome(
 
     Returns:
         ``(cutoff_steps, p_find, expected_steps)``: the paper's ``t_cutoff`` in steps from the
-        start of the coverage, the probability of a find by then (flight included), and the
+        start of the coverage, the probability of a find by then (flight included; the
+        sensor's ``find_factor`` applied, module docstring), and the
         expected duration of the sub-task given a find, in steps from its start (departure);
         ``(0, 0, 0)`` when ``max_steps < 0``.
     """
@@ -354,6 +373,9 @@ def sharp_coverage_outcome(
         flight_steps,
         strip,
     )
+    factor = sensor_find_factor(mission.sensor)
+    if factor != 1.0 and flight_steps > 0 and 0.0 < found < 1.0:  # F_flight sum to F_eta's
+        flight_sum *= found / -math.expm1(math.log1p(-found) / factor)
     previous = found
     coverage_sum = 0.0
     while at < cutoff:

@@ -23,6 +23,10 @@ expected duration given a find against the empirical detection time from departu
 The agent's path is the hierarchical planner's own sub-task
 (`CoverageSubtask`), and the true motion is the simulator's (`hptrack.models.truth_motion`), by
 the same model as the beliefs (constant velocity by default; ``ValidationConfig.motion``).
+A sensor that detects a target inside its footprint with a probability below one
+(``ValidationConfig.mission``'s ``detection_probability``) detects it at each step with
+``Pd(d)`` (`hptrack.models.sensor.sensor_detects`, the simulator's rule), from a stream of its
+own, ``spawn_key=(i, 1 + d, 0)``: the trajectories are the paper's sensor's.
 Sampling: no detection is checked while the agent waits, so the true state at departure
 is drawn exactly from the belief propagated ``t_d`` (Eq. (1) in closed form); from there
 trajectories are advanced step by step, all runs at once, with the process noise drawn in blocks of
@@ -51,7 +55,15 @@ from hptrack.experiments.workers import worker_pool
 from hptrack.interface import InputError, MissionSpec
 from hptrack.jsonout import json_text
 from hptrack.models.belief_motion import extended_prior
-from hptrack.models.sensor import measured_mask, sensor_measures
+from hptrack.models.sensor import (
+    certain,
+    detected_mask,
+    draws_detection,
+    measured_mask,
+    sensor_detects,
+    sensor_draws,
+    sensor_measures,
+)
 from hptrack.models.state import position_of, positions, velocities
 from hptrack.models.truth_motion import ConstantVelocityTruth, advance_truth
 from hptrack.scenario.model import ConstantVelocitySpec, MotionSpec
@@ -64,6 +76,9 @@ BLOCK_STEPS = 64
 RUN_BYTES = 8 * (8 + 4 * BLOCK_STEPS)
 """Memory of one sampled trajectory while its case runs, bytes (its state, first detections
 and a block of noise), to refuse a ``runs`` that does not fit before it starts."""
+DETECTION_KEY = 0
+"""The last entry of the spawn key of a case's detection draws, ``(i, 1 + d, 0)`` (a sensor
+that detects with a probability below one; the paper's draws none)."""
 CASES_FILE = "cases.csv"
 CONFIG_FILE = "config.json"
 
@@ -175,6 +190,11 @@ class ValidationConfig:
             identity["sampler"] = "models.truth_motion.advance_truth"
         if self.budget is not None:
             identity["budget"] = float(self.budget)
+        if not certain(m.detection_probability):
+            p = m.detection_probability
+            identity["detection_probability"] = (
+                float(p) if isinstance(p, int | float) else [[float(d), float(v)] for d, v in p]
+            )
         return identity
 
 
@@ -261,18 +281,25 @@ def _advance_block(
     sqrt_q,
     first_any,
     first_spiral,
+    uniforms,
 ):
     """Advance the ``active`` runs through steps ``first_step ..`` by the ``truth`` motion
     with unit normal ``noise`` ``(runs, steps, d)`` and record detections; a run stops at its
     first detection on the spiral (step >= ``flight_steps``). ``mission`` is the mission
-    record, ``sqrt_q`` ``(1,)``."""
+    record, ``sqrt_q`` ``(1,)``; a sensor that draws (`sensor_draws`) detects a target inside
+    its footprint at step ``t`` of the block when ``sensor_detects`` with ``uniforms[a, t]``
+    (``(runs, steps)``; unread otherwise)."""
+    sensor = mission.sensor
     for a in range(active.shape[0]):
         i = active[a]
         for t in range(noise.shape[1]):
             advance_truth(truth, mission, states[i : i + 1], noise[a, t : t + 1], sqrt_q)
             j = first_step + t
             x, y = position_of(states[i])
-            if sensor_measures(mission.sensor, path[j, 0], path[j, 1], x, y):
+            inside = sensor_measures(sensor, path[j, 0], path[j, 1], x, y)
+            if inside and sensor_draws(sensor):
+                inside = sensor_detects(sensor, path[j, 0], path[j, 1], x, y, uniforms[a, t])
+            if inside:
                 if first_any[i] < 0:
                     first_any[i] = j
                 if j >= flight_steps:
@@ -287,18 +314,33 @@ def first_detections(
     runs: int,
     rng: np.random.Generator,
     truth: tuple | None = None,
+    detection_rng: np.random.Generator | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Monte Carlo of the fixed plan: for each of ``runs`` trajectories sampled by the
     ``truth`` motion (default constant velocity), the first step (from departure) at which
     the target is detected, and the first such step on the spiral (``>= n``); ``-1`` when not
     detected by ``t_cutoff``.
+
+    A sensor that detects with a probability below one draws one uniform per run and step from
+    ``detection_rng`` (needed then), in blocks as the noise, so that the trajectories are
+    those of the same seed with the paper's sensor.
     """
     truth = ConstantVelocityTruth() if truth is None else truth
+    sensor = mission.record.sensor
+    draws = bool(draws_detection(sensor))
+    if draws and detection_rng is None:
+        raise ValueError("a sensor that detects with a probability below one needs detection_rng")
     states = rng.multivariate_normal(plan.mean, plan.covariance, size=runs, method="cholesky")
     n = plan.intercept_steps
     first_any = np.full(runs, -1, dtype=np.int64)
     first_spiral = np.full(runs, -1, dtype=np.int64)
-    hit = measured_mask(mission.record.sensor, plan.path[0], positions(states))
+    no_draws = np.zeros((0, 0))
+    detection_rng = detection_rng if draws else None
+    if detection_rng is not None and draws:
+        uniforms = detection_rng.random(runs)
+        hit = detected_mask(sensor, plan.path[0], positions(states), uniforms)
+    else:
+        hit = measured_mask(sensor, plan.path[0], positions(states))
     first_any[hit] = 0
     if n == 0:
         first_spiral[hit] = 0
@@ -308,6 +350,7 @@ def first_detections(
     while step < total and active.size:
         block = min(BLOCK_STEPS, total - step)
         noise = rng.standard_normal((active.size, block, states.shape[1]))
+        u = detection_rng.random((active.size, block)) if detection_rng is not None else no_draws
         _advance_block(
             truth,
             mission.record,
@@ -320,6 +363,7 @@ def first_detections(
             np.array([math.sqrt(q)]),
             first_any,
             first_spiral,
+            u,
         )
         active = active[first_spiral[active] < 0]
         step += block
@@ -347,8 +391,13 @@ def case_rows(
         rng = np.random.default_rng(
             np.random.SeedSequence(config.seed, spawn_key=(case.index, 1 + d))
         )
+        detection_rng = None
+        if draws_detection(s.record.sensor):
+            detection_rng = np.random.default_rng(
+                np.random.SeedSequence(config.seed, spawn_key=(case.index, 1 + d, DETECTION_KEY))
+            )
         first_any, first_spiral = first_detections(
-            plan, case.q, s, config.runs, rng, config.truth()
+            plan, case.q, s, config.runs, rng, config.truth(), detection_rng
         )
         n, est = plan.intercept_steps, plan.estimate
         found = first_any >= 0

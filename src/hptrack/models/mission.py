@@ -20,6 +20,7 @@ the motion itself.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numba
@@ -32,7 +33,13 @@ from hptrack.models.belief_motion import ConstantVelocity, registered_motion
 from hptrack.models.measurement import check_noise_covariance
 from hptrack.models.motion import motion_noise_factors
 from hptrack.models.riccati import riccati_table_of
-from hptrack.models.sensor import FootprintSensor, SensorPart, sensor_measures
+from hptrack.models.sensor import (
+    FootprintSensor,
+    SensorPart,
+    certain,
+    detecting_sensor,
+    sensor_measures,
+)
 from hptrack.models.vehicle import (
     HolonomicVehicle,
     VehiclePart,
@@ -59,7 +66,8 @@ class Mission(NamedTuple):
         motion: how the beliefs assume the targets move, a registered part of
             `hptrack.models.belief_motion` (`ConstantVelocity` by default).
         sensor: the sensor part (`hptrack.models.sensor`; the paper's `FootprintSensor`:
-            diameter ``w`` and ``R``).
+            diameter ``w`` and ``R``; `DetectingFootprintSensor` when the detection
+            probability is not 1).
         vehicle: the vehicle part (`hptrack.models.vehicle`; the paper's
             `HolonomicVehicle`: speed ``v_a`` and step length ``v_a tau``).
     """
@@ -81,14 +89,18 @@ def mission_record(
     process_noise: np.ndarray,
     continuous_noise: bool = True,
     motion: tuple | None = None,
+    detection_probability: float | Sequence = 1.0,
 ) -> Mission:
     """The validated `Mission` (``continuous_noise``: the continuous form of ``Q``, else
     the paper's printed one; ``motion``: a registered belief motion, default constant velocity
-    with that ``Q``).
+    with that ``Q``; ``detection_probability``: a number or a table of rows ``[distance from the
+    footprint's centre, m; Pd]``, `hptrack.models.sensor.detection_table`: 1, the default,
+    gives the paper's `FootprintSensor`, anything else a `DetectingFootprintSensor`).
 
     Raises:
         ValueError: a constant not positive and finite, ``R`` not symmetric positive definite,
-            a ``q`` negative or not finite, more than `MAX_TARGETS` targets.
+            a ``q`` negative or not finite, more than `MAX_TARGETS` targets, a bad detection
+            probability.
     """
     for name, value in (
         ("time_step", time_step),
@@ -110,12 +122,20 @@ def mission_record(
     registered_motion(motion)
     noise.flags.writeable = False
     q.flags.writeable = False
+    sensor: SensorPart = FootprintSensor(float(sensor_diameter), noise)
+    try:
+        certain_detection = certain(detection_probability)
+    except ValueError as err:
+        raise ValueError(f"detection_probability: {err}") from None
+    if not certain_detection:
+        step = float(agent_speed) * tau
+        sensor = detecting_sensor(float(sensor_diameter), noise, detection_probability, step)
     return Mission(
         time_step=tau,
         process_noise=q,
         n_steps=steps_left(tau, float(budget)),
         motion=motion,
-        sensor=FootprintSensor(float(sensor_diameter), noise),
+        sensor=sensor,
         vehicle=HolonomicVehicle(float(agent_speed), float(agent_speed) * tau),
     )
 

@@ -252,6 +252,8 @@ FIELD_COMMENTS = {
     "sensor_diameter": "m, the footprint's diameter w",
     "sensor": "what a look measures (the paper's footprint by default)",
     "sensor.model": "footprint: measures every target within diameter / 2",
+    "sensor.detection_probability": "chance a look detects a target inside: a number, or "
+    "rows [distance from the centre m, Pd]",
     "diameter": "m, the footprint's diameter w",
     "vehicle": "how the agent moves (the paper's holonomic point by default)",
     "vehicle.model": "holonomic: straight at up to speed, any direction",
@@ -293,6 +295,8 @@ def file_data(scenario: Scenario) -> dict:
         data["agent"].pop("speed")
     if scenario.sensor is not None:
         data["sensor"] = scenario.sensor_spec().model_dump(mode="json", exclude_none=True)
+        if data["sensor"].get("detection_probability") == 1.0:  # the default, the paper's
+            data["sensor"].pop("detection_probability")
         for name in ("sensor_diameter", *NOISE_FIELDS):
             data["agent"].pop(name, None)
     return data

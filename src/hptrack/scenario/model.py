@@ -43,6 +43,7 @@ from hptrack.models.beliefs import position_logdet
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import MAX_TARGETS, steps_left
 from hptrack.models.motion import ProcessNoiseForm
+from hptrack.models.sensor import detection_table
 from hptrack.models.state import positions, speeds, velocities
 from hptrack.models.truth_motion import (
     ConstantAccelerationTruth,
@@ -155,11 +156,33 @@ class AgentSpec(BaseModel):
         return _noise_of(self.measurement_noise_std, self.measurement_noise_covariance)
 
 
+def _detection_probability(value: Any) -> float | tuple[tuple[float, float], ...]:
+    """A ``detection_probability`` as a float or a tuple of ``(distance_m, Pd)`` rows
+    (`hptrack.models.sensor.detection_table` checks it)."""
+    distances, probabilities = detection_table(value)
+    if isinstance(value, int | float):
+        return float(probabilities[0])
+    return tuple((float(d), float(p)) for d, p in zip(distances, probabilities, strict=True))
+
+
+DetectionProbability = Annotated[
+    float | tuple[tuple[float, float], ...], BeforeValidator(_detection_probability)
+]
+"""The chance that a look detects a target inside the footprint: a number in ``(0, 1]`` or a
+table of rows ``[distance from the footprint's centre (m), Pd]``."""
+
+
 class FootprintSensorSpec(BaseModel):
     """The paper's sensor (`hptrack.models.sensor.FootprintSensor`): a footprint of
     ``diameter`` ``w`` (m) that measures every target inside it, with the noise
     ``measurement_noise_std`` per axis (m; ``R = std^2 I``) or a full 2x2
-    ``measurement_noise_covariance`` (m^2), which takes precedence."""
+    ``measurement_noise_covariance`` (m^2), which takes precedence.
+
+    ``detection_probability`` (default 1, the paper's): the chance that a look detects (and so
+    measures) a target inside the footprint, independently at each look: a number in ``(0, 1]``
+    or a table of rows ``[distance from the footprint's centre (m), Pd]``, distances strictly
+    increasing from 0, ``Pd`` in ``[0, 1]``, linear between rows and the last value held to the
+    footprint's edge (`hptrack.models.sensor.DetectingFootprintSensor`)."""
 
     model_config = _STRICT
 
@@ -167,6 +190,7 @@ class FootprintSensorSpec(BaseModel):
     diameter: Diameter = DEFAULT_DIAMETER
     measurement_noise_std: NoiseStd = DEFAULT_NOISE_STD
     measurement_noise_covariance: Matrix2 | None = None
+    detection_probability: DetectionProbability = 1.0
 
     @model_validator(mode="after")
     def _noise(self) -> Self:
@@ -608,6 +632,7 @@ class Scenario(BaseModel):
             process_noise=self.process_noise(),
             target_ids=self.target_ids,
             belief_motion=self.motion_part(),
+            detection_probability=self.sensor_spec().detection_probability,
         )
 
     def initial_observation(self) -> Observation:

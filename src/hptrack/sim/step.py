@@ -4,17 +4,23 @@ A step ``k -> k+1`` (``tau`` seconds) is the simulator's (`hptrack.sim.episode`)
 moves straight towards its waypoint by at most ``v_a tau``; every true target moves by the
 scenario's truth motion (`hptrack.models.truth_motion`; by default the paper's ``F`` and ``Q``
 noise); every belief is predicted one step (Eq. (1)); every target whose true position lies
-within ``w/2`` of the agent is measured, ``z = [x, y] + L e`` (``L L' = R``), and Kalman-updated.
-Sensing also happens at step 0. The kernels call the model kernels of `hptrack.models`
-(prediction, true motion, Kalman update, ``log det``); they re-derive none of them.
+within ``w/2`` of the agent is detected (always, with the paper's sensor; with probability
+``Pd(d)`` with a `hptrack.models.sensor.DetectingFootprintSensor`), and a detected one is
+measured, ``z = [x, y] + L e`` (``L L' = R``), and Kalman-updated. Sensing also happens at
+step 0. The kernels call the model kernels of `hptrack.models` (prediction, true motion, Kalman
+update, ``log det``); they re-derive none of them.
 
 Randomness is the simulator's: ``SeedSequence(seed).spawn(4)`` gives the streams of the true
 initial states, the target motion, the measurement noise and the planner. The motion stream gives
 ``n x d`` unit normals per step (``d`` the true state's size, 4 unless the truth motion has
 accelerations) and the measurement stream ``2`` per measured target, in target
-order. A Generator's normals do not depend on how the draws are split, so `World` draws
-them in blocks (`NormalBlock`) and the kernels consume them in the simulator's order: the
-same seed gives the same mission as `hptrack.sim.episode.run_episode`.
+order. A sensor that detects with a probability below one (``sensor_draws``) has a fifth stream,
+``SeedSequence(seed, spawn_key=(4,))`` (the fifth child of the same root, so the other four are
+unchanged): one uniform per target inside the footprint per look, in target order, the target
+detected when it is below ``Pd(d)`` (`hptrack.models.sensor.sensor_detects`). The paper's sensor
+draws nothing from it. A Generator's normals do not depend on how the draws are split, so
+`World` draws them in blocks (`NormalBlock`) and the kernels consume them in the simulator's
+order: the same seed gives the same mission as `hptrack.sim.episode.run_episode`.
 """
 
 from __future__ import annotations
@@ -25,7 +31,14 @@ import numpy as np
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.mission import predict_covariance_on, predict_mean_on
-from hptrack.models.sensor import sensor_measures, sensor_missed, sensor_update
+from hptrack.models.sensor import (
+    draws_detection,
+    sensor_detects,
+    sensor_draws,
+    sensor_measures,
+    sensor_missed,
+    sensor_update,
+)
 from hptrack.models.state import position_of
 from hptrack.models.truth_motion import advance_truth
 from hptrack.models.vehicle import vehicle_move
@@ -55,19 +68,24 @@ def initial_true_states(scenario: Scenario, rng: np.random.Generator) -> np.ndar
 
 
 @numba.njit(cache=True)
-def sense(sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z):
-    """Measure and update every target the ``sensor`` part measures from ``agent``
-    (`hptrack.models.sensor`); a target it does not measure gets the sensor's ``missed``.
+def sense(sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z, u, u_pos):
+    """Measure and update every target the ``sensor`` part detects from ``agent``
+    (`hptrack.models.sensor`); a target it does not detect gets the sensor's ``missed``.
 
-    Consumes two normals of ``e`` from ``e_pos`` per measured target (target order; ``factor``
-    the Cholesky factor of ``R``), writes ``seen`` and the per-target ``log det Sigma^xy`` into
-    ``logdets`` (``z``: a scratch ``(2,)`` for the measurement); returns the new ``e_pos`` and
-    ``U``.
+    A sensor that ``draws`` takes one uniform of ``u`` from ``u_pos`` per target inside its
+    footprint (target order) and detects it by ``sensor_detects``; the paper's detects every
+    target inside and reads no ``u``. Consumes two normals of ``e`` from ``e_pos`` per detected
+    target (target order; ``factor`` the Cholesky factor of ``R``), writes ``seen`` and the
+    per-target ``log det Sigma^xy`` into ``logdets`` (``z``: a scratch ``(2,)`` for the
+    measurement); returns the new ``e_pos``, ``U`` and the new ``u_pos``.
     """
     total = 0.0
     for i in range(truth.shape[0]):
         x, y = position_of(truth[i])
         inside = sensor_measures(sensor, agent[0], agent[1], x, y)
+        if inside and sensor_draws(sensor):
+            inside = sensor_detects(sensor, agent[0], agent[1], x, y, u[u_pos])
+            u_pos += 1
         seen[i] = inside
         if inside:
             e0 = e[e_pos]
@@ -81,7 +99,7 @@ def sense(sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z)
         c = covs[i]
         logdets[i] = logdet_xy(c[0, 0], c[0, 1], c[1, 1])
         total += logdets[i]
-    return e_pos, total
+    return e_pos, total, u_pos
 
 
 @numba.njit(cache=True)
@@ -99,11 +117,14 @@ def world_step(
     e,
     e_pos,
     out,
+    u,
+    u_pos,
 ):
     """One simulator step in place (module docstring): move by the mission's vehicle, true
     motion by ``truth_motion`` with the unit normals ``z_motion`` ``(n, d)``, predict one step,
     sense by the mission's sensor (``factor``: the Cholesky factor of ``R``; ``out``: `sense`'s
-    ``seen``, ``logdets`` and ``z``). Returns the new ``e_pos`` and ``U``."""
+    ``seen``, ``logdets`` and ``z``; ``u``, ``u_pos``: its detection uniforms). Returns the new
+    ``e_pos``, ``U`` and the new ``u_pos``."""
     vehicle_move(mission.vehicle, agent, waypoint)
     advance_truth(truth_motion, mission, truth, z_motion, sqrt_q)
     tau = mission.time_step
@@ -114,7 +135,9 @@ def world_step(
         predict_mean_on(mission, means[i], elapsed, means[i])
         predict_covariance_on(mission, covs[i], q[i], steps, covs[i])
     seen, logdets, z = out
-    return sense(mission.sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z)
+    return sense(
+        mission.sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z, u, u_pos
+    )
 
 
 class NormalBlock:
@@ -126,15 +149,31 @@ class NormalBlock:
 
     def __init__(self, rng: np.random.Generator, size: int) -> None:
         self.rng = rng
-        self.values = rng.standard_normal(size)
+        self.values = self._draw(size)
         self.pos = 0
+
+    def _draw(self, count: int) -> np.ndarray:
+        return self.rng.standard_normal(count)
 
     def ensure(self, count: int) -> None:
         """Make at least ``count`` unused values available from ``pos``."""
         if self.pos + count > self.values.shape[0]:
             rest = self.values[self.pos :]
-            self.values = np.concatenate([rest, self.rng.standard_normal(self.pos)])
+            self.values = np.concatenate([rest, self._draw(self.pos)])
             self.pos = 0
+
+
+class UniformBlock(NormalBlock):
+    """Uniforms in ``[0, 1)`` of one Generator, handed out as `NormalBlock`'s normals (a
+    Generator's uniforms do not depend on how the draws are split either)."""
+
+    def _draw(self, count: int) -> np.ndarray:
+        return self.rng.random(count)
+
+
+DETECTION_STREAM = 4
+"""The spawn key of the detection stream, ``SeedSequence(seed, spawn_key=(4,))``: the fifth
+child of the simulator's root (the first four are its other streams)."""
 
 
 class World:
@@ -185,6 +224,11 @@ class World:
             np.random.default_rng(motion_seq), BLOCK_STEPS * n * self._truth_size
         )
         self._sensor = NormalBlock(np.random.default_rng(sensor_seq), BLOCK_STEPS * n * 2)
+        self._detection: UniformBlock | None = None
+        self._no_draws = np.zeros(0)
+        if draws_detection(mission.record.sensor):
+            detection_seq = np.random.SeedSequence(self.seed, spawn_key=(DETECTION_STREAM,))
+            self._detection = UniformBlock(np.random.default_rng(detection_seq), BLOCK_STEPS * n)
         self._waypoint = np.empty(2)
         self._z = np.empty(2)
         self.seen = np.zeros(n, dtype=bool)
@@ -211,10 +255,23 @@ class World:
         """The budget is spent."""
         return self.step_index >= self.n_steps
 
+    def _uniforms(self) -> tuple[np.ndarray, int]:
+        """The detection uniforms and their position (at least ``n`` unused), or none."""
+        block = self._detection
+        if block is None:
+            return self._no_draws, 0
+        block.ensure(self.n_targets)
+        return block.values, block.pos
+
+    def _used(self, u_pos: int) -> None:
+        if self._detection is not None:
+            self._detection.pos = u_pos
+
     def _sense(self) -> None:
         n = self.n_targets
         self._sensor.ensure(2 * n)
-        self._sensor.pos, self.uncertainty = sense(
+        u, u_pos = self._uniforms()
+        self._sensor.pos, self.uncertainty, u_pos = sense(
             self.mission.record.sensor,
             self.agent,
             self.truth,
@@ -226,7 +283,10 @@ class World:
             self.seen,
             self.logdets,
             self._z,
+            u,
+            u_pos,
         )
+        self._used(u_pos)
 
     def step(self, waypoint_x: float, waypoint_y: float) -> float:
         """Advance one step with the agent flying towards ``(waypoint_x, waypoint_y)`` m;
@@ -247,7 +307,8 @@ class World:
         wp = self._waypoint
         wp[0] = waypoint_x
         wp[1] = waypoint_y
-        sensor.pos, self.uncertainty = world_step(
+        u, u_pos = self._uniforms()
+        sensor.pos, self.uncertainty, u_pos = world_step(
             self.mission.record,
             self.agent,
             wp,
@@ -261,7 +322,10 @@ class World:
             sensor.values,
             sensor.pos,
             (self.seen, self.logdets, self._z),
+            u,
+            u_pos,
         )
+        self._used(u_pos)
         self.step_index += 1
         return self.uncertainty
 
