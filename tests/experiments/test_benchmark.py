@@ -157,6 +157,43 @@ def test_two_runs_on_one_database_share_the_work(tmp_path):
     assert len(rows) == len({r.key for r in rows}) == total
 
 
+class _StoresBefore:
+    """A database connection that lets another run store ``row`` just before this one writes
+    its claim (the interleaving a claim must survive)."""
+
+    def __init__(self, db, other, row):
+        self._db, self._other, self._row = db, other, row
+
+    def execute(self, sql, *args):
+        if sql.startswith("INSERT OR IGNORE INTO claims") and self._row is not None:
+            self._other.add(self._row)
+            self._row = None
+        return self._db.execute(sql, *args)
+
+    def __getattr__(self, name):
+        return getattr(self._db, name)
+
+    def __enter__(self):
+        return self._db.__enter__()
+
+    def __exit__(self, *exc):
+        return self._db.__exit__(*exc)
+
+
+def test_an_episode_stored_by_another_run_while_claiming_is_not_claimed(tmp_path):
+    """Run A holds a claim and stores its episode (dropping the claim) while run B claims the
+    same key: B must not get it, or the episode runs twice."""
+    from hptrack.sim.record import EpisodeRow
+
+    first, second = ResultStore(tmp_path / "b.db"), ResultStore(tmp_path / "b.db")
+    key = CONFIG.keys()[0]
+    assert first.claim(key)
+    second._db = _StoresBefore(second._db, first, EpisodeRow(key, 10.0, 50.0, 3, 1.0, {}))
+    assert not second.claim(key)
+    assert [r.key for r in second.rows()] == [key]
+    assert second._db.execute("SELECT COUNT(*) FROM claims").fetchone()[0] == 0
+
+
 def test_claims_of_a_dead_run_are_released(tmp_path):
     store = ResultStore(tmp_path / "b.db")
     key = CONFIG.keys()[0]

@@ -338,19 +338,26 @@ class ResultStore:
         return len(stale)
 
     def claim(self, key: EpisodeKey) -> bool:
-        """Claim ``key`` for this process; ``False`` if it is done or another run holds it."""
+        """Claim ``key`` for this process; ``False`` if it is done or another run holds it.
+
+        The claim is written first and the episode looked up after it, in one transaction: the
+        write holds the database's lock, so no other run can store the episode (and drop its
+        own claim) between the look-up and the claim."""
         with self._guard(), self._db:
+            cur = self._db.execute(
+                "INSERT OR IGNORE INTO claims VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                (*key._id(), self._host, self._pid, time.time()),
+            )
+            if cur.rowcount != 1:
+                return False
             if self._db.execute(
                 "SELECT 1 FROM episodes WHERE planner=? AND n_targets=? AND "
                 "seed=? AND setting=? AND planner_settings_hash=?",
                 key._id(),
             ).fetchone():
+                self._db.rollback()
                 return False
-            cur = self._db.execute(
-                "INSERT OR IGNORE INTO claims VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                (*key._id(), self._host, self._pid, time.time()),
-            )
-            return cur.rowcount == 1
+            return True
 
     def release_all(self) -> None:
         """Give up every claim of this process (episodes that were not run after all)."""
