@@ -87,10 +87,9 @@ def run_episode(
     )
 
 
-def record_bytes(n_targets: int, n_steps: int, belief_stride: int = 1, state_size: int = 4) -> int:
+def record_bytes(n_targets: int, n_steps: int, belief_stride: int = 1) -> int:
     """Memory an `EpisodeRecord` of a mission needs, bytes (to refuse one that does not
-    fit before it starts; ``state_size`` the larger of the true and belief states')."""
-    d = state_size
-    per_step = 8 * (2 + d * n_targets) + n_targets
+    fit before it starts; sized for 4-D states)."""
+    per_step = 8 * (2 + 4 * n_targets) + n_targets
     stored = n_steps // belief_stride + 2
-    return (n_steps + 1) * per_step + stored * 8 * (d + d * d) * n_targets
+    return (n_steps + 1) * per_step + stored * 8 * 20 * n_targets
