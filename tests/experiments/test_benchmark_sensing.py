@@ -88,6 +88,7 @@ def test_a_blind_search_plans_with_the_paper_sensor_on_the_same_world(tmp_path):
         rows["greedy", s].uncertainty for s in ("homogeneous+pd:0.5", "homogeneous+pd:0.5+blind")
     ]
     assert greedy[0] == greedy[1]  # greedy never looks at the sensor's Pd
+    assert rows["greedy", "homogeneous+pd:0.5"].detections > 0
     key = config(detection_probability=0.5, blind=True).keys()[1]
     planner = planner_for(key)
     scenario = scenario_for(key)
@@ -114,3 +115,14 @@ def test_bad_sensing_options_are_one_line_errors(cli, tmp_path, args, message):
 def test_a_config_refuses_blindness_without_misses():
     with pytest.raises(InputError, match="--blind"):
         config(blind=True)
+
+
+def test_the_library_benchmark_takes_the_sensing_options():
+    from hptrack.experiments.benchmark import benchmark
+
+    kw = {"target_counts": [2], "scenarios": 1, "homogeneous": False}
+    known = benchmark(["greedy"], detection_probability=0.5, **kw)
+    paper = benchmark(["greedy"], **kw)
+    assert known["greedy"][2]["mean"] != paper["greedy"][2]["mean"]  # the detector misses
+    with pytest.raises(InputError, match="--blind"):
+        benchmark(["greedy"], blind=True, **kw)

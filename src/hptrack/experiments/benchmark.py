@@ -376,6 +376,8 @@ def benchmark(
     first_seed: int = 0,
     iterations: int | None = None,
     time_limit: float | None = None,
+    detection_probability: float = 1.0,
+    blind: bool = False,
 ) -> dict:
     """Fly every planner once on each random scenario and summarise ``U`` (the library face of
     ``hptrack benchmark``).
@@ -393,6 +395,9 @@ def benchmark(
         iterations: tree-search iterations per decision of every planner that searches (an
             option in ``options`` wins).
         time_limit: planning seconds per decision, likewise; not with ``iterations``.
+        detection_probability: the sensor's chance of detecting a target inside its footprint
+            at each look (1: the paper's).
+        blind: the planners are told the paper's certain sensor (`BenchmarkConfig`).
 
     Returns:
         ``{planner: {n: {"mean", "std", "episodes", "never_observed", "wall_time_s"}}}``.
@@ -416,7 +421,14 @@ def benchmark(
         for p in planners
     }
     config = BenchmarkConfig(
-        tuple(planners), settings, tuple(target_counts), scenarios, homogeneous, first_seed
+        tuple(planners),
+        settings,
+        tuple(target_counts),
+        scenarios,
+        homogeneous,
+        first_seed,
+        detection_probability=detection_probability,
+        blind=blind,
     )
     store = ResultStore(db)
     try:
