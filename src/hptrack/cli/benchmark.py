@@ -70,6 +70,21 @@ def benchmark(
             "the model's defaults."
         ),
     ] = "constant_velocity",
+    detection_probability: Annotated[
+        float,
+        typer.Option(
+            help="The sensor's chance of detecting a target inside its footprint at each look "
+            "(1: the paper's sensor)."
+        ),
+    ] = 1.0,
+    blind: Annotated[
+        bool,
+        typer.Option(
+            "--blind",
+            help="Tell the planners the paper's certain sensor (Pd = 1) while the world's "
+            "detector misses (needs --detection-probability below 1).",
+        ),
+    ] = False,
     iterations: Annotated[
         int | None, typer.Option(help="Tree-search iterations per decision.")
     ] = None,
@@ -166,6 +181,8 @@ def benchmark(
         first_seed=first_seed,
         process_noise_form=process_noise_form,
         motion="" if motion_label(motion) is None else motion,
+        detection_probability=detection_probability,
+        blind=blind,
     )
     scenario_for(config.keys()[0])  # a bad --motion value is refused before any work
     with ExitStack() as stack:
@@ -245,7 +262,7 @@ def _write_report(
 ) -> None:
     from rich.markdown import Markdown
 
-    from hptrack.experiments.benchmark import planner_for, scenario_for
+    from hptrack.experiments.benchmark import planner_for, planner_mission_for, scenario_for
     from hptrack.experiments.report import benchmark_report, write_csv
     from hptrack.experiments.store import EpisodeKey
     from hptrack.sim.episode import run_episode
@@ -275,7 +292,9 @@ def _write_report(
         key = EpisodeKey(
             name, n_figure, config.first_seed, config.setting, config.settings[name].canonical()
         )
-        records.append(run_episode(scenario_for(key), planner_for(key)))
+        scenario = scenario_for(key)
+        told = planner_mission_for(key, scenario)
+        records.append(run_episode(scenario, planner_for(key), planner_mission=told))
     fig = new_figure(6.0 * len(names) + 1.0, 7.0)
     plot_trajectories(fig, records)
     save_figure(fig, out / "trajectories.png", dpi=110)

@@ -11,6 +11,7 @@ and the budget.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
@@ -22,9 +23,9 @@ import numpy as np
 
 from hptrack.experiments.store import EpisodeKey, ResultStore
 from hptrack.experiments.workers import stop_workers, worker_pool
-from hptrack.interface import InputError
+from hptrack.interface import InputError, MissionSpec
 from hptrack.registry import planner_entry, planner_settings
-from hptrack.scenario.model import Scenario
+from hptrack.scenario.model import FootprintSensorSpec, Scenario
 from hptrack.scenario.random import random_scenario
 from hptrack.settings import PlannerSettings
 from hptrack.sim.episode import run_episode
@@ -50,6 +51,10 @@ class BenchmarkConfig:
         process_noise_form: the scenarios' per-step ``Q`` (`hptrack.models.motion`).
         motion: the scenarios' ``motion:`` block as `motion_label` writes it (``""``: the
             paper's constant velocity), e.g. ``"ornstein_uhlenbeck:0.01"``.
+        detection_probability: the scenarios' sensor's chance of detecting a target inside its
+            footprint at each look (1: the paper's sensor).
+        blind: the planners are told the paper's sensor (``Pd = 1``) while the world's detector
+            misses (`hptrack.sim.episode.run_episode`'s ``planner_mission``).
     """
 
     planners: tuple[str, ...]
@@ -60,6 +65,8 @@ class BenchmarkConfig:
     first_seed: int = 0
     process_noise_form: str = "continuous"
     motion: str = ""
+    detection_probability: float = 1.0
+    blind: bool = False
 
     def __post_init__(self) -> None:
         missing = [p for p in self.planners if p not in self.settings]
@@ -70,10 +77,21 @@ class BenchmarkConfig:
                 f"seeds {self.first_seed} .. {self.first_seed + self.scenarios - 1} (first seed, "
                 f"{self.scenarios} scenarios) must lie between 0 and {MAX_SEED} (2^63 - 1)"
             )
+        p = self.detection_probability
+        if isinstance(p, bool) or not (isinstance(p, int | float) and 0.0 < p <= 1.0):
+            raise InputError(f"--detection-probability must be in (0, 1], got {p!r}")
+        if self.blind and p == 1.0:
+            raise InputError("--blind needs a --detection-probability below 1 (nothing to hide)")
 
     @property
     def setting(self) -> str:
-        return setting_name(self.homogeneous, self.process_noise_form, self.motion)
+        return setting_name(
+            self.homogeneous,
+            self.process_noise_form,
+            self.motion,
+            self.detection_probability,
+            self.blind,
+        )
 
     def keys(self) -> list[EpisodeKey]:
         """Every episode of the benchmark, in run order."""
@@ -130,30 +148,66 @@ def motion_label(label: str) -> dict | None:
 
 
 def setting_name(
-    homogeneous: bool, process_noise_form: str = "continuous", motion: str = ""
+    homogeneous: bool,
+    process_noise_form: str = "continuous",
+    motion: str = "",
+    detection_probability: float = 1.0,
+    blind: bool = False,
 ) -> str:
     """The setting part of an episode's identity: ``"homogeneous"`` or ``"heterogeneous"``,
-    with ``"+paper_text"`` when ``Q`` is the paper's printed form and ``"+MODEL:VALUE"`` under
-    another belief motion (`motion_label`)."""
+    with ``"+paper_text"`` when ``Q`` is the paper's printed form, ``"+MODEL:VALUE"`` under
+    another belief motion (`motion_label`), ``"+pd:P"`` when the sensor detects with
+    probability ``P < 1`` and ``"+blind"`` when the planners are told ``Pd = 1``
+    (`BenchmarkConfig`)."""
     base = "homogeneous" if homogeneous else "heterogeneous"
     parts = [base] + ([process_noise_form] if process_noise_form != "continuous" else [])
     parts += [motion] if motion_label(motion) is not None else []
+    parts += (
+        [f"{DETECTION_PART}{float(detection_probability)!r}"] if detection_probability != 1 else []
+    )
+    parts += [BLIND_PART] if blind else []
     return "+".join(parts)
+
+
+DETECTION_PART = "pd:"
+"""The prefix of a setting's detection probability part (`setting_name`)."""
+BLIND_PART = "blind"
+"""The setting part of planners told the paper's certain sensor (`setting_name`)."""
+
+
+def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
+    """``(base, scenario fields, detection probability, blind)`` of a `setting_name`."""
+    base, *rest = setting.split("+")
+    forms = [part for part in rest if part in ("continuous", "paper_text")]
+    pds = [float(part[len(DETECTION_PART) :]) for part in rest if part.startswith(DETECTION_PART)]
+    blind = BLIND_PART in rest
+    motions = [
+        motion_label(part)
+        for part in rest
+        if part not in forms and not part.startswith(DETECTION_PART) and part != BLIND_PART
+    ]
+    fields: dict = {"process_noise_form": forms[0] if forms else "continuous"}
+    if motions:
+        fields["motion"] = motions[0]
+    if pds:
+        fields["sensor"] = FootprintSensorSpec(detection_probability=pds[0])
+    return base, fields, pds[0] if pds else 1.0, blind
 
 
 def scenario_for(key: EpisodeKey) -> Scenario:
     """The random scenario of a benchmark episode."""
-    base, *rest = key.setting.split("+")
-    forms = [part for part in rest if part in ("continuous", "paper_text")]
-    motions = [motion_label(part) for part in rest if part not in forms]
-    fields = {"motion": motions[0]} if motions else {}
+    base, fields, _, _ = _setting_parts(key.setting)
     return random_scenario(
-        key.n_targets,
-        seed=key.seed,
-        homogeneous=base == "homogeneous",
-        process_noise_form=forms[0] if forms else "continuous",
-        **fields,
+        key.n_targets, seed=key.seed, homogeneous=base == "homogeneous", **fields
     )
+
+
+def planner_mission_for(key: EpisodeKey, scenario: Scenario) -> MissionSpec | None:
+    """The mission a benchmark episode's planner is told: the scenario's own (``None``), or
+    under ``"+blind"`` the same with the paper's certain sensor."""
+    if not _setting_parts(key.setting)[3]:
+        return None
+    return dataclasses.replace(scenario.mission_spec(), detection_probability=1.0)
 
 
 def planner_for(key: EpisodeKey):
@@ -181,7 +235,12 @@ def warm_up(key: EpisodeKey) -> None:
     short = scenario.model_copy(
         update={"budget": min(scenario.budget, WARM_UP_STEPS * scenario.time_step)}
     )
-    run_episode(short, planner_for(key), belief_stride=short.n_steps)
+    run_episode(
+        short,
+        planner_for(key),
+        belief_stride=short.n_steps,
+        planner_mission=planner_mission_for(key, short),
+    )
     _warmed.add((key.planner, key.planner_settings))
 
 
@@ -192,7 +251,8 @@ def run_one(key: EpisodeKey) -> EpisodeRow:
     scenario = scenario_for(key)
     planner = planner_for(key)
     start = time.perf_counter()
-    record = run_episode(scenario, planner, belief_stride=scenario.n_steps)
+    told = planner_mission_for(key, scenario)
+    record = run_episode(scenario, planner, belief_stride=scenario.n_steps, planner_mission=told)
     wall = time.perf_counter() - start
     return EpisodeRow(
         key,
@@ -316,6 +376,8 @@ def benchmark(
     first_seed: int = 0,
     iterations: int | None = None,
     time_limit: float | None = None,
+    detection_probability: float = 1.0,
+    blind: bool = False,
 ) -> dict:
     """Fly every planner once on each random scenario and summarise ``U`` (the library face of
     ``hptrack benchmark``).
@@ -333,6 +395,9 @@ def benchmark(
         iterations: tree-search iterations per decision of every planner that searches (an
             option in ``options`` wins).
         time_limit: planning seconds per decision, likewise; not with ``iterations``.
+        detection_probability: the sensor's chance of detecting a target inside its footprint
+            at each look (1: the paper's).
+        blind: the planners are told the paper's certain sensor (`BenchmarkConfig`).
 
     Returns:
         ``{planner: {n: {"mean", "std", "episodes", "never_observed", "wall_time_s"}}}``.
@@ -356,7 +421,14 @@ def benchmark(
         for p in planners
     }
     config = BenchmarkConfig(
-        tuple(planners), settings, tuple(target_counts), scenarios, homogeneous, first_seed
+        tuple(planners),
+        settings,
+        tuple(target_counts),
+        scenarios,
+        homogeneous,
+        first_seed,
+        detection_probability=detection_probability,
+        blind=blind,
     )
     store = ResultStore(db)
     try:

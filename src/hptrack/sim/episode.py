@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from hptrack.interface import Planner, TruthReader, vehicle_waypoints
+from hptrack.interface import MissionSpec, Planner, TruthReader, vehicle_waypoints
 from hptrack.scenario.model import Scenario
 from hptrack.sim.record import EpisodeRecord
 from hptrack.sim.step import World
@@ -28,6 +28,7 @@ def run_episode(
     seed: int | None = None,
     belief_stride: int = 1,
     on_step: Callable[[int, int], None] | None = None,
+    planner_mission: MissionSpec | None = None,
 ) -> EpisodeRecord:
     """Simulate one mission of ``scenario`` flown by ``planner``.
 
@@ -38,9 +39,24 @@ def run_episode(
         seed: overrides ``scenario.seed``.
         belief_stride: store beliefs every this many steps (the last step is always stored).
         on_step: called as ``on_step(k, K)`` after each step (progress bars).
+        planner_mission: the mission the planner is told, when it is not the world's (the same
+            targets, vehicles, time step and budget; e.g. the paper's certain sensor on a world
+            whose detector misses: the "blind" planner of a sensing comparison).
+
+    Raises:
+        ValueError: ``planner_mission`` is not a mission of the same targets, vehicles and
+            steps.
     """
     world = World(scenario, seed)
     mission = world.mission
+    told = mission if planner_mission is None else planner_mission
+    if (told.target_ids, told.n_vehicles, told.time_step, told.n_steps) != (
+        mission.target_ids,
+        mission.n_vehicles,
+        mission.time_step,
+        mission.n_steps,
+    ):
+        raise ValueError("planner_mission must have the world's targets, vehicles and steps")
     n, n_steps = mission.n_targets, mission.n_steps
     stored = sorted(set(range(0, n_steps + 1, belief_stride)) | {n_steps})
     store_at = {k: j for j, k in enumerate(stored)}
@@ -59,7 +75,7 @@ def run_episode(
 
     store(0)
     observation = world.observation()
-    planner.reset(mission, observation, np.random.default_rng(world.planner_seed))
+    planner.reset(told, observation, np.random.default_rng(world.planner_seed))
     reader = planner if isinstance(planner, TruthReader) else None
     for k in range(1, n_steps + 1):
         if reader is not None:

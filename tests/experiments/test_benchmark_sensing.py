@@ -1,0 +1,128 @@
+"""A benchmark whose detector misses, and the planners told the paper's sensor ("blind")."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from hptrack.baselines.stationary import StationaryPlanner
+from hptrack.experiments.benchmark import (
+    BenchmarkConfig,
+    planner_for,
+    planner_mission_for,
+    run_benchmark,
+    scenario_for,
+)
+from hptrack.experiments.store import ResultStore
+from hptrack.interface import InputError
+from hptrack.models.sensor import DetectingFootprintSensor, FootprintSensor
+from hptrack.registry import planner_settings
+from hptrack.scenario import random_scenario
+from hptrack.scenario.model import FootprintSensorSpec
+from hptrack.sim.episode import run_episode
+
+
+class Told(StationaryPlanner):
+    """The stationary planner, remembering the mission it was told."""
+
+    def reset(self, mission, observation, rng):
+        self.told = mission
+        super().reset(mission, observation, rng)
+
+
+def missing(pd=0.5, n=3, seed=4):
+    return random_scenario(
+        n, seed, homogeneous=True, sensor=FootprintSensorSpec(detection_probability=pd)
+    )
+
+
+def test_the_planner_is_told_the_given_mission_and_the_world_stays_the_same():
+    scenario = missing()
+    world = scenario.mission_spec()
+    paper = dataclasses.replace(world, detection_probability=1.0)
+    known, blind = Told(), Told()
+    a = run_episode(scenario, known)
+    b = run_episode(scenario, blind, planner_mission=paper)
+    assert known.told.detection_probability == 0.5 and blind.told.detection_probability == 1.0
+    assert isinstance(known.told.record.sensor, DetectingFootprintSensor)
+    assert isinstance(blind.told.record.sensor, FootprintSensor)
+    np.testing.assert_array_equal(a.detections, b.detections)  # the world's detector, both
+    assert a.uncertainty == b.uncertainty
+
+
+def test_a_mission_of_other_targets_is_refused():
+    other = random_scenario(4, 4, homogeneous=True).mission_spec()
+    with pytest.raises(ValueError, match="planner_mission"):
+        run_episode(missing(), StationaryPlanner(), planner_mission=other)
+
+
+def config(**kw):
+    planners = ("greedy", "mcts")
+    settings = {
+        p: planner_settings(p, {"iterations": 200} if p == "mcts" else None) for p in planners
+    }
+    return BenchmarkConfig(
+        planners=planners, settings=settings, target_counts=(3,), scenarios=1, **kw
+    )
+
+
+def test_the_detection_probability_and_blindness_are_part_of_the_identity():
+    known, blind = config(detection_probability=0.7), config(detection_probability=0.7, blind=True)
+    assert known.setting == "homogeneous+pd:0.7"
+    assert blind.setting == "homogeneous+pd:0.7+blind"
+    assert config().setting == "homogeneous"
+    k, b = known.keys()[1], blind.keys()[1]
+    assert scenario_for(k) == scenario_for(b) == missing(0.7, 3, 0)
+    assert planner_mission_for(k, scenario_for(k)) is None
+    told = planner_mission_for(b, scenario_for(b))
+    assert told.detection_probability == 1.0 and told.target_ids == scenario_for(b).target_ids
+
+
+def test_a_blind_search_plans_with_the_paper_sensor_on_the_same_world(tmp_path):
+    store = ResultStore(tmp_path / "r.db")
+    run_benchmark(config(detection_probability=0.5), store)
+    run_benchmark(config(detection_probability=0.5, blind=True), store)
+    rows = {(r.key.planner, r.key.setting): r for r in store.rows()}
+    store.close()
+    greedy = [
+        rows["greedy", s].uncertainty for s in ("homogeneous+pd:0.5", "homogeneous+pd:0.5+blind")
+    ]
+    assert greedy[0] == greedy[1]  # greedy never looks at the sensor's Pd
+    assert rows["greedy", "homogeneous+pd:0.5"].detections > 0
+    key = config(detection_probability=0.5, blind=True).keys()[1]
+    planner = planner_for(key)
+    scenario = scenario_for(key)
+    short = scenario.model_copy(update={"budget": 5.0})
+    run_episode(short, planner, planner_mission=planner_mission_for(key, short))
+    assert isinstance(planner._record.sensor, FootprintSensor)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--blind"], "--blind needs a --detection-probability below 1"),
+        (["--detection-probability", "1.5"], "--detection-probability must be in (0, 1], got 1.5"),
+        (["--detection-probability", "0"], "--detection-probability must be in (0, 1], got 0.0"),
+    ],
+)
+def test_bad_sensing_options_are_one_line_errors(cli, tmp_path, args, message):
+    db = tmp_path / "r.db"
+    common = ["--targets", "2", "--scenarios", "1", "--planners", "greedy", "--db", db]
+    cli("benchmark", *common, "--out", tmp_path / "o", *args).refused(message)
+    assert not db.exists()
+
+
+def test_a_config_refuses_blindness_without_misses():
+    with pytest.raises(InputError, match="--blind"):
+        config(blind=True)
+
+
+def test_the_library_benchmark_takes_the_sensing_options():
+    from hptrack.experiments.benchmark import benchmark
+
+    kw = {"target_counts": [2], "scenarios": 1, "homogeneous": False}
+    known = benchmark(["greedy"], detection_probability=0.5, **kw)
+    paper = benchmark(["greedy"], **kw)
+    assert known["greedy"][2]["mean"] != paper["greedy"][2]["mean"]  # the detector misses
+    with pytest.raises(InputError, match="--blind"):
+        benchmark(["greedy"], blind=True, **kw)
