@@ -335,12 +335,22 @@ def list_planners() -> None:
 
 
 def _register_commands() -> None:
-    from hptrack.cli import animate, benchmark, coverage, examples, flight, learn, warm_up
+    from hptrack.cli import (
+        animate,
+        benchmark,
+        coverage,
+        examples,
+        fit_detection,
+        flight,
+        learn,
+        warm_up,
+    )
 
     animate.register(app)
     benchmark.register(app)
     coverage.register(app)
     examples.register(app)
+    fit_detection.register(app)
     flight.register(app)
     learn.register(app)
     warm_up.register(app)
