@@ -25,6 +25,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from hptrack.models.belief_motion import BeliefMotion
+from hptrack.models.fence import FenceSpec
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import Mission, mission_record
 from hptrack.models.motion import ProcessNoiseForm
@@ -116,6 +117,8 @@ class MissionSpec:
             independently at each look: a number in ``(0, 1]`` or a table of rows ``[distance
             from the footprint's centre, m; Pd]`` (`hptrack.models.sensor.detection_table`);
             1, the paper's sensor, by default.
+        fence: where the vehicle may fly (`hptrack.models.fence.FenceSpec`: an operating
+            area, no-fly zones, a margin); ``None``, the paper's open space, by default.
     """
 
     time_step: float = 0.5
@@ -129,6 +132,7 @@ class MissionSpec:
     n_vehicles: int = 1
     belief_motion: tuple | None = None
     detection_probability: float | tuple[tuple[float, float], ...] = 1.0
+    fence: FenceSpec | None = None
     record: Mission = field(init=False, repr=False)
     """The mission's constants as the compiled kernels take them (built and validated once,
     with the spec)."""
@@ -150,6 +154,7 @@ class MissionSpec:
             self.process_noise_form == "continuous",
             self.belief_motion,
             self.detection_probability,
+            self.fence,
         )
         object.__setattr__(self, "measurement_noise", record.sensor.measurement_noise)
         object.__setattr__(self, "process_noise", record.process_noise)

@@ -288,6 +288,7 @@ class MissionEnv(gym.Env):
             belief_covariances=covs,
             detections=seen,
             per_target_logdet=w.logdets.copy(),
+            fence=m.fence,
         )
 
     def render(self) -> np.ndarray | None:

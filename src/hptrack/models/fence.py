@@ -36,6 +36,26 @@ NODE_OFFSET = 1e-3
 """How far inside the free space the graph's nodes sit from its corners, m."""
 
 
+class FenceSpec(NamedTuple):
+    """A fence as plain data (a scenario's ``fence:`` block; `compile_fence` builds it).
+
+    Attributes:
+        inclusion: the operating area's corners ``(x, y)``, m, or ``None`` (open space).
+        polygons: the no-fly polygons, each its corners ``(x, y)``, m.
+        circles: the no-fly circles ``(x, y, radius)``, m.
+        margin: how far the UAV keeps from every boundary, m.
+    """
+
+    inclusion: tuple[tuple[float, float], ...] | None = None
+    polygons: tuple[tuple[tuple[float, float], ...], ...] = ()
+    circles: tuple[tuple[float, float, float], ...] = ()
+    margin: float = 0.0
+
+    def compiled(self) -> Fence:
+        """The compiled `Fence` (`compile_fence`)."""
+        return compile_fence(self.inclusion, self.polygons, self.circles, self.margin)
+
+
 class Fence(NamedTuple):
     """The free space as compiled geometry (module docstring).
 
@@ -104,7 +124,7 @@ def free_space(
     return True, free
 
 
-def _rings(geometry) -> list[np.ndarray]:
+def rings_of(geometry) -> list[np.ndarray]:
     """The rings (closed coordinate arrays) of a polygon or of a multipolygon's parts."""
     parts = getattr(geometry, "geoms", [geometry])
     out = []
@@ -126,7 +146,7 @@ def compile_fence(
     ``None`` for open space), no-fly ``polygons`` and ``circles`` (``[x, y, radius]``, m) and a
     ``margin`` (m) kept from every boundary (`free_space`)."""
     bounded, geometry = free_space(inclusion, polygons, circles, margin)
-    rings = _rings(geometry)
+    rings = rings_of(geometry)
     edges = (
         np.concatenate([np.column_stack([r[:-1], r[1:]]) for r in rings])
         if rings
@@ -139,7 +159,7 @@ def compile_fence(
     )
     # the nodes: the corners moved NODE_OFFSET into the free space
     inside = geometry.buffer(-NODE_OFFSET if bounded else NODE_OFFSET, join_style="mitre")
-    corners = np.concatenate([r[:-1] for r in _rings(inside)]) if rings else np.zeros((0, 2))
+    corners = np.concatenate([r[:-1] for r in rings_of(inside)]) if rings else np.zeros((0, 2))
     fence = Fence(
         bounded,
         edges,
@@ -264,6 +284,30 @@ def fenced_route(fence, ax, ay, bx, by):
         return best, bx, by
     after = fence.first[first, last]
     return best, fence.nodes[after, 0], fence.nodes[after, 1]
+
+
+@numba.njit(cache=True)
+def nearest_free(fence, x, y):
+    """``(x, y)`` (m) if the UAV may be there, else the nearest point of the free space's
+    boundary moved `NODE_OFFSET` into it."""
+    if point_free(fence, x, y):
+        return x, y
+    best, px, py, nx, ny = math.inf, x, y, 0.0, 0.0
+    for e in range(fence.edges.shape[0]):
+        x0, y0, x1, y1 = fence.edges[e]
+        ex, ey = x1 - x0, y1 - y0
+        length2 = ex * ex + ey * ey
+        s = 0.0 if length2 == 0.0 else min(max(((x - x0) * ex + (y - y0) * ey) / length2, 0.0), 1.0)
+        cx, cy = x0 + s * ex, y0 + s * ey
+        d = math.hypot(x - cx, y - cy)
+        if d < best:
+            scale = math.sqrt(length2) if length2 > 0.0 else 1.0
+            best, px, py, nx, ny = d, cx, cy, -ey / scale, ex / scale
+    for sign in (1.0, -1.0):
+        qx, qy = px + sign * 2.0 * NODE_OFFSET * nx, py + sign * 2.0 * NODE_OFFSET * ny
+        if point_free(fence, qx, qy):
+            return qx, qy
+    return px, py
 
 
 def fenced_distance(fence: Fence, a: Sequence[float], b: Sequence[float]) -> float:

@@ -30,6 +30,7 @@ from numba.extending import overload
 
 from hptrack.models import belief_motion as bm
 from hptrack.models.belief_motion import ConstantVelocity, registered_motion
+from hptrack.models.fence import FenceSpec
 from hptrack.models.measurement import check_noise_covariance
 from hptrack.models.motion import motion_noise_factors
 from hptrack.models.riccati import riccati_table_of
@@ -41,6 +42,7 @@ from hptrack.models.sensor import (
     sensor_measures,
 )
 from hptrack.models.vehicle import (
+    FencedHolonomicVehicle,
     HolonomicVehicle,
     VehiclePart,
     vehicle_approach_step,
@@ -69,7 +71,8 @@ class Mission(NamedTuple):
             diameter ``w`` and ``R``; `DetectingFootprintSensor` when the detection
             probability is not 1).
         vehicle: the vehicle part (`hptrack.models.vehicle`; the paper's
-            `HolonomicVehicle`: speed ``v_a`` and step length ``v_a tau``).
+            `HolonomicVehicle`: speed ``v_a`` and step length ``v_a tau``;
+            `FencedHolonomicVehicle` when a fence is given).
     """
 
     time_step: float
@@ -90,12 +93,14 @@ def mission_record(
     continuous_noise: bool = True,
     motion: tuple | None = None,
     detection_probability: float | Sequence = 1.0,
+    fence: FenceSpec | None = None,
 ) -> Mission:
     """The validated `Mission` (``continuous_noise``: the continuous form of ``Q``, else
     the paper's printed one; ``motion``: a registered belief motion, default constant velocity
     with that ``Q``; ``detection_probability``: a number or a table of rows ``[distance from the
     footprint's centre, m; Pd]``, `hptrack.models.sensor.detection_table`: 1, the default,
-    gives the paper's `FootprintSensor`, anything else a `DetectingFootprintSensor`).
+    gives the paper's `FootprintSensor`, anything else a `DetectingFootprintSensor`; ``fence``:
+    where the vehicle may fly, `hptrack.models.fence`, a `FencedHolonomicVehicle`).
 
     Raises:
         ValueError: a constant not positive and finite, ``R`` not symmetric positive definite,
@@ -136,8 +141,16 @@ def mission_record(
         n_steps=steps_left(tau, float(budget)),
         motion=motion,
         sensor=sensor,
-        vehicle=HolonomicVehicle(float(agent_speed), float(agent_speed) * tau),
+        vehicle=vehicle_part(float(agent_speed), tau, fence),
     )
+
+
+def vehicle_part(speed: float, time_step: float, fence: FenceSpec | None) -> VehiclePart:
+    """The vehicle part: the paper's `HolonomicVehicle` at ``speed`` (m/s), fenced by
+    ``fence`` when one is given."""
+    if fence is None:
+        return HolonomicVehicle(speed, speed * time_step)
+    return FencedHolonomicVehicle(speed, speed * time_step, fence.compiled())
 
 
 @numba.njit(cache=True)

@@ -15,10 +15,19 @@ with `register_vehicle` and its compiled kernels (`VehicleKernels`). Compiled co
   agent's displacement per step relative to that point on an intercept flight of ``steps``
   whole steps.
 
-The model: `HolonomicVehicle` (the paper's): a point that flies straight at up to ``v_a``.
+The models: `HolonomicVehicle` (the paper's): a point that flies straight at up to ``v_a``.
 Interception, with ``d = mean - agent`` and the point's velocity ``v_hat``: the smallest
 ``t >= 0`` with ``|d + v_hat t| = v_a t``, i.e. ``(v_a^2 - |v_hat|^2) t^2 - 2 (d . v_hat) t -
 |d|^2 = 0``, whose only non-negative root exists for every ``d`` when ``|v_hat| < v_a``.
+
+`FencedHolonomicVehicle`: the same point kept inside a fence (`hptrack.models.fence`): it flies
+the shortest free flight towards its waypoint (or towards the nearest free point when the
+waypoint is not free), turning at the fence's corners within a step. Its intercept time is the
+``t`` at which the shortest free flight to where the point will be (its nearest free point) is
+``v_a t`` long, found by the fixed-point iteration ``t <- L(t) / v_a`` from the straight
+intercept: ``L`` changes by at most ``|v_hat|`` per second, so the map contracts by
+``|v_hat| / v_a < 1`` and the root is unique. Its ``approach_step`` is the straight one (the
+relative motion of the flight's last leg is taken as that of a straight flight).
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ import numpy as np
 from numba.extending import overload
 
 from hptrack._dispatch import registered
+from hptrack.models.fence import Fence, fenced_route, nearest_free, point_free
 
 
 class HolonomicVehicle(NamedTuple):
@@ -46,7 +56,21 @@ class HolonomicVehicle(NamedTuple):
     step_length: float
 
 
-VehiclePart = HolonomicVehicle
+class FencedHolonomicVehicle(NamedTuple):
+    """A point that flies at up to its speed in any direction the fence allows.
+
+    Attributes:
+        speed: ``v_a``, m/s.
+        step_length: the largest displacement per step ``v_a tau``, m.
+        fence: where it may fly (`hptrack.models.fence.Fence`).
+    """
+
+    speed: float
+    step_length: float
+    fence: Fence
+
+
+VehiclePart = HolonomicVehicle | FencedHolonomicVehicle
 """The vehicle classes a mission record may hold (a union of the registered ones)."""
 
 
@@ -202,8 +226,85 @@ register_vehicle(
 )
 
 
+FIXED_POINT_ROUNDS = 200
+"""Most rounds of the fenced intercept's fixed-point iteration (it converges geometrically)."""
+
+
+@numba.njit(cache=True)
+def fenced_move(vehicle, agent, waypoint):
+    """`FencedHolonomicVehicle`: by at most ``v_a tau`` along the shortest free flight towards
+    ``waypoint`` (its nearest free point), through as many corners as the step reaches; from a
+    point that is not free, straight towards the nearest free one."""
+    fence = vehicle.fence
+    left = vehicle.step_length
+    if not point_free(fence, agent[0], agent[1]):
+        gx, gy = nearest_free(fence, agent[0], agent[1])
+        move_agent(agent, np.array([gx, gy]), left)
+        return
+    gx, gy = nearest_free(fence, waypoint[0], waypoint[1])
+    for _ in range(fence.nodes.shape[0] + 1):
+        length, wx, wy = fenced_route(fence, agent[0], agent[1], gx, gy)
+        if not math.isfinite(length):
+            return
+        d = math.hypot(wx - agent[0], wy - agent[1])
+        if d > left:
+            agent[0] += (wx - agent[0]) * left / d
+            agent[1] += (wy - agent[1]) * left / d
+            return
+        agent[0], agent[1] = wx, wy
+        left -= d
+        if wx == gx and wy == gy:
+            return
+
+
+@numba.njit(cache=True)
+def fenced_intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy):
+    """`FencedHolonomicVehicle`: the intercept time by the fixed point of the shortest free
+    flight (module docstring), s; ``inf`` when it cannot catch the point."""
+    fence = vehicle.fence
+    t = intercept_time(agent_x, agent_y, x, y, vx, vy, vehicle.speed)
+    if math.isinf(t):
+        return t
+    if not point_free(fence, agent_x, agent_y):
+        agent_x, agent_y = nearest_free(fence, agent_x, agent_y)
+    for _ in range(FIXED_POINT_ROUNDS):
+        gx, gy = nearest_free(fence, x + vx * t, y + vy * t)
+        length = fenced_route(fence, agent_x, agent_y, gx, gy)[0]
+        if not math.isfinite(length):
+            return math.inf
+        after = length / vehicle.speed
+        if abs(after - t) <= 1e-12 * (1.0 + t):
+            return after
+        t = after
+    return t
+
+
+register_vehicle(
+    FencedHolonomicVehicle,
+    VehicleKernels(fenced_move, fenced_intercept_time, holonomic_approach_step),
+)
+
+
+@numba.njit(cache=True)
+def _fenced_reach_times(vehicle, agent, positions, velocities, radius, out):
+    for k in range(positions.shape[0]):
+        dx, dy = positions[k, 0] - agent[k, 0], positions[k, 1] - agent[k, 1]
+        if dx * dx + dy * dy <= radius * radius:
+            out[k] = 0.0
+        else:
+            out[k] = fenced_intercept_time(
+                vehicle,
+                agent[k, 0],
+                agent[k, 1],
+                positions[k, 0],
+                positions[k, 1],
+                velocities[k, 0],
+                velocities[k, 1],
+            )
+
+
 def reach_times(
-    vehicle: HolonomicVehicle,
+    vehicle: VehiclePart,
     agent: np.ndarray,
     positions: np.ndarray,
     velocities: np.ndarray,
@@ -212,7 +313,21 @@ def reach_times(
     """Earliest time, s, at which the ``vehicle`` flying straight at full speed from ``agent``
     ``(2,)`` or ``(k, 2)`` comes within ``radius`` (m) of each point moving at constant
     ``velocities`` ``(k, 2)`` (m/s) from ``positions`` ``(k, 2)`` (m); ``inf`` if it never does
-    (a point faster than the agent)."""
+    (a point faster than the agent). A fenced vehicle flies the shortest free flight to the
+    point (`fenced_intercept_time`) and is within ``radius`` only once there or at the start."""
+    if isinstance(vehicle, FencedHolonomicVehicle):
+        points = np.asarray(positions, dtype=float)
+        starts = np.broadcast_to(np.asarray(agent, dtype=float), points.shape)
+        out = np.empty(points.shape[0])
+        _fenced_reach_times(
+            vehicle,
+            np.ascontiguousarray(starts),
+            points,
+            np.asarray(velocities, float),
+            radius,
+            out,
+        )
+        return out
     speed = vehicle.speed
     d = positions - agent
     v = velocities

@@ -40,6 +40,7 @@ from hptrack.models.belief_motion import (
     extended_prior,
 )
 from hptrack.models.beliefs import position_logdet
+from hptrack.models.fence import CIRCLE_SIDES, FenceSpec, fenced_route, nearest_free, point_free
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import MAX_TARGETS, steps_left
 from hptrack.models.motion import ProcessNoiseForm
@@ -217,6 +218,65 @@ SensorSpec = FootprintSensorSpec
 discriminated by ``model``, as `TruthMotionSpec`)."""
 VehicleSpec = HolonomicVehicleSpec
 """Which vehicle (`hptrack.models.vehicle`), by ``model`` (as `SensorSpec`)."""
+
+
+MAX_FENCE_CORNERS = 512
+"""Most corners of a fence's polygons together, a circle counting as its
+`hptrack.models.fence.CIRCLE_SIDES` (the visibility graph grows with their cube)."""
+
+
+class PolygonZoneSpec(BaseModel):
+    """A polygon of a ``fence:`` block: its corners ``[x, y]`` (m), a simple polygon."""
+
+    model_config = _STRICT
+
+    polygon: Annotated[list[Vector2], Field(min_length=3, max_length=MAX_FENCE_CORNERS)]
+
+
+class CircleZoneSpec(BaseModel):
+    """A circular no-fly zone of a ``fence:`` block: ``[x, y, radius]`` (m)."""
+
+    model_config = _STRICT
+
+    circle: tuple[Coordinate, Coordinate, Annotated[Real, Field(gt=0.0, le=1e6)]]
+
+
+class FenceBlockSpec(BaseModel):
+    """Where the UAV may fly (`hptrack.models.fence`): an optional operating area
+    ``inclusion`` (a polygon), no-fly ``exclusions`` (polygons and circles) and a ``margin``
+    (m) the UAV keeps from every boundary. Targets may drive anywhere; only the UAV is
+    fenced."""
+
+    model_config = _STRICT
+
+    inclusion: PolygonZoneSpec | None = None
+    exclusions: Annotated[list[PolygonZoneSpec | CircleZoneSpec], Field(max_length=64)] = []
+    margin: Annotated[Real, Field(ge=0.0, le=1e4)] = 0.0
+
+    @model_validator(mode="after")
+    def _corners(self) -> Self:
+        corners = len(self.inclusion.polygon) if self.inclusion else 0
+        corners += sum(
+            len(z.polygon) if isinstance(z, PolygonZoneSpec) else CIRCLE_SIDES
+            for z in self.exclusions
+        )
+        if corners > MAX_FENCE_CORNERS:
+            raise ValueError(
+                f"the fence has {corners} corners (a circle counts {CIRCLE_SIDES}); at most "
+                f"{MAX_FENCE_CORNERS}"
+            )
+        return self
+
+    def spec(self) -> FenceSpec:
+        """The fence as plain data (`hptrack.models.fence.FenceSpec`)."""
+        return FenceSpec(
+            inclusion=tuple(self.inclusion.polygon) if self.inclusion else None,
+            polygons=tuple(
+                tuple(z.polygon) for z in self.exclusions if isinstance(z, PolygonZoneSpec)
+            ),
+            circles=tuple(z.circle for z in self.exclusions if isinstance(z, CircleZoneSpec)),
+            margin=self.margin,
+        )
 
 
 class TargetSpec(BaseModel):
@@ -410,6 +470,7 @@ class Scenario(BaseModel):
     agent: AgentSpec = AgentSpec()
     sensor: SensorSpec | None = None
     vehicle: VehicleSpec | None = None
+    fence: FenceBlockSpec | None = None
     targets: Annotated[list[TargetSpec], Field(min_length=1, max_length=MAX_TARGETS)]
 
     @model_validator(mode="after")
@@ -478,7 +539,36 @@ class Scenario(BaseModel):
                 )
         self._check_variances(self.covariances(), "")
         self._check_variances(covs, " by the end of the budget")
+        self._check_fence()
         return self
+
+    def _check_fence(self) -> None:
+        """Refuse a fence whose polygons are not simple, that leaves no free space, the start
+        outside it, or a target's prior mean out of the UAV's sight (farther than the
+        footprint's radius from every free point it can fly to)."""
+        if self.fence is None:
+            return
+        try:
+            fence = self.fence.spec().compiled()
+        except ValueError as err:
+            raise ValueError(f"fence: {err}") from None
+        x, y = self.agent.position
+        if not point_free(fence, x, y):
+            raise ValueError(
+                f"agent.position ({x:g}, {y:g}) m is not where the fence lets the UAV fly "
+                "(in a no-fly zone, outside the operating area or within the margin)"
+            )
+        radius = 0.5 * self.sensor_spec().diameter
+        for i, target in enumerate(self.targets):
+            mx, my = target.mean[0], target.mean[1]
+            fx, fy = nearest_free(fence, mx, my)
+            gap = math.hypot(fx - mx, fy - my)
+            if gap > radius or not math.isfinite(fenced_route(fence, x, y, fx, fy)[0]):
+                raise ValueError(
+                    f"targets.{i}.mean: target {target.id!r} at ({mx:g}, {my:g}) m is out of "
+                    f"the UAV's sight: {gap:.3g} m from the nearest point it may fly to that "
+                    f"it can reach, beyond the footprint's radius {radius:g} m"
+                )
 
     def _speed_field(self) -> str:
         """Where the vehicle's speed is written: ``vehicle.speed`` or ``agent.speed``."""
@@ -633,6 +723,7 @@ class Scenario(BaseModel):
             target_ids=self.target_ids,
             belief_motion=self.motion_part(),
             detection_probability=self.sensor_spec().detection_probability,
+            fence=self.fence.spec() if self.fence else None,
         )
 
     def initial_observation(self) -> Observation:

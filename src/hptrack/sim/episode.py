@@ -100,6 +100,7 @@ def run_episode(
         detections=detections,
         per_target_logdet=world.logdets.copy(),
         info=dict(planner.episode_info()),
+        fence=mission.fence,
     )
 
 

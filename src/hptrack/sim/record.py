@@ -11,6 +11,7 @@ import numpy as np
 
 from hptrack.jsonout import json_text
 from hptrack.models.beliefs import position_logdet
+from hptrack.models.fence import FenceSpec
 from hptrack.subtasks import read_subtasks
 
 if TYPE_CHECKING:
@@ -44,6 +45,8 @@ class EpisodeRecord:
         detections: ``(K+1, n)`` which targets were measured at each step.
         per_target_logdet: ``(n,)`` final ``log det Sigma^xy`` per target.
         info: planner-specific metadata (JSON-serialisable), e.g. its sub-task log.
+        fence: where the vehicles might fly (`hptrack.models.fence.FenceSpec`), ``None`` in
+            open space.
     """
 
     planner: str
@@ -59,6 +62,7 @@ class EpisodeRecord:
     detections: np.ndarray
     per_target_logdet: np.ndarray
     info: dict = field(default_factory=dict)
+    fence: FenceSpec | None = None
 
     def __post_init__(self) -> None:
         if self.agent_paths.ndim == 2:

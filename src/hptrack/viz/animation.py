@@ -23,6 +23,7 @@ from hptrack.interface import InputError
 from hptrack.models.beliefs import position_logdet
 from hptrack.sim.record import EpisodeRecord
 from hptrack.subtasks import read_subtasks
+from hptrack.viz.fence import draw_fence
 from hptrack.viz.mission import ellipse_axes, target_color
 
 log = logging.getLogger(__name__)
@@ -238,6 +239,7 @@ def animate_mission(
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.tick_params(labelsize="small")
+    fence_keys = draw_fence(ax, record.fence) if record.fence is not None else []
 
     (history,) = ax.plot([], [], color="0.82", lw=0.6, zorder=1)
     (trail,) = ax.plot([], [], color="k", lw=1.4, zorder=4)
@@ -291,6 +293,7 @@ def animate_mission(
         ),
         Line2D([], [], color="0.35", marker="+", ms=7, ls="none", label="belief mean"),
         Line2D([], [], color="0.82", lw=0.8, label="agent path so far"),
+        *fence_keys,
     ]
     legend_style = {
         "fontsize": "small",

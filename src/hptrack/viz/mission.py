@@ -20,6 +20,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Ellipse, Patch
 
 from hptrack.sim.record import EpisodeRecord
+from hptrack.viz.fence import draw_fence
 from hptrack.viz.style import (
     DPI,
     colorbar_beside,
@@ -218,6 +219,7 @@ def plot_mission(
                 label=f"95 % belief, t = {t:.0f} s",
             )
         )
+    fence_keys = draw_fence(ax, record.fence) if record.fence is not None else []
     ax.plot(*path[0], marker="^", color="k", ms=8, ls="none", zorder=5)
     ax.plot(*path[-1], marker="D", color="k", mfc="none", mew=1.4, ms=8, ls="none", zorder=5)
     ax.set_aspect("equal")
@@ -262,7 +264,7 @@ def plot_mission(
                 label=f"target measured{where}",
             )
         )
-    artists["legend_handles"] = keys + ellipse_keys + marks
+    artists["legend_handles"] = keys + ellipse_keys + marks + fence_keys
     artists["legend_handler_map"] = {
         agent: _TimeShadedKey(),
         Ellipse: HandlerPatch(patch_func=_ellipse_key),
