@@ -124,3 +124,31 @@ def test_random_zones_agree_with_an_independent_visibility_graph(seed):
 def test_bad_fences_are_refused(kwargs, message):
     with pytest.raises(ValueError, match=message):
         compile_fence(**kwargs)
+
+
+def _fenced_mission(**fence):
+    from hptrack.interface import MissionSpec
+    from hptrack.models.fence import FenceSpec
+
+    return MissionSpec(process_noise=np.array([0.0]), target_ids=("t",), fence=FenceSpec(**fence))
+
+
+def test_the_chance_of_a_find_loses_what_the_footprint_cannot_see():
+    from hptrack.models.mission import visible_find
+
+    cov = np.diag([100.0**2, 100.0**2, 1e-12, 1e-12])
+    still = np.array([100.0, 0.0, 0.0, 0.0])
+    # free space x < 50: the footprint (radius 50 m) sees up to x = 100, half of the belief
+    wall = _fenced_mission(polygons=(((50.0, -1e5), (1e5, -1e5), (1e5, 1e5), (50.0, 1e5)),))
+    half = visible_find(wall.record, still, 0.0, cov, 0.0, 0.8, 100)
+    assert half == pytest.approx(0.8 * 0.5, abs=0.8 / 24)
+    # far from every zone: exactly the open-space chance
+    far = _fenced_mission(circles=((1e5, 1e5, 10.0),))
+    assert visible_find(far.record, still, 0.0, cov, 0.0, 0.8, 100) == 0.8
+    # deep inside a zone: nothing can be seen
+    deep = _fenced_mission(circles=((100.0, 0.0, 5000.0),))
+    assert visible_find(deep.record, still, 0.0, cov, 0.0, 0.8, 100) == 0.0
+    # a belief that drives out of the wall's shadow is seen where the spiral sweeps it later
+    leaving = np.array([100.0, 0.0, -2.0, 0.0])
+    later = visible_find(wall.record, leaving, 0.0, cov, 0.0, 0.8, 200)
+    assert later > half

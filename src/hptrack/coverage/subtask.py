@@ -18,6 +18,7 @@ intercept flight takes ``j = 0 .. n`` and spiral step ``m`` is ``path[n + m]``. 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from functools import cached_property
 
 import numpy as np
@@ -32,8 +33,9 @@ from hptrack.coverage.intercept import (
 from hptrack.coverage.sharp_estimator import SharpEstimate, estimate_sharp
 from hptrack.coverage.spiral import ShiftingSpiral
 from hptrack.interface import MissionSpec, Observation
-from hptrack.models.mission import approach_step_to
+from hptrack.models.mission import approach_step_to, visible_find
 from hptrack.models.state import velocities
+from hptrack.models.vehicle import flies_straight, flown_path
 from hptrack.subtasks import Subtask
 
 
@@ -97,6 +99,13 @@ class CoverageSubtask:
             m,
             None if remaining_budget is None else remaining_budget - n * m.time_step,
         )
+        self.straight = flies_straight(m.record.vehicle)
+        if not self.straight:
+            est = self.estimate
+            seen = visible_find(
+                m.record, mean, n * m.time_step, covs[0], self.q, est.p_find, est.cutoff_steps
+            )
+            self.estimate = replace(self.estimate, p_find=float(seen))
         self.spiral = ShiftingSpiral(
             self.intercept.start,
             velocities(mean) if m.motion.straight else velocities(means[0]),
@@ -148,7 +157,14 @@ class CoverageSubtask:
         remaining = (
             None if self.remaining_budget is None else self.remaining_budget - n * m.time_step
         )
-        return estimate_sharp(self.start_covariance, self.q, m, n, approach, remaining)
+        sharp = estimate_sharp(self.start_covariance, self.q, m, n, approach, remaining)
+        if self.straight:
+            return sharp
+        cutoff = self.estimate.cutoff_steps
+        seen = visible_find(
+            m.record, mean, n * m.time_step, self.start_covariance, self.q, sharp.p_find, cutoff
+        )
+        return replace(sharp, p_find=float(seen))
 
     @property
     def intercept_time(self) -> float:
@@ -194,6 +210,8 @@ class CoverageSubtask:
         if j < 0:
             raise ValueError(f"step offset must be non-negative, got {j}")
         n = self.intercept.steps
+        if j <= n and not self.straight:  # a fenced vehicle finds its own way to the meeting
+            return self.intercept.start.copy()
         if j <= n:
             return intercept_waypoint(
                 self.agent_position, self.intercept, self.mission.step_length, j
@@ -202,7 +220,8 @@ class CoverageSubtask:
 
     def planned_positions(self, n_steps: int | None = None) -> np.ndarray:
         """Planned positions ``(n_steps, 2)`` from the start; by default up to ``t_cutoff`` or
-        the budget's end, whichever comes first (``total_steps + 1`` positions), m."""
+        the budget's end, whichever comes first (``total_steps + 1`` positions), m; a fenced
+        vehicle's are where it flies when sent to the waypoints (`flown_path`)."""
         count = self.total_steps + 1 if n_steps is None else int(n_steps)
         n = self.intercept.steps
         head = intercept_path(
@@ -211,9 +230,15 @@ class CoverageSubtask:
             self.mission.step_length,
             np.arange(min(count, n + 1)),
         )
-        if count <= n + 1:
-            return head
-        return np.concatenate([head, self.spiral.positions(count - n)[1:]])
+        planned = (
+            head if count <= n + 1 else np.concatenate([head, self.spiral.positions(count - n)[1:]])
+        )
+        if self.straight:
+            return planned
+        sent = np.array([self.waypoint(j) for j in range(count)])
+        flown = np.empty_like(sent)
+        flown_path(self.mission.record.vehicle, self.agent_position, sent, flown)
+        return flown
 
     def next_waypoint(self, observation: Observation) -> np.ndarray:
         """Where to fly for the step after ``observation``, m."""

@@ -310,6 +310,24 @@ def nearest_free(fence, x, y):
     return px, py
 
 
+@numba.njit(cache=True)
+def sees(fence, x, y, radius):
+    """Whether a footprint of ``radius`` (m) flown where the UAV may fly can cover ``(x, y)``:
+    the point is free, or within ``radius`` of the free space's boundary."""
+    if point_free(fence, x, y):
+        return True
+    r2 = radius * radius
+    for e in range(fence.edges.shape[0]):
+        x0, y0, x1, y1 = fence.edges[e]
+        ex, ey = x1 - x0, y1 - y0
+        length2 = ex * ex + ey * ey
+        s = 0.0 if length2 == 0.0 else min(max(((x - x0) * ex + (y - y0) * ey) / length2, 0.0), 1.0)
+        dx, dy = x - x0 - s * ex, y - y0 - s * ey
+        if dx * dx + dy * dy <= r2:
+            return True
+    return False
+
+
 def fenced_distance(fence: Fence, a: Sequence[float], b: Sequence[float]) -> float:
     """The length of the shortest free flight from ``a`` to ``b`` (m; `fenced_route`)."""
     return float(fenced_route(fence, float(a[0]), float(a[1]), float(b[0]), float(b[1]))[0])

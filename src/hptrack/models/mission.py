@@ -39,6 +39,7 @@ from hptrack.models.sensor import (
     SensorPart,
     certain,
     detecting_sensor,
+    footprint_radius,
     sensor_measures,
 )
 from hptrack.models.vehicle import (
@@ -47,6 +48,8 @@ from hptrack.models.vehicle import (
     VehiclePart,
     vehicle_approach_step,
     vehicle_intercept_time,
+    vehicle_open_space,
+    vehicle_sees,
 )
 
 MAX_TARGETS = 62
@@ -253,6 +256,50 @@ def approach_step_to(mission, agent_x, agent_y, mean, steps, elapsed=0.0):
         ex, ey = mean_position_on(mission, mean, elapsed + steps * tau)
         vx, vy = (ex - x) / (steps * tau), (ey - y) / (steps * tau)
     return vehicle_approach_step(mission.vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps)
+
+
+QUADRATURE_RINGS = 12
+"""Rings of equal probability of `visible_find`'s quadrature."""
+QUADRATURE_ANGLES = 24
+"""Points per ring of that quadrature (staggered between rings)."""
+
+
+@numba.njit(cache=True)
+def visible_find(mission, mean, elapsed, cov, q, p_find, cutoff_steps):
+    """A coverage estimate's chance of a find ``p_find`` (within ``cutoff_steps`` of the
+    spiral's start) less what the footprint cannot cover from where the vehicle may fly
+    (exactly ``p_find`` in open space); ``mean`` (a state) is the belief's predicted
+    ``elapsed`` s ahead to the spiral's start, ``cov`` its covariance there, ``q`` its noise.
+
+    The spiral sweeps the belief's probability from its centre out, its ``P_cdf`` rising as
+    ``1 - exp(-c t)`` for a sweep of constant area rate; so the ellipse holding mass ``u`` is
+    swept at ``t_u = t_cutoff ln(1 - u) / ln(1 - p_find)``. A quadrature of equal weights,
+    `QUADRATURE_RINGS` rings of equal mass steps ``u`` in ``(0, p_find)``, `QUADRATURE_ANGLES`
+    points on each at the Mahalanobis radius ``sqrt(-2 ln(1 - u))`` of the belief predicted to
+    ``t_u`` around its mean then, counts the share of points the vehicle's footprint can see
+    (`hptrack.models.vehicle`); ``p_find`` times that share is returned."""
+    if vehicle_open_space(mission.vehicle) or p_find <= 0.0:
+        return p_find
+    tau = mission.time_step
+    radius = footprint_radius(mission.sensor)
+    scale = cutoff_steps / math.log(1.0 - min(p_find, 1.0 - 1e-12))
+    seen = 0
+    for k in range(QUADRATURE_RINGS):
+        u = p_find * (k + 0.5) / QUADRATURE_RINGS
+        log_miss = math.log(1.0 - u)
+        steps = scale * log_miss
+        x, y = mean_position_on(mission, mean, elapsed + steps * tau)
+        sxx, sxy, syy = position_covariance_on(mission, cov, q, steps)
+        l11 = math.sqrt(sxx)
+        l21 = sxy / l11
+        l22 = math.sqrt(max(syy - l21 * l21, 0.0))
+        r = math.sqrt(-2.0 * log_miss)
+        for j in range(QUADRATURE_ANGLES):
+            theta = 2.0 * math.pi * (j + 0.5 * (k % 2)) / QUADRATURE_ANGLES
+            zx, zy = r * math.cos(theta), r * math.sin(theta)
+            if vehicle_sees(mission.vehicle, x + l11 * zx, y + l21 * zx + l22 * zy, radius):
+                seen += 1
+    return p_find * (seen / (QUADRATURE_RINGS * QUADRATURE_ANGLES))
 
 
 @numba.njit(cache=True, inline="always")

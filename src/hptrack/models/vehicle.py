@@ -13,7 +13,11 @@ with `register_vehicle` and its compiled kernels (`VehicleKernels`). Compiled co
   never);
 * ``approach_step(vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps) -> (dx, dy)``: the
   agent's displacement per step relative to that point on an intercept flight of ``steps``
-  whole steps.
+  whole steps;
+* ``open_space(vehicle) -> bool``: whether the vehicle may fly anywhere (a compile-time
+  constant; ``True``, the default);
+* ``sees(vehicle, x, y, radius) -> bool``: whether a footprint of ``radius`` m flown where the
+  vehicle may fly can cover ``(x, y)`` (always, the default).
 
 The models: `HolonomicVehicle` (the paper's): a point that flies straight at up to ``v_a``.
 Interception, with ``d = mean - agent`` and the point's velocity ``v_hat``: the smallest
@@ -41,7 +45,7 @@ import numpy as np
 from numba.extending import overload
 
 from hptrack._dispatch import registered
-from hptrack.models.fence import Fence, fenced_route, nearest_free, point_free
+from hptrack.models.fence import Fence, fenced_route, nearest_free, point_free, sees
 
 
 class HolonomicVehicle(NamedTuple):
@@ -74,12 +78,27 @@ VehiclePart = HolonomicVehicle | FencedHolonomicVehicle
 """The vehicle classes a mission record may hold (a union of the registered ones)."""
 
 
+@numba.njit(cache=True, inline="always")
+def anywhere(vehicle):
+    """Default ``open_space``: the vehicle may fly anywhere."""
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def sees_anything(vehicle, x, y, radius):
+    """Default ``sees``: every point can be covered."""
+    return True
+
+
 class VehicleKernels(NamedTuple):
-    """The compiled kernels of a vehicle model (module docstring)."""
+    """The compiled kernels of a vehicle model (module docstring); ``open_space`` and
+    ``sees`` default to open space."""
 
     move: Callable
     intercept_time: Callable
     approach_step: Callable
+    open_space: Callable = anywhere
+    sees: Callable = sees_anything
 
 
 _VEHICLES: dict[type, VehicleKernels] = {}
@@ -107,6 +126,26 @@ def vehicle_intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy):
 def vehicle_approach_step(vehicle, agent_x, agent_y, x, y, vx, vy, tau, steps):
     """The registered ``approach_step`` of ``vehicle``'s class (compiled code only)."""
     raise NotImplementedError
+
+
+def vehicle_open_space(vehicle):
+    """The registered ``open_space`` of ``vehicle``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+def vehicle_sees(vehicle, x, y, radius):
+    """The registered ``sees`` of ``vehicle``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(vehicle_open_space, inline="always")
+def _open_space(vehicle):
+    return _kernel(vehicle, "open_space")
+
+
+@overload(vehicle_sees, inline="always")
+def _sees(vehicle, x, y, radius):
+    return _kernel(vehicle, "sees")
 
 
 @overload(vehicle_move, inline="always")
@@ -279,10 +318,42 @@ def fenced_intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy):
     return t
 
 
+@numba.njit(cache=True, inline="always")
+def fenced(vehicle):
+    """`FencedHolonomicVehicle`'s ``open_space``: no."""
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def fenced_sees(vehicle, x, y, radius):
+    """`FencedHolonomicVehicle`: `hptrack.models.fence.sees` of its fence."""
+    return sees(vehicle.fence, x, y, radius)
+
+
 register_vehicle(
     FencedHolonomicVehicle,
-    VehicleKernels(fenced_move, fenced_intercept_time, holonomic_approach_step),
+    VehicleKernels(
+        fenced_move, fenced_intercept_time, holonomic_approach_step, fenced, fenced_sees
+    ),
 )
+
+
+@numba.njit(cache=True)
+def flown_path(vehicle, start, waypoints, out):
+    """The positions ``out`` ``(k, 2)`` the vehicle reaches from ``start`` ``(2,)`` sent to
+    ``waypoints[1:]`` ``(k, 2)`` one per step (``out[0]`` is ``start``), m."""
+    agent = start.copy()
+    out[0] = agent
+    for j in range(1, waypoints.shape[0]):
+        vehicle_move(vehicle, agent, waypoints[j])
+        out[j] = agent
+
+
+def flies_straight(vehicle: VehiclePart) -> bool:
+    """Whether ``vehicle`` flies straight to any point (open space): an intercept's waypoints
+    can then be laid on the straight line; a fenced one is sent to the meeting point and finds
+    its own way."""
+    return not isinstance(vehicle, FencedHolonomicVehicle)
 
 
 @numba.njit(cache=True)

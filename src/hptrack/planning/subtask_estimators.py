@@ -13,6 +13,8 @@ disk) once per estimator class.
   from the covariance predicted to the spiral's start; a find lasts the intercept plus the
   rounded ``E[T_find]``, a miss the intercept plus ``t_cutoff``. The result of a target never
   found since the root depends only on its start step, so it is memoised per search;
+  where a fence keeps the vehicle from covering part of the searched ellipse, the chance of a
+  find loses that part (`hptrack.models.mission.visible_find`, both estimators);
 * ``"sharp"`` (`SharpEstimator`): `hptrack.coverage.sharp_estimator.sharp_coverage_outcome`,
   which counts detections on the intercept flight and the footprint's reach; a find lasts the
   estimated duration from departure. Its estimate depends on the approach: not memoised.
@@ -30,7 +32,7 @@ from numba.extending import overload
 from hptrack._dispatch import registered
 from hptrack.coverage.estimator import coverage_outcome
 from hptrack.coverage.sharp_estimator import sharp_coverage_outcome
-from hptrack.models.mission import approach_step_to, predict_covariance_on
+from hptrack.models.mission import approach_step_to, predict_covariance_on, visible_find
 
 _ESTIMATORS: dict[type, Callable] = {}
 ESTIMATORS: dict[str, type] = {}
@@ -87,6 +89,7 @@ def paper_outcome(estimator, env, state, a, t, ic, work):
         predict_covariance_on(mission, base_cov[a], q, start - base_step[a], work)
         k, p, expected = coverage_outcome(mission, work, q, left - ic)
         cutoff = int(k)
+        p = visible_find(mission, env.means[a], start * mission.time_step, work, q, p, cutoff)
         if base_step[a] == 0:
             memo.cutoff[a, start] = cutoff
             memo.p_find[a, start] = p
@@ -106,6 +109,7 @@ def sharp_outcome(estimator, env, state, a, t, ic, work):
     q = mission.process_noise[a]
     predict_covariance_on(mission, base_cov[a], q, t + ic - base_step[a], work)
     cutoff, p, expected = sharp_coverage_outcome(mission, work, q, env.n_steps - t - ic, ic, dx, dy)
+    p = visible_find(mission, env.means[a], (t + ic) * mission.time_step, work, q, p, cutoff)
     return p, max(1, int(math.floor(expected + 0.5))), max(1, ic + int(cutoff))
 
 
