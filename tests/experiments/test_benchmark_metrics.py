@@ -89,3 +89,17 @@ def test_an_unknown_metric_is_refused_in_one_line(cli, tmp_path, value):
         "--metric must be one of U, gospa_mean, gospa_end, track_loss, never_detected", repr(value)
     )
     assert not (tmp_path / "b.db").exists()
+
+
+def test_the_library_benchmark_summarises_the_metric_asked(tmp_path):
+    from hptrack.experiments.benchmark import benchmark
+    from hptrack.interface import InputError
+
+    db = tmp_path / "b.db"
+    gospa = benchmark(("greedy",), (2,), 1, db=db, metric="gospa_end")["greedy"][2]
+    u = benchmark(("greedy",), (2,), 1, db=db)["greedy"][2]
+    key = EpisodeKey("greedy", 2, 0, "homogeneous", planner_settings("greedy", None).canonical())
+    row = run_one(key)
+    assert (gospa["mean"], u["mean"]) == (row.gospa_end, row.uncertainty)
+    with pytest.raises(InputError, match="--metric must be one of"):
+        benchmark(("greedy",), (2,), 1, metric="ospa")

@@ -383,9 +383,10 @@ def benchmark(
     time_limit: float | None = None,
     detection_probability: float = 1.0,
     blind: bool = False,
+    metric: str = "U",
 ) -> dict:
-    """Fly every planner once on each random scenario and summarise ``U`` (the library face of
-    ``hptrack benchmark``).
+    """Fly every planner once on each random scenario and summarise ``U`` or another
+    ``metric`` (the library face of ``hptrack benchmark``).
 
     Args:
         planners: registered planner names.
@@ -403,13 +404,16 @@ def benchmark(
         detection_probability: the sensor's chance of detecting a target inside its footprint
             at each look (1: the paper's).
         blind: the planners are told the paper's certain sensor (`BenchmarkConfig`).
+        metric: what to summarise, one of `hptrack.sim.record.METRICS` (`summarise`).
 
     Returns:
         ``{planner: {n: {"mean", "std", "episodes", "never_observed", "wall_time_s"}}}``.
 
     Raises:
-        InputError: bad options, or both ``iterations`` and ``time_limit``.
+        InputError: bad options, both ``iterations`` and ``time_limit``, or an unknown
+            ``metric``.
     """
+    check_metric(metric)
     options = options or {}
     unknown = sorted(set(options) - set(planners))
     if unknown:
@@ -439,7 +443,7 @@ def benchmark(
     try:
         run_benchmark(config, store, workers)
         wanted = set(config.keys())
-        return summarise((row for row in store.rows() if row.key in wanted), planners)
+        return summarise((row for row in store.rows() if row.key in wanted), planners, metric)
     finally:
         store.close()
 
