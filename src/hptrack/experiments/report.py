@@ -6,6 +6,7 @@ protocol."""
 from __future__ import annotations
 
 import csv
+import math
 from collections import Counter
 from pathlib import Path
 
@@ -17,7 +18,7 @@ from hptrack.sim.record import METRICS, EpisodeRow
 
 def mean_std(mean: float, std: float) -> str:
     """A table cell ``mean ± std`` with two decimals (``-`` for no values)."""
-    return "-" if mean != mean else f"{mean:.2f} ± {std:.2f}"
+    return "-" if math.isnan(mean) else f"{mean:.2f} ± {std:.2f}"
 
 
 def effort_label(key: EpisodeKey) -> str:
