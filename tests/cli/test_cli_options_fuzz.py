@@ -79,7 +79,7 @@ def test_the_belief_stride_advice_is_the_smallest_that_fits():
     from hptrack.interface import InputError
     from hptrack.sim.episode import record_bytes
 
-    n, steps = 62, 1_000_000
+    n, steps = 40, 1_000_000
     with pytest.raises(InputError, match=r"--belief-stride (\d+)") as err:
         _check_record_size(n, steps, 1)
     stride = int(err.value.args[0].split("--belief-stride ")[1].split()[0])

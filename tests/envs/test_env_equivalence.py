@@ -187,3 +187,29 @@ def test_subtask_env_replaying_the_tree_search_gives_its_mission(scenario):
     assert info["U"] == record.uncertainty
     if scenario.targets[1].truth is not None:
         assert "missed" in outcomes
+
+
+@pytest.mark.parametrize("every_step", [False, True])
+def test_the_env_gives_the_records_gospa_and_track_loss(every_step):
+    from hptrack.interface import InputError
+
+    scenario = random_scenario(3, seed=5, budget=60.0)
+    env = gym.make("hptrack/Tracking-v0", n_targets=3, gospa_every_step=every_step).unwrapped
+    _, info = env.reset(options={"scenario": scenario})
+    rng = np.random.default_rng(1)
+    waypoints, gospas, truncated = [], [info.get("gospa")], False
+    while not truncated:
+        action = int(rng.integers(13))
+        waypoints.append(np.array(env.waypoint(action)))
+        _, _, _, truncated, info = env.step(action)
+        gospas.append(info.get("gospa"))
+    record = run_episode(scenario, ReplayPlanner(waypoints))
+    _, history = record.gospa_history()
+    assert info["gospa"] == history[-1] == record.metrics()["gospa_end"]
+    np.testing.assert_array_equal(info["tracks_lost"], record.tracks_lost())
+    if every_step:
+        np.testing.assert_array_equal(gospas, history)
+    else:
+        assert gospas[:-1] == [None] * (len(history) - 1)
+    with pytest.raises(InputError, match="gospa_every_step must be True or False, got 'yes'"):
+        gym.make("hptrack/Tracking-v0", gospa_every_step="yes")

@@ -64,8 +64,9 @@ def test_a_layout_2_database_is_migrated_with_every_result(layout_2):
     store.close()
     assert _raw(layout_2) == before  # every result unchanged, only identities rewritten
     with sqlite3.connect(layout_2) as db:
-        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 6
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 7
     for r in rows:
+        assert (r.gospa_mean, r.gospa_end, r.track_loss) == (None, None, None)
         text = r.key.planner_settings
         assert _rebuilt(r.key.planner, text) == text  # a full identity, as the code builds
         assert r.key.planner_settings_hash == digest_of(text)
@@ -144,3 +145,52 @@ def test_a_layout_without_a_migration_is_refused(tmp_path):
         db.execute("PRAGMA user_version = 1")
     with pytest.raises(InputError, match=r"another layout \(version 1"):
         ResultStore(path)
+
+
+LAYOUT_6 = """
+CREATE TABLE episodes (
+    planner TEXT NOT NULL, n_targets INTEGER NOT NULL, seed INTEGER NOT NULL,
+    setting TEXT NOT NULL, planner_settings_hash TEXT NOT NULL, planner_settings TEXT NOT NULL,
+    uncertainty REAL NOT NULL, never_observed REAL NOT NULL, detections INTEGER NOT NULL,
+    wall_time_s REAL NOT NULL, info TEXT NOT NULL,
+    PRIMARY KEY (planner, n_targets, seed, setting, planner_settings_hash)
+);
+CREATE TABLE claims (
+    planner TEXT NOT NULL, n_targets INTEGER NOT NULL, seed INTEGER NOT NULL,
+    setting TEXT NOT NULL, planner_settings_hash TEXT NOT NULL, host TEXT NOT NULL,
+    pid INTEGER NOT NULL, claimed_at REAL NOT NULL,
+    PRIMARY KEY (planner, n_targets, seed, setting, planner_settings_hash)
+);
+"""
+"""The tables of layout 6 (before the tracking metrics), as that store created them."""
+
+
+def test_a_layout_6_database_gains_the_metrics_as_null(tmp_path):
+    from hptrack.experiments.store import EpisodeKey
+    from hptrack.sim.record import EpisodeRow
+
+    path = tmp_path / "v6.db"
+    text = planner_settings("greedy", None).canonical()
+    with sqlite3.connect(path) as db:
+        db.executescript(LAYOUT_6)
+        db.execute(
+            "INSERT INTO episodes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            ("greedy", 2, 0, "homogeneous", digest_of(text), text, 30.5, 51.0, 7, 1.5, "{}"),
+        )
+        db.execute("PRAGMA user_version = 6")
+    store = ResultStore(path)
+    (old,) = store.rows()
+    assert (old.uncertainty, old.detections, old.info) == (30.5, 7, {})
+    assert (old.gospa_mean, old.gospa_end, old.track_loss) == (None, None, None)
+    key = EpisodeKey("greedy", 2, 1, "homogeneous", text)
+    new = EpisodeRow(key, 29.0, 51.0, 9, 2.0, {"targets_never_detected": 1}, 61.25, 70.5, 1)
+    store.add(new)
+    assert store.rows() == [old, new]
+    assert new.metric("never_detected") == 1 and new.metric("U") == 29.0
+    assert old.metric("gospa_end") is None
+    store.close()
+    with sqlite3.connect(path) as db:
+        assert db.execute("PRAGMA user_version").fetchone()[0] == 7
+        db.execute("UPDATE episodes SET gospa_end = 'far' WHERE seed = 1")
+    with pytest.raises(InputError, match=r"seed=1: gospa_end is 'far', not a finite number"):
+        ResultStore(path).rows()

@@ -47,6 +47,7 @@ from hptrack.registry import PLANNERS, make_planner
 from hptrack.scenario import Scenario, load_scenario, random_scenario, save_scenario
 from hptrack.scenario.model import MAX_STEPS
 from hptrack.sim.episode import record_bytes, run_episode
+from hptrack.sim.metrics import gospa_cutoff
 
 matplotlib.use("Agg")
 
@@ -243,6 +244,16 @@ def _print_summary(record) -> None:
     table.add_section()
     table.add_row("U", f"{record.uncertainty:.3f}", str(int(record.detections.sum())))
     console.print(table)
+    metrics = record.metrics()
+    cutoff = gospa_cutoff(record.sensor_diameter)
+    lost = metrics["tracks_lost"]
+    for line in (
+        f"GOSPA (p = 2, c = {cutoff:g} m): mean {metrics['gospa_mean']:.3f} m, "
+        f"end {metrics['gospa_end']:.3f} m",
+        f"track loss: {metrics['track_loss']} of {len(record.target_ids)} targets at the end "
+        "(outside the 99 % ellipse, or swapped)" + (f": {', '.join(lost)}" if lost else ""),
+    ):
+        console.print(escape(line), highlight=False, soft_wrap=True)
 
 
 @scenario_app.command("random")

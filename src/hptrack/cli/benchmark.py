@@ -130,11 +130,19 @@ def benchmark(
         int | None,
         typer.Option(help="Number of targets of the figure's scenario (default: the largest)."),
     ] = None,
+    metric: Annotated[
+        str,
+        typer.Option(
+            help="The metric the tables, the summary CSV and --json report: U, gospa_mean, "
+            "gospa_end, track_loss or never_detected."
+        ),
+    ] = "U",
 ) -> None:
     """Run the multi-target benchmark (paper Tables II-III); results are stored as they finish."""
     from hptrack.experiments.benchmark import (
         BenchmarkConfig,
         check_effort,
+        check_metric,
         motion_label,
         run_benchmark,
         scenario_for,
@@ -156,6 +164,7 @@ def benchmark(
 
         check_dask_options(scheduler, dask_local, scheduler_timeout)
     check_effort(iterations, time_limit)
+    check_metric(metric)
     names = tuple(dict.fromkeys(p.strip() for p in planners.split(",") if p.strip()))
     if not names:
         raise InputError(f"--planners expects planner names, got {planners!r}")
@@ -249,16 +258,21 @@ def benchmark(
             rows = [r for r in store.rows() if r.key in keys]
     console.print(f"{ran} episodes run now, {len(rows)} of {len(keys)} in the table ({db})")
     with writing(out, "--out"):
-        _write_report(config, rows, out, figure_planners, figure_targets)
+        _write_report(config, rows, out, figure_planners, figure_targets, metric)
     if json_path:
-        summary = summarise(rows, config.planners)
+        summary = summarise(rows, config.planners, metric)
         write_json(
             json_path, {p: {str(n): c for n, c in by_n.items()} for p, by_n in summary.items()}
         )
 
 
 def _write_report(
-    config, rows, out: Path, figure_planners: str | None, figure_targets: int | None
+    config,
+    rows,
+    out: Path,
+    figure_planners: str | None,
+    figure_targets: int | None,
+    metric: str,
 ) -> None:
     from rich.markdown import Markdown
 
@@ -270,9 +284,9 @@ def _write_report(
     from hptrack.viz.style import new_figure, save_figure
 
     out.mkdir(parents=True, exist_ok=True)
-    text = benchmark_report(config, rows)
+    text = benchmark_report(config, rows, metric)
     (out / "table.md").write_text(text)
-    write_csv(rows, out / "episodes.csv")
+    write_csv(rows, out / "episodes.csv", metric)
     console.print(Markdown(text))
     if rows:
         save_uncertainty_boxes(

@@ -13,7 +13,9 @@ Observation: `hptrack.envs.observation`. Reward: ``-(U_k - U_{k-1}) / n``, so an
 rewards sum to ``-(U_K - U_0) / n``. An episode is truncated when the budget is spent
 (``terminated`` is always False). ``info``: ``U``, ``per_target_logdet`` ``(n,)``,
 ``never_observed_U`` (the scenario's ``U`` if nothing is measured after the start),
-``detected`` ``(n,)`` and ``step``.
+``detected`` ``(n,)`` and ``step``; at the budget's end (every step with
+``gospa_every_step=True``) ``gospa``, m, between the belief means and the true positions, and at
+the end ``tracks_lost`` ``(n,)`` (`hptrack.sim.metrics`).
 
 `MissionEnv` holds what both environments share (scenarios, the world, the observation,
 ``info``, rendering); `TrackingEnv` adds the step-level actions.
@@ -31,8 +33,10 @@ from gymnasium import spaces
 from hptrack.envs.observation import ObservationLayout
 from hptrack.interface import InputError, shown
 from hptrack.models.mission import MAX_TARGETS
+from hptrack.models.state import POSITION, positions
 from hptrack.scenario.model import Scenario
 from hptrack.scenario.random import random_scenario
+from hptrack.sim.metrics import gospa, gospa_cutoff, track_lost
 from hptrack.sim.record import EpisodeRecord
 from hptrack.sim.step import World
 
@@ -127,6 +131,7 @@ class MissionEnv(gym.Env):
         max_targets: pad the observation to this many target slots and append a mask
             (episodes may then have any ``n <= max_targets``); default: no padding, ``n`` slots.
         render_mode: ``None`` or ``"rgb_array"`` (the mission figure of the episode so far).
+        gospa_every_step: ``info["gospa"]`` at every step, not only at the budget's end.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -137,8 +142,14 @@ class MissionEnv(gym.Env):
         setting: str = "heterogeneous",
         max_targets: int | None = None,
         render_mode: str | None = None,
+        gospa_every_step: bool = False,
     ) -> None:
         self._n_range = _target_range(n_targets)
+        if not isinstance(gospa_every_step, bool | np.bool_):
+            raise InputError(
+                f"gospa_every_step must be True or False, got {shown(gospa_every_step)}"
+            )
+        self.gospa_every_step = bool(gospa_every_step)
         if setting not in SETTINGS:
             raise InputError(f"setting must be one of {', '.join(SETTINGS)}, got {setting!r}")
         if max_targets is not None and (
@@ -245,13 +256,21 @@ class MissionEnv(gym.Env):
 
     def _info(self) -> dict[str, Any]:
         w = self._world()
-        return {
+        info = {
             "U": w.uncertainty,
             "per_target_logdet": w.logdets.copy(),
             "never_observed_U": self.never_observed_uncertainty,
             "detected": w.seen.copy(),
             "step": w.step_index,
         }
+        if w.done or self.gospa_every_step:
+            cutoff = gospa_cutoff(w.mission.sensor_diameter)
+            means, truth = positions(w.means), positions(w.truth)
+            info["gospa"] = gospa(means, truth, cutoff)
+            if w.done:
+                covs = w.covariances[:, POSITION, POSITION]
+                info["tracks_lost"] = track_lost(means, covs, truth, cutoff)
+        return info
 
     # --- rendering ---------------------------------------------------------------------------
     def _record(self) -> None:

@@ -12,6 +12,7 @@ and the budget.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
@@ -29,7 +30,7 @@ from hptrack.scenario.model import FootprintSensorSpec, Scenario
 from hptrack.scenario.random import random_scenario
 from hptrack.settings import PlannerSettings
 from hptrack.sim.episode import run_episode
-from hptrack.sim.record import EpisodeRow
+from hptrack.sim.record import METRICS, EpisodeRow
 
 MAX_SEED = 2**63 - 1
 """Largest scenario seed (SQLite's largest integer)."""
@@ -254,13 +255,17 @@ def run_one(key: EpisodeKey) -> EpisodeRow:
     told = planner_mission_for(key, scenario)
     record = run_episode(scenario, planner, belief_stride=scenario.n_steps, planner_mission=told)
     wall = time.perf_counter() - start
+    metrics = record.metrics()
     return EpisodeRow(
         key,
         record.uncertainty,
         scenario.never_observed_uncertainty(),
         int(record.detections.sum()),
         wall,
-        {**record.info, "targets_never_detected": int(np.sum(~record.detections.any(axis=0)))},
+        {**record.info, "targets_never_detected": metrics["targets_never_detected"]},
+        metrics["gospa_mean"],
+        metrics["gospa_end"],
+        metrics["track_loss"],
     )
 
 
@@ -378,9 +383,10 @@ def benchmark(
     time_limit: float | None = None,
     detection_probability: float = 1.0,
     blind: bool = False,
+    metric: str = "U",
 ) -> dict:
-    """Fly every planner once on each random scenario and summarise ``U`` (the library face of
-    ``hptrack benchmark``).
+    """Fly every planner once on each random scenario and summarise ``U`` or another
+    ``metric`` (the library face of ``hptrack benchmark``).
 
     Args:
         planners: registered planner names.
@@ -398,13 +404,16 @@ def benchmark(
         detection_probability: the sensor's chance of detecting a target inside its footprint
             at each look (1: the paper's).
         blind: the planners are told the paper's certain sensor (`BenchmarkConfig`).
+        metric: what to summarise, one of `hptrack.sim.record.METRICS` (`summarise`).
 
     Returns:
         ``{planner: {n: {"mean", "std", "episodes", "never_observed", "wall_time_s"}}}``.
 
     Raises:
-        InputError: bad options, or both ``iterations`` and ``time_limit``.
+        InputError: bad options, both ``iterations`` and ``time_limit``, or an unknown
+            ``metric``.
     """
+    check_metric(metric)
     options = options or {}
     unknown = sorted(set(options) - set(planners))
     if unknown:
@@ -434,7 +443,7 @@ def benchmark(
     try:
         run_benchmark(config, store, workers)
         wanted = set(config.keys())
-        return summarise((row for row in store.rows() if row.key in wanted), planners)
+        return summarise((row for row in store.rows() if row.key in wanted), planners, metric)
     finally:
         store.close()
 
@@ -446,9 +455,23 @@ def check_effort(iterations: int | None, time_limit: float | None) -> None:
         raise InputError("give --iterations or --time-limit (iterations or time_limit), not both")
 
 
-def summarise(rows: Iterable[EpisodeRow], order: Iterable[str] = ()) -> dict:
-    """``{planner: {n: {"mean", "std", "episodes", "never_observed"}}}`` of ``U``; planners in
-    ``order`` first (in that order), then the others as they first appear in ``rows``."""
+def check_metric(metric: str) -> str:
+    """``metric`` if it names one of `hptrack.sim.record.METRICS`.
+
+    Raises:
+        InputError: another name.
+    """
+    if metric not in METRICS:
+        raise InputError(f"--metric must be one of {', '.join(METRICS)}, got {metric!r}")
+    return metric
+
+
+def summarise(rows: Iterable[EpisodeRow], order: Iterable[str] = (), metric: str = "U") -> dict:
+    """``{planner: {n: {"mean", "std", "episodes", "never_observed", "wall_time_s"}}}`` of
+    ``metric`` (`hptrack.sim.record.METRICS`, default ``U``) over the episodes that hold it
+    (``episodes`` counts them; mean and std are NaN when none does); planners in ``order``
+    first (in that order), then the others as they first appear in ``rows``."""
+    check_metric(metric)
     groups: dict = {planner: {} for planner in order}
     for row in rows:
         groups.setdefault(row.key.planner, {}).setdefault(row.key.n_targets, []).append(row)
@@ -458,11 +481,12 @@ def summarise(rows: Iterable[EpisodeRow], order: Iterable[str] = ()) -> dict:
             continue
         out[planner] = {}
         for n, items in sorted(by_n.items()):
-            u = np.array([r.uncertainty for r in items])
+            values = [v for v in (r.metric(metric) for r in items) if v is not None]
+            u = np.array(values)
             out[planner][n] = {
-                "mean": float(u.mean()),
-                "std": float(u.std()),
-                "episodes": len(items),
+                "mean": float(u.mean()) if values else math.nan,
+                "std": float(u.std()) if values else math.nan,
+                "episodes": len(values),
                 "never_observed": float(np.mean([r.never_observed for r in items])),
                 "wall_time_s": float(np.mean([r.wall_time_s for r in items])),
             }

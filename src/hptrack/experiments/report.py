@@ -1,22 +1,24 @@
-"""Benchmark report: Markdown and CSV tables of mean ± std of ``U`` per planner and ``n``, the
-reduction of the first planner against each other, and the paper's rows beside a run that
-follows the paper's protocol."""
+"""Benchmark report: Markdown and CSV tables of mean ± std of ``U`` (or another metric of
+`hptrack.sim.record.METRICS`) per planner and ``n``, for ``U`` the reduction of the first
+planner against each other and the paper's rows beside a run that follows the paper's
+protocol."""
 
 from __future__ import annotations
 
 import csv
+import math
 from collections import Counter
 from pathlib import Path
 
 from hptrack.experiments.benchmark import BenchmarkConfig, gap_closed, reductions, summarise
 from hptrack.experiments.store import EpisodeKey
 from hptrack.registry import planner_entry
-from hptrack.sim.record import EpisodeRow
+from hptrack.sim.record import METRICS, EpisodeRow
 
 
 def mean_std(mean: float, std: float) -> str:
-    """A table cell ``mean ± std`` with two decimals."""
-    return f"{mean:.2f} ± {std:.2f}"
+    """A table cell ``mean ± std`` with two decimals (``-`` for no values)."""
+    return "-" if math.isnan(mean) else f"{mean:.2f} ± {std:.2f}"
 
 
 def effort_label(key: EpisodeKey) -> str:
@@ -96,13 +98,14 @@ def paper_protocol_gaps(config: BenchmarkConfig, rows: list[EpisodeRow]) -> list
     return gaps
 
 
-def benchmark_report(config: BenchmarkConfig, rows: list[EpisodeRow]) -> str:
+def benchmark_report(config: BenchmarkConfig, rows: list[EpisodeRow], metric: str = "U") -> str:
     """The benchmark's Markdown report: its setting and effort, the tables of
-    `markdown_tables` with the planners in the order asked, and the paper's rows of the
-    setting only when the run follows the paper's protocol (`paper_protocol_gaps`)."""
+    `markdown_tables` of ``metric`` with the planners in the order asked, and (of ``U``) the
+    paper's rows of the setting only when the run follows the paper's protocol
+    (`paper_protocol_gaps`)."""
     efforts = "; ".join(f"{p}: {config.settings[p].effort_label()}" for p in config.planners)
     gaps = paper_protocol_gaps(config, rows)
-    paper = () if gaps else PAPER_ROWS[config.homogeneous]
+    paper = () if gaps or metric != "U" else PAPER_ROWS[config.homogeneous]
     note = (
         f"\n\nThe paper's rows are left out: {'; '.join(gaps)} (its protocol: "
         f"{PAPER_SCENARIOS} scenarios for each n in {PAPER_TARGET_COUNTS[0]}.."
@@ -113,21 +116,32 @@ def benchmark_report(config: BenchmarkConfig, rows: list[EpisodeRow]) -> str:
     return (
         f"Setting: {config.setting}; planning effort: {efforts}; "
         f"{config.scenarios} scenarios per n from seed {config.first_seed}.{note}\n\n"
-        + markdown_tables(rows, paper, config.planners)
+        + markdown_tables(rows, paper, config.planners, metric)
     )
 
 
 def markdown_tables(
-    rows: list[EpisodeRow], paper_rows: tuple[str, ...] = (), planners: tuple[str, ...] = ()
+    rows: list[EpisodeRow],
+    paper_rows: tuple[str, ...] = (),
+    planners: tuple[str, ...] = (),
+    metric: str = "U",
 ) -> str:
-    """The U table (ours in the order of ``planners``, the never-observed score, chosen paper
-    rows), the first planner's reduction of U against each other planner, and wall times."""
-    summary = summarise(rows, planners)
+    """The table of ``metric`` (ours in the order of ``planners``; for ``U`` the
+    never-observed score, chosen paper rows and the first planner's reduction of U against
+    each other planner), and wall times."""
+    summary = summarise(rows, planners, metric)
     ns = sorted({n for by_n in summary.values() for n in by_n})
     head = "| planner | " + " | ".join(f"n={n}" for n in ns) + " |"
     rule = "|---|" + "---|" * len(ns)
-    gaps = gap_closed(summary)
-    lines = ["Mean ± std of U (lower is better); episodes per cell in brackets.", "", head, rule]
+    u = metric == "U"
+    gaps = gap_closed(summary) if u else {}
+    title = (
+        "Mean ± std of U (lower is better); episodes per cell in brackets."
+        if u
+        else f"Mean ± std of {METRICS[metric]} (lower is better); episodes holding it per "
+        "cell in brackets."
+    )
+    lines = [title, "", head, rule]
     if gaps:
         lines[0] += (
             " `clairvoyant` reads the true target states (a perfect-knowledge reference that "
@@ -144,13 +158,15 @@ def markdown_tables(
         truth = " (reads the truth)" if planner_entry(planner).reads_truth else ""
         lines.append(f"| {planner}{truth} | " + " | ".join(cells) + " |")
     first = next(iter(summary))
-    lines.append(
-        "| never observed (same scenarios) | "
-        + " | ".join(
-            f"{summary[first][n]['never_observed']:.2f}" if n in summary[first] else "" for n in ns
+    if u:
+        lines.append(
+            "| never observed (same scenarios) | "
+            + " | ".join(
+                f"{summary[first][n]['never_observed']:.2f}" if n in summary[first] else ""
+                for n in ns
+            )
+            + " |"
         )
-        + " |"
-    )
     for name in paper_rows:
         paper = PAPER_TABLE[name]
         lines.append(
@@ -158,7 +174,7 @@ def markdown_tables(
             + " | ".join(mean_std(*paper[n]) if n in paper else "" for n in ns)
             + " |"
         )
-    if len(summary) > 1:
+    if u and len(summary) > 1:
         lines += [
             "",
             f"Reduction of mean U by {first} against each other planner, percent "
@@ -190,8 +206,9 @@ def markdown_tables(
     return "\n".join(lines) + "\n"
 
 
-def write_csv(rows: list[EpisodeRow], path: Path) -> None:
-    """Per-episode rows and, in a sibling file, the per-cell summary."""
+def write_csv(rows: list[EpisodeRow], path: Path, metric: str = "U") -> None:
+    """Per-episode rows (``U`` and every other metric of `METRICS`, empty where a row holds
+    none) and, in a sibling file, the per-cell summary of ``metric``."""
     with open(path, "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(
@@ -206,6 +223,7 @@ def write_csv(rows: list[EpisodeRow], path: Path) -> None:
                 "detections",
                 "wall_time_s",
                 "planner_settings",
+                *(m for m in METRICS if m != "U"),
             ]
         )
         for r in rows:
@@ -221,6 +239,7 @@ def write_csv(rows: list[EpisodeRow], path: Path) -> None:
                     r.detections,
                     r.wall_time_s,
                     r.key.planner_settings,
+                    *("" if r.metric(m) is None else r.metric(m) for m in METRICS if m != "U"),
                 ]
             )
     summary_path = path.with_name(path.stem + "_summary.csv")
@@ -230,14 +249,14 @@ def write_csv(rows: list[EpisodeRow], path: Path) -> None:
             [
                 "planner",
                 "n_targets",
-                "mean_U",
-                "std_U",
+                f"mean_{metric}",
+                f"std_{metric}",
                 "episodes",
                 "never_observed",
                 "mean_wall_time_s",
             ]
         )
-        for planner, by_n in summarise(rows).items():
+        for planner, by_n in summarise(rows, metric=metric).items():
             for n, cell in by_n.items():
                 writer.writerow(
                     [

@@ -42,7 +42,7 @@ from hptrack.jsonout import json_text
 from hptrack.settings import digest_of
 from hptrack.sim.record import EpisodeRow
 
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS episodes (
     planner TEXT NOT NULL,
@@ -56,6 +56,9 @@ CREATE TABLE IF NOT EXISTS episodes (
     detections INTEGER NOT NULL,
     wall_time_s REAL NOT NULL,
     info TEXT NOT NULL,
+    gospa_mean REAL,
+    gospa_end REAL,
+    track_loss INTEGER,
     PRIMARY KEY (planner, n_targets, seed, setting, planner_settings_hash)
 );
 CREATE TABLE IF NOT EXISTS claims (
@@ -115,11 +118,40 @@ def _migrate_2_to_3(db: sqlite3.Connection) -> None:
     for statement in SCHEMA.split(";"):
         db.execute(statement)
     db.execute(
-        "INSERT INTO episodes SELECT planner, n_targets, seed, setting, "
-        "digest_of(full_identity(planner, settings)), full_identity(planner, settings), "
-        "uncertainty, never_observed, detections, wall_time_s, info FROM episodes_layout_2"
+        f"INSERT INTO episodes ({', '.join(_LAYOUT_3_COLUMNS)}) SELECT planner, n_targets, "
+        "seed, setting, digest_of(full_identity(planner, settings)), "
+        "full_identity(planner, settings), uncertainty, never_observed, detections, "
+        "wall_time_s, info FROM episodes_layout_2"
     )
     db.execute("DROP TABLE episodes_layout_2")
+
+
+_LAYOUT_3_COLUMNS = (
+    "planner",
+    "n_targets",
+    "seed",
+    "setting",
+    "planner_settings_hash",
+    "planner_settings",
+    "uncertainty",
+    "never_observed",
+    "detections",
+    "wall_time_s",
+    "info",
+)
+"""The columns of the episodes of layouts 3 to 6 (the step from layout 2 fills these)."""
+METRIC_COLUMNS = (("gospa_mean", "REAL"), ("gospa_end", "REAL"), ("track_loss", "INTEGER"))
+"""The tracking metrics layout 7 added (`hptrack.sim.record.EpisodeRow`); NULL in rows
+stored before."""
+
+
+def _add_metrics(db: sqlite3.Connection) -> None:
+    """Layout 6 -> 7: the tracking metrics' columns, NULL in every stored row (their episodes
+    did not keep what the metrics need)."""
+    have = {c[1] for c in db.execute("PRAGMA table_info(episodes)")}
+    for name, kind in METRIC_COLUMNS:
+        if name not in have:  # the step from layout 2 builds the table of this layout
+            db.execute(f"ALTER TABLE episodes ADD COLUMN {name} {kind}")
 
 
 def _adding(added: dict[str, dict]) -> Callable[[sqlite3.Connection], None]:
@@ -149,6 +181,7 @@ MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
     3: _adding({"mcts": {"miss": "drop"}}),  # the sub-task MDP's miss rule
     4: _adding({"mcts": {"passes": "ignore"}}),  # ... and its credit of passes
     5: _adding({"mcts": {"readmit": False, "commit": 0.0}}),  # re-admission, commitment
+    6: _add_metrics,
 }
 """Layout version -> the step that makes a database of that layout one of the next."""
 
@@ -292,7 +325,7 @@ class ResultStore:
     def _add(self, row: EpisodeRow) -> None:
         key = row.key
         self._db.execute(
-            "INSERT OR IGNORE INTO episodes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "INSERT OR IGNORE INTO episodes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (
                 *key._id(),
                 key.planner_settings,
@@ -301,6 +334,9 @@ class ResultStore:
                 row.detections,
                 row.wall_time_s,
                 json_text(row.info),
+                row.gospa_mean,
+                row.gospa_end,
+                row.track_loss,
             ),
         )
         self._db.execute(
@@ -374,8 +410,8 @@ class ResultStore:
         with self._guard():
             cur = self._db.execute(
                 "SELECT planner, n_targets, seed, setting, planner_settings, uncertainty, "
-                "never_observed, detections, wall_time_s, info FROM episodes "
-                "ORDER BY planner, n_targets, seed"
+                "never_observed, detections, wall_time_s, info, gospa_mean, gospa_end, "
+                "track_loss FROM episodes ORDER BY planner, n_targets, seed"
             )
             return [self._row(r) for r in cur]
 
@@ -389,6 +425,11 @@ class ResultStore:
             ("never_observed", r[6], float),
             ("detections", r[7], int),
             ("wall_time_s", r[8], float),
+            *(
+                (name, value, int if kind == "INTEGER" else float)
+                for (name, kind), value in zip(METRIC_COLUMNS, r[10:], strict=True)
+                if value is not None
+            ),
         ):
             if not isinstance(value, (int, float) if kind is float else int) or (
                 kind is float and not math.isfinite(value)
@@ -400,7 +441,18 @@ class ResultStore:
             info = None
         if not isinstance(info, dict):
             raise InputError(f"{where}: info is {str(r[9])[:60]!r}, not a JSON object")
-        return EpisodeRow(EpisodeKey(*r[:5]), float(r[5]), float(r[6]), r[7], float(r[8]), info)
+        gospa_mean, gospa_end, track_loss = r[10:]
+        return EpisodeRow(
+            EpisodeKey(*r[:5]),
+            float(r[5]),
+            float(r[6]),
+            r[7],
+            float(r[8]),
+            info,
+            None if gospa_mean is None else float(gospa_mean),
+            None if gospa_end is None else float(gospa_end),
+            track_loss,
+        )
 
     def close(self) -> None:
         self._db.close()

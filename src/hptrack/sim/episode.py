@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from hptrack.interface import MissionSpec, Planner, TruthReader, vehicle_waypoints
+from hptrack.models.state import positions
 from hptrack.scenario.model import Scenario
 from hptrack.sim.record import EpisodeRecord
 from hptrack.sim.step import World
@@ -66,9 +67,11 @@ def run_episode(
     detections = np.zeros((n_steps + 1, n), dtype=bool)
     belief_means = np.empty((len(stored), n, d))
     belief_covs = np.empty((len(stored), n, d, d))
+    mean_positions = np.empty((n_steps + 1, n, 2))
 
     def store(k: int) -> None:
         agent_paths[k], true_states[k], detections[k] = world.agents, world.truth, world.seen
+        mean_positions[k] = positions(world.means)
         if k in store_at:
             belief_means[store_at[k]] = world.means
             belief_covs[store_at[k]] = world.covariances
@@ -101,12 +104,14 @@ def run_episode(
         per_target_logdet=world.logdets.copy(),
         info=dict(planner.episode_info()),
         fence=mission.fence,
+        mean_positions=mean_positions,
     )
 
 
 def record_bytes(n_targets: int, n_steps: int, belief_stride: int = 1) -> int:
     """Memory an `EpisodeRecord` of a mission needs, bytes (to refuse one that does not
-    fit before it starts; sized for 4-D states)."""
-    per_step = 8 * (2 + 4 * n_targets) + n_targets
+    fit before it starts; sized for 4-D states: per step the vehicle, the truths, the
+    belief means' positions and the detections)."""
+    per_step = 8 * (2 + 6 * n_targets) + n_targets
     stored = n_steps // belief_stride + 2
     return (n_steps + 1) * per_step + stored * 8 * 20 * n_targets

@@ -5,13 +5,15 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hptrack.jsonout import json_text
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.fence import FenceSpec
+from hptrack.models.state import POSITION, positions
+from hptrack.sim.metrics import gospa_cutoff, gospa_history, never_detected, track_lost
 from hptrack.subtasks import read_subtasks
 
 if TYPE_CHECKING:
@@ -47,6 +49,9 @@ class EpisodeRecord:
         info: planner-specific metadata (JSON-serialisable), e.g. its sub-task log.
         fence: where the vehicles might fly (`hptrack.models.fence.FenceSpec`), ``None`` in
             open space.
+        mean_positions: ``(K+1, n, 2)`` the belief means' positions at every step, m (what
+            the metrics need, whatever the belief stride; ``None`` in a record of an older
+            hptrack or of a flight log, whose metrics then use the stored belief steps).
     """
 
     planner: str
@@ -63,10 +68,13 @@ class EpisodeRecord:
     per_target_logdet: np.ndarray
     info: dict = field(default_factory=dict)
     fence: FenceSpec | None = None
+    mean_positions: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.agent_paths.ndim == 2:
             self.agent_paths = self.agent_paths[:, None, :]
+        if self.mean_positions is None and len(self.belief_steps) == len(self.agent_paths):
+            self.mean_positions = positions(self.belief_means)
 
     @property
     def agent_path(self) -> np.ndarray:
@@ -97,15 +105,64 @@ class EpisodeRecord:
         """``U`` at each stored belief step."""
         return position_logdet(self.belief_covariances).sum(axis=1)
 
+    def gospa_history(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(steps, GOSPA)``: GOSPA (`hptrack.sim.metrics`, ``c = w / 2``) between the belief
+        means and the true positions at every step (at the stored belief steps in a record
+        without `mean_positions`), m; ``GOSPA`` is NaN where the record has no truth."""
+        if self.mean_positions is None:
+            steps, means = self.belief_steps, positions(self.belief_means)
+        else:
+            steps, means = np.arange(len(self.mean_positions)), self.mean_positions
+        truths = positions(self.true_states)[steps]
+        known = np.isfinite(truths).all(axis=(1, 2))
+        values = np.full(len(steps), np.nan)
+        values[known] = gospa_history(
+            means[known], truths[known], gospa_cutoff(self.sensor_diameter)
+        )
+        return np.asarray(steps), values
+
+    def tracks_lost(self) -> np.ndarray | None:
+        """``(n,)`` which targets' tracks are lost at the end (`hptrack.sim.metrics.track_lost`:
+        truth outside the belief's 99 % ellipse, or a swapped track); ``None`` without the
+        truth."""
+        truth = positions(self.true_states[-1])
+        if not np.isfinite(truth).all():
+            return None
+        return track_lost(
+            positions(self.belief_means[-1]),
+            self.belief_covariances[-1][:, POSITION, POSITION],
+            truth,
+            gospa_cutoff(self.sensor_diameter),
+        )
+
+    def metrics(self) -> dict:
+        """The tracking metrics beside ``U`` (`hptrack.sim.metrics`): ``gospa_mean`` (over
+        `gospa_history`'s steps) and ``gospa_end`` (at the last step), m, ``track_loss`` (the
+        targets whose tracks are lost at the end), ``tracks_lost`` (their ids) and
+        ``targets_never_detected``; the truth's metrics are ``None`` in a record without it."""
+        _, history = self.gospa_history()
+        lost = self.tracks_lost()
+        known = bool(np.isfinite(history).all())
+        return {
+            "gospa_mean": float(history.mean()) if known else None,
+            "gospa_end": float(history[-1]) if known else None,
+            "track_loss": None if lost is None else int(lost.sum()),
+            "tracks_lost": None
+            if lost is None
+            else [t for t, gone in zip(self.target_ids, lost, strict=True) if gone],
+            "targets_never_detected": never_detected(self.detections),
+        }
+
     def summary(self) -> dict:
-        """JSON-ready summary: ``U``, per-target log det and detections, planner, seed, and
-        the planner's metadata with its sub-tasks naming targets by id
-        (`subtasks_with_ids`)."""
+        """JSON-ready summary: ``U``, the tracking metrics (`metrics`), per-target log det and
+        detections, planner, seed, and the planner's metadata with its sub-tasks naming targets
+        by id (`subtasks_with_ids`)."""
         info = dict(self.info)
         if info.get("subtasks"):
             info["subtasks"] = subtasks_with_ids(info["subtasks"], self.target_ids)
         return {
             "U": self.uncertainty,
+            **self.metrics(),
             "per_target_logdet": dict(
                 zip(self.target_ids, map(float, self.per_target_logdet), strict=True)
             ),
@@ -129,23 +186,24 @@ class EpisodeRecord:
             "sensor_diameter": self.sensor_diameter,
             "info": self.info,
         }
+        arrays: dict[str, Any] = {
+            "agent_paths": self.agent_paths,
+            "true_states": self.true_states,
+            "belief_steps": self.belief_steps,
+            "belief_means": self.belief_means,
+            "belief_covariances": self.belief_covariances,
+            "detections": self.detections,
+            "per_target_logdet": self.per_target_logdet,
+        }
+        if self.mean_positions is not None:
+            arrays["mean_positions"] = self.mean_positions
         with open(path, "wb") as fh:
-            np.savez_compressed(
-                fh,
-                meta=np.array(json_text(meta)),
-                agent_paths=self.agent_paths,
-                true_states=self.true_states,
-                belief_steps=self.belief_steps,
-                belief_means=self.belief_means,
-                belief_covariances=self.belief_covariances,
-                detections=self.detections,
-                per_target_logdet=self.per_target_logdet,
-            )
+            np.savez_compressed(fh, meta=np.array(json_text(meta)), **arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> EpisodeRecord:
         """Read a record written by `save` (also by an older hptrack, whose file holds one
-        vehicle's ``agent_path``)."""
+        vehicle's ``agent_path`` and no ``mean_positions``)."""
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
             arrays = {k: data[k] for k in data.files if k != "meta"}
@@ -166,8 +224,9 @@ class EpisodeRecord:
 class EpisodeRow:
     """One finished episode as a results store keeps it
     (`hptrack.experiments.store.ResultStore`): its key, ``U``, the never-observed ``U`` of
-    the same scenario, the number of detection steps, the wall time (s) and planner
-    metadata."""
+    the same scenario, the number of detection steps, the wall time (s), planner
+    metadata and the tracking metrics (`EpisodeRecord.metrics`; ``None`` in a row stored
+    before hptrack kept them). Its ``info`` holds ``targets_never_detected``."""
 
     key: EpisodeKey
     uncertainty: float
@@ -175,3 +234,26 @@ class EpisodeRow:
     detections: int
     wall_time_s: float
     info: dict
+    gospa_mean: float | None = None
+    gospa_end: float | None = None
+    track_loss: int | None = None
+
+    def metric(self, name: str) -> float | None:
+        """The value of a metric of `METRICS` (a count is an int; ``None``: the row does not
+        hold it)."""
+        if name == "U":
+            return self.uncertainty
+        if name == "never_detected":
+            return self.info.get("targets_never_detected")
+        return getattr(self, name)
+
+
+METRICS = {
+    "U": "U (sum of the final log det of the position covariances)",
+    "gospa_mean": "GOSPA over the mission's steps, mean, m",
+    "gospa_end": "GOSPA at the budget's end, m",
+    "track_loss": "targets whose tracks are lost at the end",
+    "never_detected": "targets never detected",
+}
+"""The metrics an `EpisodeRow` holds, each with what a report calls it (all lower is
+better)."""
