@@ -85,6 +85,14 @@ def benchmark(
             "detector misses (needs --detection-probability below 1).",
         ),
     ] = False,
+    no_fly: Annotated[
+        bool,
+        typer.Option(
+            "--no-fly",
+            help="Add one to three random no-fly circles covering 10-25 % of the targets' "
+            "square to every scenario (margin 10 m).",
+        ),
+    ] = False,
     iterations: Annotated[
         int | None, typer.Option(help="Tree-search iterations per decision.")
     ] = None,
@@ -192,6 +200,7 @@ def benchmark(
         motion="" if motion_label(motion) is None else motion,
         detection_probability=detection_probability,
         blind=blind,
+        no_fly=no_fly,
     )
     scenario_for(config.keys()[0])  # a bad --motion value is refused before any work
     with ExitStack() as stack:

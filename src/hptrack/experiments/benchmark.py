@@ -27,7 +27,7 @@ from hptrack.experiments.workers import stop_workers, worker_pool
 from hptrack.interface import InputError, MissionSpec
 from hptrack.registry import planner_entry, planner_settings
 from hptrack.scenario.model import FootprintSensorSpec, Scenario
-from hptrack.scenario.random import random_scenario
+from hptrack.scenario.random import random_scenario, with_no_fly
 from hptrack.settings import PlannerSettings
 from hptrack.sim.episode import run_episode
 from hptrack.sim.record import METRICS, EpisodeRow
@@ -56,6 +56,8 @@ class BenchmarkConfig:
             footprint at each look (1: the paper's sensor).
         blind: the planners are told the paper's sensor (``Pd = 1``) while the world's detector
             misses (`hptrack.sim.episode.run_episode`'s ``planner_mission``).
+        no_fly: each scenario gets random no-fly circles
+            (`hptrack.scenario.random.with_no_fly`).
     """
 
     planners: tuple[str, ...]
@@ -68,6 +70,7 @@ class BenchmarkConfig:
     motion: str = ""
     detection_probability: float = 1.0
     blind: bool = False
+    no_fly: bool = False
 
     def __post_init__(self) -> None:
         missing = [p for p in self.planners if p not in self.settings]
@@ -92,6 +95,7 @@ class BenchmarkConfig:
             self.motion,
             self.detection_probability,
             self.blind,
+            self.no_fly,
         )
 
     def keys(self) -> list[EpisodeKey]:
@@ -154,12 +158,13 @@ def setting_name(
     motion: str = "",
     detection_probability: float = 1.0,
     blind: bool = False,
+    no_fly: bool = False,
 ) -> str:
     """The setting part of an episode's identity: ``"homogeneous"`` or ``"heterogeneous"``,
     with ``"+paper_text"`` when ``Q`` is the paper's printed form, ``"+MODEL:VALUE"`` under
     another belief motion (`motion_label`), ``"+pd:P"`` when the sensor detects with
-    probability ``P < 1`` and ``"+blind"`` when the planners are told ``Pd = 1``
-    (`BenchmarkConfig`)."""
+    probability ``P < 1``, ``"+blind"`` when the planners are told ``Pd = 1`` and ``"+nofly"``
+    with random no-fly circles (`BenchmarkConfig`)."""
     base = "homogeneous" if homogeneous else "heterogeneous"
     parts = [base] + ([process_noise_form] if process_noise_form != "continuous" else [])
     parts += [motion] if motion_label(motion) is not None else []
@@ -167,6 +172,7 @@ def setting_name(
         [f"{DETECTION_PART}{float(detection_probability)!r}"] if detection_probability != 1 else []
     )
     parts += [BLIND_PART] if blind else []
+    parts += [NO_FLY_PART] if no_fly else []
     return "+".join(parts)
 
 
@@ -174,6 +180,8 @@ DETECTION_PART = "pd:"
 """The prefix of a setting's detection probability part (`setting_name`)."""
 BLIND_PART = "blind"
 """The setting part of planners told the paper's certain sensor (`setting_name`)."""
+NO_FLY_PART = "nofly"
+"""The setting part of scenarios with random no-fly circles (`setting_name`)."""
 
 
 def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
@@ -185,7 +193,9 @@ def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
     motions = [
         motion_label(part)
         for part in rest
-        if part not in forms and not part.startswith(DETECTION_PART) and part != BLIND_PART
+        if part not in forms
+        and not part.startswith(DETECTION_PART)
+        and part not in (BLIND_PART, NO_FLY_PART)
     ]
     fields: dict = {"process_noise_form": forms[0] if forms else "continuous"}
     if motions:
@@ -198,9 +208,12 @@ def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
 def scenario_for(key: EpisodeKey) -> Scenario:
     """The random scenario of a benchmark episode."""
     base, fields, _, _ = _setting_parts(key.setting)
-    return random_scenario(
+    scenario = random_scenario(
         key.n_targets, seed=key.seed, homogeneous=base == "homogeneous", **fields
     )
+    if NO_FLY_PART in key.setting.split("+"):
+        return with_no_fly(scenario, key.seed)
+    return scenario
 
 
 def planner_mission_for(key: EpisodeKey, scenario: Scenario) -> MissionSpec | None:
@@ -383,6 +396,7 @@ def benchmark(
     time_limit: float | None = None,
     detection_probability: float = 1.0,
     blind: bool = False,
+    no_fly: bool = False,
     metric: str = "U",
 ) -> dict:
     """Fly every planner once on each random scenario and summarise ``U`` or another
@@ -404,6 +418,7 @@ def benchmark(
         detection_probability: the sensor's chance of detecting a target inside its footprint
             at each look (1: the paper's).
         blind: the planners are told the paper's certain sensor (`BenchmarkConfig`).
+        no_fly: random no-fly circles in every scenario (`BenchmarkConfig`).
         metric: what to summarise, one of `hptrack.sim.record.METRICS` (`summarise`).
 
     Returns:
@@ -438,6 +453,7 @@ def benchmark(
         first_seed,
         detection_probability=detection_probability,
         blind=blind,
+        no_fly=no_fly,
     )
     store = ResultStore(db)
     try:

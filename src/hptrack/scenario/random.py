@@ -5,13 +5,18 @@ Per target: position mean uniform in [-1000, 1000] m per axis, velocity mean uni
 [-0.8, 0.8], velocity variances uniform in [0.25, 0.5] (m/s)^2, q uniform in [1e-4, 5e-4].
 The *homogeneous* setting (comparison with ARVI and A*) draws one q and one covariance per
 scenario; the *heterogeneous* setting draws everything per target.
+
+`with_no_fly` adds random no-fly circles to a scenario (beyond the paper: the fence
+benchmark's protocol).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from hptrack.scenario.model import AgentSpec, Scenario, TargetSpec
+from hptrack.scenario.model import AgentSpec, CircleZoneSpec, FenceBlockSpec, Scenario, TargetSpec
 
 POSITION_RANGE_M = (-1000.0, 1000.0)
 VELOCITY_RANGE_MPS = (-3.0, 3.0)
@@ -63,3 +68,55 @@ def random_scenario(
             )
         )
     return Scenario(seed=seed, agent=agent or AgentSpec(), targets=targets, **scenario_fields)
+
+
+NO_FLY_CIRCLES = (1, 3)
+"""Fewest and most random no-fly circles (`with_no_fly`)."""
+NO_FLY_SHARE = (0.10, 0.25)
+"""The range of the share of the targets' square (`POSITION_RANGE_M` per axis) they cover."""
+NO_FLY_MARGIN_M = 10.0
+"""The margin of a random fence, m."""
+NO_FLY_KEY = 11
+"""The spawn key of the no-fly circles' random stream (the scenario's own draws do not change)."""
+NO_FLY_ATTEMPTS = 10_000
+"""Most draws of the circles before giving up."""
+
+
+def with_no_fly(scenario: Scenario, seed: int) -> Scenario:
+    """``scenario`` with `NO_FLY_CIRCLES` random no-fly circles covering together a share in
+    `NO_FLY_SHARE` of the targets' square (areas split at random; centres uniform in the
+    square), kept `NO_FLY_MARGIN_M` from; the circles are drawn again until the start is free
+    and every target's prior mean is in sight (`Scenario`'s fence checks), from ``seed``'s own
+    stream.
+
+    Raises:
+        ValueError: no such circles in `NO_FLY_ATTEMPTS` draws.
+    """
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(NO_FLY_KEY,)))
+    low, high = POSITION_RANGE_M
+    area = (high - low) ** 2
+    data = scenario.model_dump()
+    for _ in range(NO_FLY_ATTEMPTS):
+        count = int(rng.integers(NO_FLY_CIRCLES[0], NO_FLY_CIRCLES[1] + 1))
+        share = rng.uniform(*NO_FLY_SHARE)
+        shares = share * rng.dirichlet(np.ones(count))
+        circles = [
+            CircleZoneSpec(
+                circle=(*rng.uniform(low, high, size=2).tolist(), math.sqrt(a * area / math.pi))
+            )
+            for a in shares
+        ]
+        centres = np.array([c.circle[:2] for c in circles])
+        radii = np.array([c.circle[2] for c in circles]) + NO_FLY_MARGIN_M
+        sight = 0.5 * scenario.sensor_spec().diameter
+        start = np.array(scenario.agent.position)
+        means = scenario.means()[:, :2]
+        gaps = np.linalg.norm(means[:, None, :] - centres[None], axis=2)
+        if np.any(np.linalg.norm(centres - start, axis=1) <= radii) or np.any(gaps < radii - sight):
+            continue  # the start in a circle, or a mean out of sight: draw again
+        fence = FenceBlockSpec(exclusions=circles, margin=NO_FLY_MARGIN_M)
+        try:
+            return Scenario.model_validate({**data, "fence": fence})
+        except ValueError:
+            continue
+    raise ValueError(f"no no-fly circles in {NO_FLY_ATTEMPTS} draws leave the targets in sight")
