@@ -116,6 +116,8 @@ class MissionSpec:
             independently at each look: a number in ``(0, 1]`` or a table of rows ``[distance
             from the footprint's centre, m; Pd]`` (`hptrack.models.sensor.detection_table`);
             1, the paper's sensor, by default.
+        negative_information: a look that detects nothing updates the beliefs
+            (`hptrack.models.miss_update`); ``False``, the paper's, by default.
     """
 
     time_step: float = 0.5
@@ -129,6 +131,7 @@ class MissionSpec:
     n_vehicles: int = 1
     belief_motion: tuple | None = None
     detection_probability: float | tuple[tuple[float, float], ...] = 1.0
+    negative_information: bool = False
     record: Mission = field(init=False, repr=False)
     """The mission's constants as the compiled kernels take them (built and validated once,
     with the spec)."""
@@ -150,6 +153,7 @@ class MissionSpec:
             self.process_noise_form == "continuous",
             self.belief_motion,
             self.detection_probability,
+            self.negative_information,
         )
         object.__setattr__(self, "measurement_noise", record.sensor.measurement_noise)
         object.__setattr__(self, "process_noise", record.process_noise)

@@ -13,8 +13,9 @@ with `register_sensor` and its compiled kernels (`SensorKernels`). Compiled code
   prune a search use it);
 * ``update(sensor, mean, cov, z, mean_out, cov_out)``: the belief after the measurement ``z``;
 * ``update_covariance(sensor, cov, out)``: its covariance only (it does not depend on ``z``);
-* ``missed(sensor, mean, cov)``: what a look that does not measure the target does to its belief
-  in place (nothing for the footprint: the paper uses no negative information);
+* ``missed(sensor, agent_x, agent_y, mean, cov)``: what a look from the agent at
+  ``(agent_x, agent_y)`` that does not measure the target does to its belief in place (nothing
+  for the footprint: the paper uses no negative information);
 * ``draws(sensor) -> bool``: whether a look needs a uniform draw per target inside its reach to
   decide whether it detects it (a compile-time constant; ``False`` for the paper's sensor);
 * ``detects(sensor, agent_x, agent_y, x, y, u) -> bool``: whether a look that ``measures`` the
@@ -31,6 +32,9 @@ the footprint's centre (a table, linearly interpolated, its last value held to t
 target inside is detected, and then measured as above, with probability ``Pd(d)`` at each look,
 independently (`detection_probability`); a look that does not detect it leaves its belief as it
 is, as for a target outside. The mission record holds it only when ``Pd`` is not 1 everywhere.
+`NegativeInformationSensor` (the scenario's ``negative_information: true``): the same detector
+(any ``Pd``, 1 included), whose look that detects nothing updates the belief by the miss
+(`hptrack.models.miss_update.miss_update`).
 """
 
 from __future__ import annotations
@@ -44,7 +48,13 @@ import numpy as np
 from numba.extending import overload
 
 from hptrack._dispatch import registered
-from hptrack.models.measurement import kalman_update, update_covariance, within_footprint
+from hptrack.models.measurement import (
+    kalman_update,
+    table_probability,
+    update_covariance,
+    within_footprint,
+)
+from hptrack.models.miss_update import miss_update
 
 
 class FootprintSensor(NamedTuple):
@@ -80,7 +90,21 @@ class DetectingFootprintSensor(NamedTuple):
     find_factor: float
 
 
-SensorPart = FootprintSensor | DetectingFootprintSensor
+class NegativeInformationSensor(NamedTuple):
+    """`DetectingFootprintSensor`'s detector (any ``Pd``, 1 included) whose look that detects
+    nothing conditions the belief on the miss (`hptrack.models.miss_update.miss_update`).
+
+    Attributes: as `DetectingFootprintSensor`'s.
+    """
+
+    diameter: float
+    measurement_noise: np.ndarray
+    distances: np.ndarray
+    probabilities: np.ndarray
+    find_factor: float
+
+
+SensorPart = FootprintSensor | DetectingFootprintSensor | NegativeInformationSensor
 """The sensor classes a mission record may hold (a union of the registered ones)."""
 
 
@@ -148,7 +172,7 @@ def sensor_update_covariance(sensor, cov, out):
     raise NotImplementedError
 
 
-def sensor_missed(sensor, mean, cov):
+def sensor_missed(sensor, agent_x, agent_y, mean, cov):
     """The registered ``missed`` of ``sensor``'s class (compiled code only)."""
     raise NotImplementedError
 
@@ -204,7 +228,7 @@ def _update_covariance(sensor, cov, out):
 
 
 @overload(sensor_missed, inline="always")
-def _missed(sensor, mean, cov):
+def _missed(sensor, agent_x, agent_y, mean, cov):
     return _kernel(sensor, "missed")
 
 
@@ -233,7 +257,7 @@ def footprint_update_covariance(sensor, cov, out):
 
 
 @numba.njit(cache=True, inline="always")
-def footprint_missed(sensor, mean, cov):
+def footprint_missed(sensor, agent_x, agent_y, mean, cov):
     """`FootprintSensor`: a look that misses leaves the belief as it is."""
 
 
@@ -247,23 +271,6 @@ register_sensor(
         footprint_missed,
     ),
 )
-
-
-@numba.njit(cache=True, inline="always")
-def table_probability(distances, probabilities, d):
-    """``Pd(d)`` of a detection table: linear between its rows, the first value below the first
-    distance (0) and the last beyond the last one."""
-    last = distances.shape[0] - 1
-    if d >= distances[last]:
-        return probabilities[last]
-    if d <= distances[0]:
-        return probabilities[0]
-    j = 1
-    while distances[j] < d:
-        j += 1
-    lo, hi = distances[j - 1], distances[j]
-    t = (d - lo) / (hi - lo)
-    return probabilities[j - 1] + t * (probabilities[j] - probabilities[j - 1])
 
 
 @numba.njit(cache=True, inline="always")
@@ -293,6 +300,29 @@ register_sensor(
         footprint_update,
         footprint_update_covariance,
         footprint_missed,
+        detecting_draws,
+        detecting_detects,
+        detecting_find_factor,
+    ),
+)
+
+
+@numba.njit(cache=True)
+def negative_missed(sensor, agent_x, agent_y, mean, cov):
+    """`NegativeInformationSensor`: the miss update over the footprint (`miss_update`)."""
+    miss_update(
+        mean, cov, agent_x, agent_y, 0.5 * sensor.diameter, sensor.distances, sensor.probabilities
+    )
+
+
+register_sensor(
+    NegativeInformationSensor,
+    SensorKernels(
+        footprint_measures,
+        footprint_radius,
+        footprint_update,
+        footprint_update_covariance,
+        negative_missed,
         detecting_draws,
         detecting_detects,
         detecting_find_factor,
@@ -419,6 +449,15 @@ def detecting_sensor(
     distances.flags.writeable = False
     probabilities.flags.writeable = False
     return DetectingFootprintSensor(float(diameter), noise, distances, probabilities, factor)
+
+
+def negative_information_sensor(
+    diameter: float, noise: np.ndarray, detection_probability: float | Sequence, step: float
+) -> NegativeInformationSensor:
+    """The `NegativeInformationSensor` of a ``detection_probability`` (as `detecting_sensor`)."""
+    return NegativeInformationSensor(
+        *detecting_sensor(diameter, noise, detection_probability, step)
+    )
 
 
 @numba.njit(cache=True)
