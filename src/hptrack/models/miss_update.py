@@ -279,6 +279,20 @@ def centred_miss_scale(a, p):
 
 
 @numba.njit(cache=True)
+def search_miss_scale(p_find, factor):
+    """The covariance factor ``c`` of a coverage sub-task that ended in a miss: the spiral swept
+    the Mahalanobis disc ``a = S_cover / (2 pi sqrt(det))`` and found with ``p_find = 1 - (1 -
+    F)^eta`` (``F = 1 - e^-a`` the chance the target was in it, ``eta`` = ``factor``, the
+    sensor's ``find_factor``; `hptrack.coverage.estimator`), so ``a = -ln(1 - p_find) / eta``
+    and a target in the disc was detected with ``p_find / F``: `centred_miss_scale` of those.
+    1 when ``p_find`` is 0 or 1 (no miss to learn from)."""
+    if not 0.0 < p_find < 1.0:
+        return 1.0
+    a = -math.log1p(-p_find) / factor
+    return centred_miss_scale(a, min(p_find / -math.expm1(-a), 1.0))
+
+
+@numba.njit(cache=True)
 def scale_position_covariance(cov, c):
     """The closed form applied in place: the position covariance times ``c`` and the rest by
     the regression (`condition_covariance`; the mean does not move)."""

@@ -21,9 +21,15 @@ with `register_sensor` and its compiled kernels (`SensorKernels`). Compiled code
 * ``detects(sensor, agent_x, agent_y, x, y, u) -> bool``: whether a look that ``measures`` the
   target detects it, given the uniform draw ``u`` in ``[0, 1)`` (always, for the paper's);
 * ``find_factor(sensor) -> float``: the factor a coverage estimate's chance of a find takes for
-  detections below certainty (1 for the paper's sensor; `pass_detection_factor`).
+  detections below certainty (1 for the paper's sensor; `pass_detection_factor`);
+* ``informs(sensor) -> bool``: whether a miss changes a belief (a compile-time constant;
+  ``False`` for the paper's sensor, which uses no negative information);
+* ``search_missed(sensor, p_find, cov)``: what a coverage sub-task that found its target with
+  the chance ``p_find`` and missed does to the covariance predicted to its end, in place
+  (nothing for the paper's sensor; the sub-task MDP's miss branch).
 
-The last three have defaults, the paper's certain detection (`SensorKernels`).
+The last five have defaults, the paper's certain detection and no negative information
+(`SensorKernels`).
 
 The models: `FootprintSensor` (the paper's): a target within ``w/2`` of the agent is measured as
 ``z = [x, y] + v``, ``v ~ N(0, R)`` (`hptrack.models.measurement`). `DetectingFootprintSensor`:
@@ -54,7 +60,7 @@ from hptrack.models.measurement import (
     update_covariance,
     within_footprint,
 )
-from hptrack.models.miss_update import miss_update
+from hptrack.models.miss_update import miss_update, scale_position_covariance, search_miss_scale
 
 
 class FootprintSensor(NamedTuple):
@@ -126,9 +132,21 @@ def certain_find_factor(sensor):
     return 1.0
 
 
+@numba.njit(cache=True, inline="always")
+def uninformed(sensor):
+    """Default ``informs``: a miss tells nothing (the paper's)."""
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def search_unchanged(sensor, p_find, cov):
+    """Default ``search_missed``: the covariance as predicted (the paper's)."""
+
+
 class SensorKernels(NamedTuple):
     """The compiled kernels of a sensor model (module docstring); ``draws``, ``detects`` and
-    ``find_factor`` default to certain detection."""
+    ``find_factor`` default to certain detection, ``informs`` and ``search_missed`` to no
+    negative information."""
 
     measures: Callable
     reach: Callable
@@ -138,6 +156,8 @@ class SensorKernels(NamedTuple):
     draws: Callable = certain_draws
     detects: Callable = certain_detects
     find_factor: Callable = certain_find_factor
+    informs: Callable = uninformed
+    search_missed: Callable = search_unchanged
 
 
 _SENSORS: dict[type, SensorKernels] = {}
@@ -190,6 +210,26 @@ def sensor_detects(sensor, agent_x, agent_y, x, y, u):
 def sensor_find_factor(sensor):
     """The registered ``find_factor`` of ``sensor``'s class (compiled code only)."""
     raise NotImplementedError
+
+
+def sensor_informs(sensor):
+    """The registered ``informs`` of ``sensor``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+def sensor_search_missed(sensor, p_find, cov):
+    """The registered ``search_missed`` of ``sensor``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(sensor_informs, inline="always")
+def _informs(sensor):
+    return _kernel(sensor, "informs")
+
+
+@overload(sensor_search_missed, inline="always")
+def _search_missed(sensor, p_find, cov):
+    return _kernel(sensor, "search_missed")
 
 
 @overload(sensor_draws, inline="always")
@@ -315,6 +355,19 @@ def negative_missed(sensor, agent_x, agent_y, mean, cov):
     )
 
 
+@numba.njit(cache=True, inline="always")
+def negative_informs(sensor):
+    """`NegativeInformationSensor`: a miss changes the belief."""
+    return True
+
+
+@numba.njit(cache=True)
+def negative_search_missed(sensor, p_find, cov):
+    """`NegativeInformationSensor`: the closed form of the spiral's miss
+    (`search_miss_scale`, `scale_position_covariance`)."""
+    scale_position_covariance(cov, search_miss_scale(p_find, sensor.find_factor))
+
+
 register_sensor(
     NegativeInformationSensor,
     SensorKernels(
@@ -326,6 +379,8 @@ register_sensor(
         detecting_draws,
         detecting_detects,
         detecting_find_factor,
+        negative_informs,
+        negative_search_missed,
     ),
 )
 
