@@ -516,6 +516,20 @@ def negative_information_sensor(
 
 
 @numba.njit(cache=True)
+def informs_misses(sensor):
+    """Whether a miss changes a belief with ``sensor`` (`sensor_informs`, for Python
+    callers)."""
+    return sensor_informs(sensor)
+
+
+@numba.njit(cache=True)
+def look_missed(sensor, agent_x, agent_y, mean, cov):
+    """``sensor``'s ``missed`` of a look from ``(agent_x, agent_y)`` m, in place (for Python
+    callers)."""
+    sensor_missed(sensor, agent_x, agent_y, mean, cov)
+
+
+@numba.njit(cache=True)
 def draws_detection(sensor):
     """Whether ``sensor`` draws a uniform per target inside its footprint (`sensor_draws`, for
     Python callers)."""
