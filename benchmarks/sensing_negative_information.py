@@ -119,8 +119,7 @@ def report(rows: list[dict], out: Path, pd: float, iterations: int) -> None:
             )
     lines += [
         "",
-        "| n | pair | paired mean difference of U | std. error | scenarios "
-        "| |difference| / std. error |",
+        "| n | pair | paired mean difference of U | std. error | scenarios | size / std. error |",
         "| --- | --- | --- | --- | --- | --- |",
     ]
     summary["paired"] = []
