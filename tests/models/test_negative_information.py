@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.interface import MissionSpec
 from hptrack.models.sensor import (
     DetectingFootprintSensor,
@@ -15,6 +16,7 @@ from hptrack.models.sensor import (
 )
 from hptrack.scenario import parse_scenario, random_scenario
 from hptrack.scenario.io import ScenarioError, file_data
+from hptrack.sim.episode import run_episode
 from hptrack.sim.step import World
 
 
@@ -50,6 +52,17 @@ def test_a_bad_value_is_one_line_naming_the_field(value):
         parse_scenario(_data(negative_information=value))
     text = str(err.value)
     assert "\n" not in text and "sensor.negative_information: " in text
+
+
+@pytest.mark.parametrize("pd", [1.0, 0.7])
+def test_false_gives_the_same_episodes_bit_for_bit(pd):
+    plain = run_episode(parse_scenario(_data(detection_probability=pd)), GreedyPlanner(), 5)
+    off = _data(detection_probability=pd, negative_information=False)
+    again = run_episode(parse_scenario(off), GreedyPlanner(), 5)
+    assert plain.detections.any()
+    for name in ("detections", "agent_paths", "belief_means", "belief_covariances"):
+        np.testing.assert_array_equal(getattr(plain, name), getattr(again, name))
+    np.testing.assert_array_equal(plain.per_target_logdet, again.per_target_logdet)
 
 
 def test_the_mission_spec_checks_it_too():
