@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 
 from hptrack.baselines.greedy import GreedyPlanner
 from hptrack.interface import MissionSpec
@@ -115,3 +116,11 @@ def test_the_simulator_changes_beliefs_only_where_a_look_missed():
         k += 1
     assert np.all(first_miss >= 0) and np.all(differed)
     assert on.uncertainty != off.uncertainty
+
+
+def test_the_cli_refuses_a_bad_value_in_one_line_before_any_work(cli, tmp_path):
+    data = _data(detection_probability=0.7, negative_information=True)
+    data["sensor"]["negative_information"] = "yes"
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    cli("simulate", path).refused("sensor.negative_information: ")
