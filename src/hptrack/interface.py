@@ -119,6 +119,8 @@ class MissionSpec:
             1, the paper's sensor, by default.
         fence: where the vehicle may fly (`hptrack.models.fence.FenceSpec`: an operating
             area, no-fly zones, a margin); ``None``, the paper's open space, by default.
+        negative_information: a look that detects nothing updates the beliefs
+            (`hptrack.models.miss_update`); ``False``, the paper's, by default.
     """
 
     time_step: float = 0.5
@@ -133,6 +135,7 @@ class MissionSpec:
     belief_motion: tuple | None = None
     detection_probability: float | tuple[tuple[float, float], ...] = 1.0
     fence: FenceSpec | None = None
+    negative_information: bool = False
     record: Mission = field(init=False, repr=False)
     """The mission's constants as the compiled kernels take them (built and validated once,
     with the spec)."""
@@ -155,6 +158,7 @@ class MissionSpec:
             self.belief_motion,
             self.detection_probability,
             self.fence,
+            self.negative_information,
         )
         object.__setattr__(self, "measurement_noise", record.sensor.measurement_noise)
         object.__setattr__(self, "process_noise", record.process_noise)

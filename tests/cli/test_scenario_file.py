@@ -62,7 +62,7 @@ def test_every_field_round_trips_with_its_comment(tmp_path):
     # the parameters of the other truth motions
     other_motions = {"diffusion", "damping", "acceleration_std", "jerk_intensity"}
     blocks = {"sensor", "sensor.model", "diameter", "vehicle", "vehicle.model", "motion"}  # unset
-    blocks |= {"sensor.detection_probability"}  # written only when not 1
+    blocks |= {"sensor.detection_probability", "sensor.negative_information"}  # when not default
     assert written == set(FIELD_COMMENTS) - other_motions - blocks  # every field: its comment
     for motion, parameter in (
         ("random_walk", "diffusion"),

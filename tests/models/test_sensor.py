@@ -29,7 +29,7 @@ def _look(sensor, agent, target, mean, cov, z, mean_out, cov_out, cov_only):
         sensor_update(sensor, mean, cov, z, mean_out, cov_out)
         sensor_update_covariance(sensor, cov, cov_only)
     else:
-        sensor_missed(sensor, mean, cov)
+        sensor_missed(sensor, agent[0], agent[1], mean, cov)
     return seen, sensor_reach(sensor)
 
 

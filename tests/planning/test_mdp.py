@@ -372,3 +372,59 @@ def test_passes_credit_the_targets_a_flight_crosses():
         assert (si[I_STEP], si[I_LAST], step[0], step[2]) == (find_steps, 0, find_steps, 0)
     with pytest.raises(ValueError, match="passes must be one of"):
         problem.env(SubtaskOptions(passes="always"))
+
+
+def _scaled_by_hand(cov, c):
+    """The position block times ``c``, the rest by the regression on the position."""
+    s, b = cov[:2, :2], cov[2:, :2]
+    k = b @ np.linalg.inv(s)
+    out = cov.copy()
+    out[:2, :2] = c * s
+    out[2:, :2] = c * b
+    out[:2, 2:] = out[2:, :2].T
+    out[2:, 2:] = cov[2:, 2:] + (c - 1.0) * k @ s @ k.T
+    return out
+
+
+@pytest.mark.parametrize("pd", [1.0, 0.7])
+def test_negative_information_scales_the_covariance_a_miss_leaves(pd):
+    """With ``negative_information`` a missed pursuit's covariance, predicted to the miss's end,
+    is scaled by the closed form of a look over the swept Mahalanobis disc: at ``Pd = 1`` by
+    ``1 + a``, ``a = -ln(1 - p_find)``; below, ``a = -ln(1 - p_find) / eta`` and the disc
+    detected with ``p_find / (1 - e^-a)``. ``miss="keep"`` pursues it again from there."""
+    q = 3e-4
+    record = mission_record(
+        TAU, 900.0, SPEED, W, R, np.full(2, q), True, None, pd, negative_information=True
+    )
+    means = np.array([[900.0, 0, 1, 1], [0, 900.0, 0, 0]])
+    problem = PlanningProblem(record, np.zeros(2), means, np.array([prior(), prior()]), 900.0)
+    work = new_work()
+    env, state, si, sf, cov, step = setup(problem, miss="keep")
+    p, _, miss_steps = expand_action(env, state, 0, work)
+    apply_outcome(env, state, 0, MISS, miss_steps, work)
+    eta = record.sensor.find_factor
+    a = -math.log(1.0 - p) / eta
+    detect = p / (1.0 - math.exp(-a))
+    c = (2.0 * (1.0 - detect) + detect * math.exp(-a) * (2.0 * a + 2.0)) / (
+        2.0 * (1.0 - detect * (1.0 - math.exp(-a)))
+    )
+    if pd == 1.0:
+        assert eta == 1.0 and detect == pytest.approx(1.0) and c == pytest.approx(1.0 + a)
+    else:
+        assert 0.7 < eta < 1.0 and detect < 1.0
+    assert c > 1.2  # the miss widens the belief by more than the tolerance below
+    want = _scaled_by_hand(predict(prior(), q, miss_steps), c)
+    np.testing.assert_allclose(cov[0], want, rtol=1e-5, atol=1e-9)  # (the floor: ~1e-7)
+    assert (si[I_MASK], step[0], step[1]) == (0b11, miss_steps, 0)
+    # pursued again from the belief the miss left
+    again = expand_action(env, state, 0, work)
+    ic = intercept_of(env, sf, 0, si[I_STEP])
+    k, p_hand, _ = hand_estimate(predict(want, q, ic), q, env.n_steps - si[I_STEP] - ic)
+    if pd == 1.0:
+        assert again[0] == pytest.approx(p_hand, rel=1e-5) and again[2] == ic + k
+    # the default record (no negative information) leaves the base as it was
+    plain = make_problem(means, [prior(), prior()])
+    env, state, si, sf, cov, step = setup(plain, miss="keep")
+    apply_outcome(env, state, 0, MISS, expand_action(env, state, 0, work)[2], work)
+    np.testing.assert_array_equal(cov[0], prior())
+    assert step[0] == 0

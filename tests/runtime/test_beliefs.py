@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from hptrack.models.measurement import kalman_update
+from hptrack.models.miss_update import miss_update
 from hptrack.models.motion import ConstantVelocityModel
 from hptrack.runtime.beliefs import BeliefTimeline
 
@@ -73,3 +74,34 @@ def test_duplicates_are_recognised():
     assert timeline.is_duplicate(0, 1.0, np.array([1.0, 2.0]))
     assert not timeline.is_duplicate(0, 1.0, np.array([1.0, 2.5]))
     assert not timeline.is_duplicate(1, 1.0, np.array([1.0, 2.0]))
+
+
+def _miss(agent_x, agent_y, mean, cov):
+    """The footprint's miss (100 m, Pd 0.7) as the timeline calls it."""
+    miss_update(mean, cov, agent_x, agent_y, 50.0, np.zeros(1), np.array([0.7]))
+
+
+def test_misses_are_filtered_in_time_order_and_a_late_detection_takes_its_miss_out():
+    """A miss at 1.0 s from (55, 1) m (over the flank of target 0), then a measurement at
+    2.2 s: the beliefs as predicting, missing and updating one by one; a measurement of the
+    look's interval that arrives after the miss takes it out (the look detected the target
+    after all)."""
+    means, covs, q = _prior()
+    timeline = BeliefTimeline(means, covs, q, MOTION, tolerance_s=5.0, missed=_miss, look_s=0.5)
+    timeline.add_miss(0, 1.0, np.array([55.0, 1.0]))
+    timeline.add(0, 2.2, np.array([2.1, 1.0]), R, 0)
+    m, c = MOTION.predict(means, covs, q, 1.0)
+    _miss(55.0, 1.0, m[0], c[0])
+    m, c = MOTION.predict(m, c, q, 1.2)
+    kalman_update(m[0].copy(), c[0].copy(), np.array([2.1, 1.0]), R, m[0], c[0])
+    want = MOTION.predict(m, c, q, 0.8)
+    got = timeline.at(3.0)
+    np.testing.assert_allclose(got[0], want[0], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(got[1], want[1], rtol=1e-12, atol=1e-12)
+    moved = MOTION.predict(means, covs, q, 3.0)
+    assert not np.allclose(got[1][0], _sequential([MEASUREMENTS[2]], 3.0)[1][0])
+    np.testing.assert_allclose(got[1][1], moved[1][1], rtol=1e-12)  # target 1: untouched
+    # a measurement taken at 0.7 s (in the look of the miss at 1.0 s) arrives: the miss goes
+    timeline.add(0, 0.7, np.array([0.5, 0.2]), R, 1)
+    both = [(0.7, 0, (0.5, 0.2)), (2.2, 0, (2.1, 1.0))]
+    np.testing.assert_allclose(timeline.at(3.0)[1], _sequential(both, 3.0)[1], rtol=1e-12)

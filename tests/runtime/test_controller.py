@@ -5,9 +5,13 @@ import numpy as np
 import pytest
 
 from hptrack.interface import CurrentPlan, Subtask, SubtaskAction
+from hptrack.models.measurement import kalman_update
+from hptrack.models.miss_update import miss_update
 from hptrack.runtime.controller import MissionController, plan_json
 from hptrack.runtime.inputs import ControllerSettings
 from hptrack.runtime.worker import InlineRunner, ThreadedRunner
+from hptrack.scenario import parse_scenario
+from hptrack.scenario.io import file_data
 from hptrack.settings import NoSettings
 
 
@@ -445,3 +449,48 @@ def test_the_controller_shows_the_hierarchical_planners_current_plan(flight_scen
     assert first["subtask"] == plan_json(plan, flight_scenario.target_ids)
     header = ctrl.log.records[0]
     assert header["planner_settings"]["iterations"] == 200
+
+
+def test_with_negative_information_each_tick_is_a_look_that_missed_the_targets_not_detected(
+    flight_scenario,
+):
+    """Tick 0 from (25, 10) m misses both targets (p1's belief under the footprint); p1 is
+    detected at 0.3 s, so tick 1 misses p2 only: the beliefs as the miss update and the Kalman
+    update give them one by one. The paper's sensor (the default) leaves the priors."""
+    data = file_data(flight_scenario)
+    for name in ("sensor_diameter", "measurement_noise_std"):
+        data["agent"].pop(name)
+    data["sensor"] = {
+        "diameter": 20.0,
+        "measurement_noise_std": 1.0,
+        "detection_probability": 0.8,
+        "negative_information": True,
+    }
+    scenario = parse_scenario(data)
+    ctrl, planner = _controller(scenario)
+    ctrl.odometry(0.0, [25.0, 10.0])
+    ctrl.setpoint(0.0)
+    ctrl.detection(0.3, "p1", [31.0, 10.0])
+    ctrl.odometry(0.5, [26.0, 10.0])
+    ctrl.setpoint(0.5)
+    first, second = planner.observations
+    motion, q = scenario.mission_spec().motion, scenario.process_noise()
+    table = (np.zeros(1), np.array([0.8]))
+    means, covs = scenario.means(), scenario.covariances()
+    for i in range(2):
+        miss_update(means[i], covs[i], 25.0, 10.0, 10.0, *table)
+    np.testing.assert_allclose(first.means, means, rtol=1e-12)
+    np.testing.assert_allclose(first.covariances, covs, rtol=1e-12)
+    assert covs[0, 0, 0] > 1.2 * scenario.covariances()[0, 0, 0]  # the miss moved p1
+    m, c = motion.predict(means, covs, q, np.array([0.3, 0.5]))
+    kalman_update(m[0].copy(), c[0].copy(), np.array([31.0, 10.0]), np.eye(2), m[0], c[0])
+    m[0], c[0] = (x[0] for x in motion.predict(m[:1], c[:1], q[:1], 0.2))
+    miss_update(m[1], c[1], 26.0, 10.0, 10.0, *table)
+    np.testing.assert_allclose(second.means, m, rtol=1e-10)
+    np.testing.assert_allclose(second.covariances, c, rtol=1e-10, atol=1e-12)
+    plain, recorder = _controller(flight_scenario)
+    plain.odometry(0.0, [25.0, 10.0])
+    plain.setpoint(0.0)
+    np.testing.assert_array_equal(
+        recorder.observations[0].covariances, flight_scenario.covariances()
+    )

@@ -24,6 +24,23 @@ def within_footprint(diameter, agent_x, agent_y, x, y):
     return dx * dx + dy * dy <= r * r
 
 
+@numba.njit(cache=True, inline="always")
+def table_probability(distances, probabilities, d):
+    """``Pd(d)`` of a detection table: linear between its rows, the first value below the first
+    distance (0) and the last beyond the last one."""
+    last = distances.shape[0] - 1
+    if d >= distances[last]:
+        return probabilities[last]
+    if d <= distances[0]:
+        return probabilities[0]
+    j = 1
+    while distances[j] < d:
+        j += 1
+    lo, hi = distances[j - 1], distances[j]
+    t = (d - lo) / (hi - lo)
+    return probabilities[j - 1] + t * (probabilities[j] - probabilities[j - 1])
+
+
 @numba.njit(cache=True)
 def _within_all(diameter, agent, positions, out):
     for i in range(positions.shape[0]):

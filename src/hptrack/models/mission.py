@@ -40,6 +40,7 @@ from hptrack.models.sensor import (
     certain,
     detecting_sensor,
     footprint_radius,
+    negative_information_sensor,
     sensor_measures,
 )
 from hptrack.models.vehicle import (
@@ -97,13 +98,16 @@ def mission_record(
     motion: tuple | None = None,
     detection_probability: float | Sequence = 1.0,
     fence: FenceSpec | None = None,
+    negative_information: bool = False,
 ) -> Mission:
     """The validated `Mission` (``continuous_noise``: the continuous form of ``Q``, else
     the paper's printed one; ``motion``: a registered belief motion, default constant velocity
     with that ``Q``; ``detection_probability``: a number or a table of rows ``[distance from the
     footprint's centre, m; Pd]``, `hptrack.models.sensor.detection_table`: 1, the default,
-    gives the paper's `FootprintSensor`, anything else a `DetectingFootprintSensor`; ``fence``:
-    where the vehicle may fly, `hptrack.models.fence`, a `FencedHolonomicVehicle`).
+    gives the paper's `FootprintSensor`, anything else a `DetectingFootprintSensor`;
+    ``fence``: where the vehicle may fly, `hptrack.models.fence`, a `FencedHolonomicVehicle`;
+    ``negative_information``: a `NegativeInformationSensor` of that detector instead, whose
+    looks that see nothing update the beliefs).
 
     Raises:
         ValueError: a constant not positive and finite, ``R`` not symmetric positive definite,
@@ -135,8 +139,16 @@ def mission_record(
         certain_detection = certain(detection_probability)
     except ValueError as err:
         raise ValueError(f"detection_probability: {err}") from None
-    if not certain_detection:
-        step = float(agent_speed) * tau
+    if not isinstance(negative_information, bool):
+        raise ValueError(
+            f"negative_information must be true or false, got {negative_information!r}"
+        )
+    step = float(agent_speed) * tau
+    if negative_information:
+        sensor = negative_information_sensor(
+            float(sensor_diameter), noise, detection_probability, step
+        )
+    elif not certain_detection:
         sensor = detecting_sensor(float(sensor_diameter), noise, detection_probability, step)
     return Mission(
         time_step=tau,

@@ -13,16 +13,23 @@ with `register_sensor` and its compiled kernels (`SensorKernels`). Compiled code
   prune a search use it);
 * ``update(sensor, mean, cov, z, mean_out, cov_out)``: the belief after the measurement ``z``;
 * ``update_covariance(sensor, cov, out)``: its covariance only (it does not depend on ``z``);
-* ``missed(sensor, mean, cov)``: what a look that does not measure the target does to its belief
-  in place (nothing for the footprint: the paper uses no negative information);
+* ``missed(sensor, agent_x, agent_y, mean, cov)``: what a look from the agent at
+  ``(agent_x, agent_y)`` that does not measure the target does to its belief in place (nothing
+  for the footprint: the paper uses no negative information);
 * ``draws(sensor) -> bool``: whether a look needs a uniform draw per target inside its reach to
   decide whether it detects it (a compile-time constant; ``False`` for the paper's sensor);
 * ``detects(sensor, agent_x, agent_y, x, y, u) -> bool``: whether a look that ``measures`` the
   target detects it, given the uniform draw ``u`` in ``[0, 1)`` (always, for the paper's);
 * ``find_factor(sensor) -> float``: the factor a coverage estimate's chance of a find takes for
-  detections below certainty (1 for the paper's sensor; `pass_detection_factor`).
+  detections below certainty (1 for the paper's sensor; `pass_detection_factor`);
+* ``informs(sensor) -> bool``: whether a miss changes a belief (a compile-time constant;
+  ``False`` for the paper's sensor, which uses no negative information);
+* ``search_missed(sensor, p_find, cov)``: what a coverage sub-task that found its target with
+  the chance ``p_find`` and missed does to the covariance predicted to its end, in place
+  (nothing for the paper's sensor; the sub-task MDP's miss branch).
 
-The last three have defaults, the paper's certain detection (`SensorKernels`).
+The last five have defaults, the paper's certain detection and no negative information
+(`SensorKernels`).
 
 The models: `FootprintSensor` (the paper's): a target within ``w/2`` of the agent is measured as
 ``z = [x, y] + v``, ``v ~ N(0, R)`` (`hptrack.models.measurement`). `DetectingFootprintSensor`:
@@ -31,6 +38,9 @@ the footprint's centre (a table, linearly interpolated, its last value held to t
 target inside is detected, and then measured as above, with probability ``Pd(d)`` at each look,
 independently (`detection_probability`); a look that does not detect it leaves its belief as it
 is, as for a target outside. The mission record holds it only when ``Pd`` is not 1 everywhere.
+`NegativeInformationSensor` (the scenario's ``negative_information: true``): the same detector
+(any ``Pd``, 1 included), whose look that detects nothing updates the belief by the miss
+(`hptrack.models.miss_update.miss_update`).
 """
 
 from __future__ import annotations
@@ -44,7 +54,13 @@ import numpy as np
 from numba.extending import overload
 
 from hptrack._dispatch import registered
-from hptrack.models.measurement import kalman_update, update_covariance, within_footprint
+from hptrack.models.measurement import (
+    kalman_update,
+    table_probability,
+    update_covariance,
+    within_footprint,
+)
+from hptrack.models.miss_update import miss_update, scale_position_covariance, search_miss_scale
 
 
 class FootprintSensor(NamedTuple):
@@ -80,7 +96,21 @@ class DetectingFootprintSensor(NamedTuple):
     find_factor: float
 
 
-SensorPart = FootprintSensor | DetectingFootprintSensor
+class NegativeInformationSensor(NamedTuple):
+    """`DetectingFootprintSensor`'s detector (any ``Pd``, 1 included) whose look that detects
+    nothing conditions the belief on the miss (`hptrack.models.miss_update.miss_update`).
+
+    Attributes: as `DetectingFootprintSensor`'s.
+    """
+
+    diameter: float
+    measurement_noise: np.ndarray
+    distances: np.ndarray
+    probabilities: np.ndarray
+    find_factor: float
+
+
+SensorPart = FootprintSensor | DetectingFootprintSensor | NegativeInformationSensor
 """The sensor classes a mission record may hold (a union of the registered ones)."""
 
 
@@ -102,9 +132,21 @@ def certain_find_factor(sensor):
     return 1.0
 
 
+@numba.njit(cache=True, inline="always")
+def uninformed(sensor):
+    """Default ``informs``: a miss tells nothing (the paper's)."""
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def search_unchanged(sensor, p_find, cov):
+    """Default ``search_missed``: the covariance as predicted (the paper's)."""
+
+
 class SensorKernels(NamedTuple):
     """The compiled kernels of a sensor model (module docstring); ``draws``, ``detects`` and
-    ``find_factor`` default to certain detection."""
+    ``find_factor`` default to certain detection, ``informs`` and ``search_missed`` to no
+    negative information."""
 
     measures: Callable
     reach: Callable
@@ -114,6 +156,8 @@ class SensorKernels(NamedTuple):
     draws: Callable = certain_draws
     detects: Callable = certain_detects
     find_factor: Callable = certain_find_factor
+    informs: Callable = uninformed
+    search_missed: Callable = search_unchanged
 
 
 _SENSORS: dict[type, SensorKernels] = {}
@@ -148,7 +192,7 @@ def sensor_update_covariance(sensor, cov, out):
     raise NotImplementedError
 
 
-def sensor_missed(sensor, mean, cov):
+def sensor_missed(sensor, agent_x, agent_y, mean, cov):
     """The registered ``missed`` of ``sensor``'s class (compiled code only)."""
     raise NotImplementedError
 
@@ -166,6 +210,26 @@ def sensor_detects(sensor, agent_x, agent_y, x, y, u):
 def sensor_find_factor(sensor):
     """The registered ``find_factor`` of ``sensor``'s class (compiled code only)."""
     raise NotImplementedError
+
+
+def sensor_informs(sensor):
+    """The registered ``informs`` of ``sensor``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+def sensor_search_missed(sensor, p_find, cov):
+    """The registered ``search_missed`` of ``sensor``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(sensor_informs, inline="always")
+def _informs(sensor):
+    return _kernel(sensor, "informs")
+
+
+@overload(sensor_search_missed, inline="always")
+def _search_missed(sensor, p_find, cov):
+    return _kernel(sensor, "search_missed")
 
 
 @overload(sensor_draws, inline="always")
@@ -204,7 +268,7 @@ def _update_covariance(sensor, cov, out):
 
 
 @overload(sensor_missed, inline="always")
-def _missed(sensor, mean, cov):
+def _missed(sensor, agent_x, agent_y, mean, cov):
     return _kernel(sensor, "missed")
 
 
@@ -233,7 +297,7 @@ def footprint_update_covariance(sensor, cov, out):
 
 
 @numba.njit(cache=True, inline="always")
-def footprint_missed(sensor, mean, cov):
+def footprint_missed(sensor, agent_x, agent_y, mean, cov):
     """`FootprintSensor`: a look that misses leaves the belief as it is."""
 
 
@@ -247,23 +311,6 @@ register_sensor(
         footprint_missed,
     ),
 )
-
-
-@numba.njit(cache=True, inline="always")
-def table_probability(distances, probabilities, d):
-    """``Pd(d)`` of a detection table: linear between its rows, the first value below the first
-    distance (0) and the last beyond the last one."""
-    last = distances.shape[0] - 1
-    if d >= distances[last]:
-        return probabilities[last]
-    if d <= distances[0]:
-        return probabilities[0]
-    j = 1
-    while distances[j] < d:
-        j += 1
-    lo, hi = distances[j - 1], distances[j]
-    t = (d - lo) / (hi - lo)
-    return probabilities[j - 1] + t * (probabilities[j] - probabilities[j - 1])
 
 
 @numba.njit(cache=True, inline="always")
@@ -296,6 +343,44 @@ register_sensor(
         detecting_draws,
         detecting_detects,
         detecting_find_factor,
+    ),
+)
+
+
+@numba.njit(cache=True)
+def negative_missed(sensor, agent_x, agent_y, mean, cov):
+    """`NegativeInformationSensor`: the miss update over the footprint (`miss_update`)."""
+    miss_update(
+        mean, cov, agent_x, agent_y, 0.5 * sensor.diameter, sensor.distances, sensor.probabilities
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def negative_informs(sensor):
+    """`NegativeInformationSensor`: a miss changes the belief."""
+    return True
+
+
+@numba.njit(cache=True)
+def negative_search_missed(sensor, p_find, cov):
+    """`NegativeInformationSensor`: the closed form of the spiral's miss
+    (`search_miss_scale`, `scale_position_covariance`)."""
+    scale_position_covariance(cov, search_miss_scale(p_find, sensor.find_factor))
+
+
+register_sensor(
+    NegativeInformationSensor,
+    SensorKernels(
+        footprint_measures,
+        footprint_radius,
+        footprint_update,
+        footprint_update_covariance,
+        negative_missed,
+        detecting_draws,
+        detecting_detects,
+        detecting_find_factor,
+        negative_informs,
+        negative_search_missed,
     ),
 )
 
@@ -419,6 +504,29 @@ def detecting_sensor(
     distances.flags.writeable = False
     probabilities.flags.writeable = False
     return DetectingFootprintSensor(float(diameter), noise, distances, probabilities, factor)
+
+
+def negative_information_sensor(
+    diameter: float, noise: np.ndarray, detection_probability: float | Sequence, step: float
+) -> NegativeInformationSensor:
+    """The `NegativeInformationSensor` of a ``detection_probability`` (as `detecting_sensor`)."""
+    return NegativeInformationSensor(
+        *detecting_sensor(diameter, noise, detection_probability, step)
+    )
+
+
+@numba.njit(cache=True)
+def informs_misses(sensor):
+    """Whether a miss changes a belief with ``sensor`` (`sensor_informs`, for Python
+    callers)."""
+    return sensor_informs(sensor)
+
+
+@numba.njit(cache=True)
+def look_missed(sensor, agent_x, agent_y, mean, cov):
+    """``sensor``'s ``missed`` of a look from ``(agent_x, agent_y)`` m, in place (for Python
+    callers)."""
+    sensor_missed(sensor, agent_x, agent_y, mean, cov)
 
 
 @numba.njit(cache=True)

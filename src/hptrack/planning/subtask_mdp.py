@@ -62,6 +62,13 @@ agent's position to where it ends, and each other target whose belief that fligh
 probability at least `PASS_CREDIT` (`pass_probability`) counts as measured at the
 closest approach, its covariance updated there, and back in the action list if it was missed.
 
+**Negative information** (the scenario's ``sensor.negative_information``, beyond the paper): a
+pursuit that ends in a miss says the target was not where the spiral swept. Its covariance
+predicted to the miss's end is scaled by the closed form of a look over the Mahalanobis disc the
+spiral covered (`hptrack.models.miss_update.search_miss_scale`: ``a = -ln(1 - p_find) / eta``,
+detected there with ``p_find / (1 - e^-a)``), and that is its base from then on, so
+``miss="keep"`` re-pursues it with the belief the miss left (and ``"drop"`` scores it so).
+
 At the end of the budget, or when no action is available, the value of the state is ``-U``
 with ``U = sum_i log det Sigma^xy_i`` at step ``N``
 (Sec. III).
@@ -94,7 +101,12 @@ from hptrack.models.mission import (
     steps_left,
 )
 from hptrack.models.riccati import measured_covariance
-from hptrack.models.sensor import footprint_radius, sensor_update_covariance
+from hptrack.models.sensor import (
+    footprint_radius,
+    sensor_informs,
+    sensor_search_missed,
+    sensor_update_covariance,
+)
 from hptrack.models.state import velocity_of
 from hptrack.planning.mdp import MdpKernels, register_mdp
 from hptrack.planning.subtask_estimators import estimate_pursuit, estimator_of
@@ -533,13 +545,28 @@ def apply_outcome(env, state, a, outcome, payload, work):
 
     Found: ``a``'s covariance becomes the posterior of a measurement at the end step (or, when
     following or dwelling, the covariance measured at every step to the end). Missed: ``a``
-    leaves the action list. The agent ends at the pursued target's estimated position; other
-    beliefs are implicit (they grow from their base). ``work`` is ``(>= 5, d, d)`` scratch.
+    leaves the action list (``miss="drop"``); with a sensor that ``informs``
+    (``negative_information``), its covariance predicted to the end step takes the sensor's
+    ``search_missed`` of the pursuit's ``p_find`` there. The agent ends at the pursued target's
+    estimated position; other beliefs are implicit (they grow from their base). ``work`` is
+    ``(>= 5, d, d)`` scratch.
     """
     mission = env.mission
     si, sf, base_cov, base_step = state
     t = si[I_STEP]
     end = t + payload
+    if sensor_informs(mission.sensor) and outcome == MISS and not is_dwell(env, a):
+        if a != si[I_LAST]:  # a pursuit (following is never missed)
+            p_find = expand_action(env, state, a, work)[0]
+            missed = work[4]
+            q = mission.process_noise[a]
+            predict_covariance_on(mission, base_cov[a], q, end - base_step[a], missed)
+            sensor_search_missed(mission.sensor, p_find, missed)
+            d = state_size_on(mission)
+            for i in range(d):
+                for j in range(d):
+                    base_cov[a, i, j] = missed[i, j]
+            base_step[a] = end
     if is_dwell(env, a):
         a = si[I_LAST]  # the dwell measures the target just found, which stays the last found
     if outcome == FIND:

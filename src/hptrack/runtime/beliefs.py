@@ -9,11 +9,18 @@ measurement at time ``t`` is inserted in time order; the posteriors from there o
 Eq. (1), and updated with `kalman_update`). The belief at time ``T`` is the
 last posterior at or before ``T`` predicted to ``T``. The horizon is the newest measurement time
 minus the tolerance: a measurement older than it is refused.
+
+With negative information (a ``missed`` kernel, the scenario's ``sensor.negative_information``)
+the history also holds misses: a look from the agent's position at a time that detected nothing
+(`BeliefTimeline.add_miss`), filtered in their time order by the miss update
+(`hptrack.models.miss_update`). A measurement of the same target taken within ``look_s`` before
+a miss (during the look the miss stands for) arrives late: the miss is taken out.
 """
 
 from __future__ import annotations
 
 import bisect
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,11 +31,12 @@ from hptrack.models.measurement import kalman_update
 
 @dataclass
 class _Entry:
-    """One accepted measurement of one target and the belief after it."""
+    """One accepted measurement of one target (or, ``z`` ``None``, a miss of a look from the
+    agent at ``noise``, m) and the belief after it."""
 
     t: float
     seq: int
-    z: np.ndarray
+    z: np.ndarray | None
     noise: np.ndarray
     mean: np.ndarray
     cov: np.ndarray
@@ -44,6 +52,9 @@ class BeliefTimeline:
         motion: the motion model.
         tolerance_s: how far behind the newest measurement a measurement may be, s.
         start_s: time of the priors, s (the mission start).
+        missed: ``missed(agent_x, agent_y, mean, cov)``, the miss update in place; ``None``
+            (the paper's): no misses.
+        look_s: how long before a miss a measurement of the target takes it out, s.
     """
 
     def __init__(
@@ -54,11 +65,15 @@ class BeliefTimeline:
         motion: BeliefMotion,
         tolerance_s: float,
         start_s: float = 0.0,
+        missed: Callable[[float, float, np.ndarray, np.ndarray], None] | None = None,
+        look_s: float = 0.0,
     ) -> None:
         n = len(means)
         self._q = np.asarray(process_noise, dtype=float)
         self._motion = motion
         self.tolerance_s = float(tolerance_s)
+        self._missed = missed
+        self._look_s = float(look_s)
         self._base_t = np.full(n, float(start_s))
         self._base_mean = np.array(means, dtype=float)
         self._base_cov = np.array(covariances, dtype=float)
@@ -77,7 +92,8 @@ class BeliefTimeline:
         keys = self._keys[i]
         j = bisect.bisect_left(keys, (t - 1e-9, -1))
         while j < len(keys) and keys[j][0] <= t + 1e-9:
-            if np.array_equal(self._entries[i][j].z, z):
+            found = self._entries[i][j].z
+            if found is not None and np.array_equal(found, z):
                 return True
             j += 1
         return False
@@ -87,6 +103,7 @@ class BeliefTimeline:
         (2, 2) m^2; ``seq`` orders measurements of the same time. The caller has checked that
         ``t >= horizon_s``."""
         key = (float(t), int(seq))
+        first = self._drop_misses(i, float(t))
         pos = bisect.bisect_right(self._keys[i], key)
         entry = _Entry(
             float(t),
@@ -98,9 +115,36 @@ class BeliefTimeline:
         )
         self._keys[i].insert(pos, key)
         self._entries[i].insert(pos, entry)
-        self._refilter(i, pos)
+        self._refilter(i, min(pos, first))
         self.newest_s = max(self.newest_s, float(t))
         self._settle()
+
+    def add_miss(self, i: int, t: float, agent: np.ndarray) -> None:
+        """A look from ``agent`` (2,) m at ``t`` s did not detect target ``i`` (needs a
+        ``missed`` kernel; ``t >= horizon_s``); after any measurement at the same time."""
+        assert self._missed is not None, "a timeline without negative information has no misses"
+        key = (float(t), np.iinfo(np.int64).max)
+        pos = bisect.bisect_right(self._keys[i], key)
+        d = self._motion.state_size
+        entry = _Entry(
+            float(t), key[1], None, np.array(agent, dtype=float), np.empty(d), np.empty((d, d))
+        )
+        self._keys[i].insert(pos, key)
+        self._entries[i].insert(pos, entry)
+        self._refilter(i, pos)
+
+    def _drop_misses(self, i: int, t: float) -> int:
+        """Take out target ``i``'s misses in ``[t, t + look_s)``; the first position changed
+        (the history's length when none)."""
+        entries = self._entries[i]
+        first = len(entries)
+        for j in range(len(entries) - 1, -1, -1):
+            e = entries[j]
+            if e.z is None and t - 1e-9 <= e.t < t + self._look_s - 1e-9:
+                entries.pop(j)
+                self._keys[i].pop(j)
+                first = j
+        return first
 
     def _state_before(self, i: int, pos: int) -> tuple[float, np.ndarray, np.ndarray]:
         if pos == 0:
@@ -112,7 +156,12 @@ class BeliefTimeline:
         t, mean, cov = self._state_before(i, pos)
         for e in self._entries[i][pos:]:
             m, c = self._motion.predict(mean[None], cov[None], self._q[i], max(e.t - t, 0.0))
-            kalman_update(m[0], c[0], e.z, e.noise, e.mean, e.cov)
+            if e.z is None:
+                assert self._missed is not None
+                e.mean[:], e.cov[:] = m[0], c[0]
+                self._missed(float(e.noise[0]), float(e.noise[1]), e.mean, e.cov)
+            else:
+                kalman_update(m[0], c[0], e.z, e.noise, e.mean, e.cov)
             t, mean, cov = e.t, e.mean, e.cov
 
     def _settle(self) -> None:

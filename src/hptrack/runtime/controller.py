@@ -11,7 +11,10 @@ the mission start):
   once.
 
 Beliefs are predicted in closed form to each event's time whatever the gaps
-(`BeliefTimeline`). The planner runs on its own step clock:
+(`BeliefTimeline`). With the scenario's ``sensor.negative_information``, each tick is a look
+from the latest odometry: every target with no detection taken since the previous tick gets
+the miss update at the tick's time (`hptrack.models.miss_update`; a detection of that interval
+that arrives later takes the miss out again). The planner runs on its own step clock:
 ticks at ``k tau``. At the first ``setpoint`` call at or after ``k tau`` the controller builds the
 `Observation` of step ``k`` (beliefs at ``k tau`` from the
 measurements taken up to then, the latest odometry) and hands ``act`` to the planner runner (a
@@ -51,6 +54,7 @@ from __future__ import annotations
 
 import threading
 from collections import Counter
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -58,6 +62,7 @@ import numpy as np
 from hptrack.interface import CurrentPlan, Planner
 from hptrack.models.beliefs import position_logdet
 from hptrack.models.mission import STEP_TOLERANCE
+from hptrack.models.sensor import informs_misses, look_missed
 from hptrack.runtime.beliefs import BeliefTimeline
 from hptrack.runtime.clock import MissionClock
 from hptrack.runtime.inputs import ControllerSettings, InputChecks, raw, vector
@@ -131,12 +136,16 @@ class MissionController:
         )
         self.fallback = Fallback(self.mission, self.seed)
         self.history = MissionHistory(self.mission, np.asarray(scenario.agent.position, float))
+        sensor = self.mission.record.sensor
+        self._informs = bool(informs_misses(sensor))
         self._beliefs = BeliefTimeline(
             scenario.means(),
             scenario.covariances(),
             self.mission.process_noise,
             self.mission.motion,
             self.settings.reorder_tolerance_s,
+            missed=partial(look_missed, sensor) if self._informs else None,
+            look_s=self.mission.time_step,
         )
         self._lock = threading.RLock()
         self._odom: tuple[float, np.ndarray] | None = None
@@ -267,8 +276,11 @@ class MissionController:
             self._finish(t, "budget", self.mission.n_steps * self.mission.time_step)
             return
         time_k = k * self.mission.time_step
-        means, covs = self._beliefs.at(time_k)
         recorded = self._take(self._for_record, time_k)
+        if self._informs and self._odom is not None and time_k >= self._beliefs.horizon_s:
+            for i in np.flatnonzero(~recorded):
+                self._beliefs.add_miss(int(i), time_k, self._odom[1])
+        means, covs = self._beliefs.at(time_k)
         agent = None if self._odom is None else self._odom[1]
         record: dict[str, Any] = {
             "kind": "tick",

@@ -254,6 +254,7 @@ FIELD_COMMENTS = {
     "sensor.model": "footprint: measures every target within diameter / 2",
     "sensor.detection_probability": "chance a look detects a target inside: a number, or "
     "rows [distance from the centre m, Pd]",
+    "sensor.negative_information": "true: a look that sees nothing updates the beliefs",
     "diameter": "m, the footprint's diameter w",
     "vehicle": "how the agent moves (the paper's holonomic point by default)",
     "vehicle.model": "holonomic: straight at up to speed, any direction",
@@ -297,6 +298,8 @@ def file_data(scenario: Scenario) -> dict:
         data["sensor"] = scenario.sensor_spec().model_dump(mode="json", exclude_none=True)
         if data["sensor"].get("detection_probability") == 1.0:  # the default, the paper's
             data["sensor"].pop("detection_probability")
+        if data["sensor"].get("negative_information") is False:  # the default, the paper's
+            data["sensor"].pop("negative_information")
         for name in ("sensor_diameter", *NOISE_FIELDS):
             data["agent"].pop(name, None)
     return data

@@ -183,7 +183,11 @@ class FootprintSensorSpec(BaseModel):
     measures) a target inside the footprint, independently at each look: a number in ``(0, 1]``
     or a table of rows ``[distance from the footprint's centre (m), Pd]``, distances strictly
     increasing from 0, ``Pd`` in ``[0, 1]``, linear between rows and the last value held to the
-    footprint's edge (`hptrack.models.sensor.DetectingFootprintSensor`)."""
+    footprint's edge (`hptrack.models.sensor.DetectingFootprintSensor`).
+
+    ``negative_information`` (default false, the paper's): a look that detects nothing updates
+    the beliefs of the targets it could have seen (`hptrack.models.miss_update`), in the
+    simulator, the flight controller and the planner's sub-task model."""
 
     model_config = _STRICT
 
@@ -192,6 +196,7 @@ class FootprintSensorSpec(BaseModel):
     measurement_noise_std: NoiseStd = DEFAULT_NOISE_STD
     measurement_noise_covariance: Matrix2 | None = None
     detection_probability: DetectionProbability = 1.0
+    negative_information: Annotated[bool, Strict()] = False
 
     @model_validator(mode="after")
     def _noise(self) -> Self:
@@ -724,6 +729,7 @@ class Scenario(BaseModel):
             belief_motion=self.motion_part(),
             detection_probability=self.sensor_spec().detection_probability,
             fence=self.fence.spec() if self.fence else None,
+            negative_information=self.sensor_spec().negative_information,
         )
 
     def initial_observation(self) -> Observation:

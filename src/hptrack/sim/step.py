@@ -95,7 +95,7 @@ def sense(sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z,
             z[1] = y + (e0 * factor[1, 0] + e1 * factor[1, 1])
             sensor_update(sensor, means[i], covs[i], z, means[i], covs[i])
         else:
-            sensor_missed(sensor, means[i], covs[i])
+            sensor_missed(sensor, agent[0], agent[1], means[i], covs[i])
         c = covs[i]
         logdets[i] = logdet_xy(c[0, 0], c[0, 1], c[1, 1])
         total += logdets[i]
