@@ -73,52 +73,50 @@ def fenced_case(index: int, seed: int, delay_s: float, runs: int) -> dict:
     }
 
 
+ESTIMATORS = {"paper": "", "sharp": "sharp_"}
+"""The estimators compared, by the prefix of their columns."""
+
+
 def table(rows: list[dict]) -> tuple[str, dict]:
-    """The markdown table and the summary by delay."""
+    """The markdown table and the summary by estimator and delay."""
     lines = [
-        "| t_d (s) | cases | simulated P_find, open | fenced | open space: mean error | "
-        "within 0.03 | fenced, corrected: mean error | largest | within 0.03 | "
-        "fenced, uncorrected: mean error | within 0.03 |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| estimator | t_d (s) | cases | simulated P_find, open | fenced | open: mean error "
+        "| within 0.03 | fenced, corrected: mean error | largest | within 0.03 "
+        "| fenced, uncorrected: mean error | within 0.03 |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
-    summary = {}
-    for delay in DELAYS_S:
-        at = [r for r in rows if r["delay"] == delay]
-        if not at:
-            continue
-        err = {
-            key: np.abs(np.array([r[est] - r[emp] for r in at]))
-            for key, est, emp in (
-                ("open", "open_est", "open_emp"),
-                ("corrected", "fenced_est", "fenced_emp"),
-                ("uncorrected", "uncorrected_est", "fenced_emp"),
-                ("sharp_open", "sharp_open_est", "open_emp"),
-                ("sharp_corrected", "sharp_fenced_est", "fenced_emp"),
-                ("sharp_uncorrected", "sharp_uncorrected_est", "fenced_emp"),
-            )
-        }
-        summary[f"{delay:g}"] = {
-            "cases": len(at),
-            "simulated_open": float(np.mean([r["open_emp"] for r in at])),
-            "simulated_fenced": float(np.mean([r["fenced_emp"] for r in at])),
-            **{
-                f"{k}_{stat}": float(f(v))
-                for k, v in err.items()
-                for stat, f in (
-                    ("mean_error", np.mean),
-                    ("largest_error", np.max),
-                    ("within_0.03", lambda e: np.mean(e <= 0.03)),
+    summary: dict = {}
+    for name, prefix in ESTIMATORS.items():
+        for delay in DELAYS_S:
+            at = [r for r in rows if r["delay"] == delay]
+            if not at:
+                continue
+            errors = {
+                key: np.abs(np.array([r[prefix + est] - r[emp] for r in at]))
+                for key, est, emp in (
+                    ("open", "open_est", "open_emp"),
+                    ("corrected", "fenced_est", "fenced_emp"),
+                    ("uncorrected", "uncorrected_est", "fenced_emp"),
                 )
-            },
-        }
-        s = summary[f"{delay:g}"]
-        lines.append(
-            f"| {delay:g} | {len(at)} | {s['simulated_open']:.3f} | {s['simulated_fenced']:.3f} "
-            f"| {s['open_mean_error']:.4f} | {100 * s['open_within_0.03']:.1f} % "
-            f"| {s['corrected_mean_error']:.4f} | {s['corrected_largest_error']:.4f} "
-            f"| {100 * s['corrected_within_0.03']:.1f} % "
-            f"| {s['uncorrected_mean_error']:.4f} | {100 * s['uncorrected_within_0.03']:.1f} % |"
-        )
+            }
+            s = {
+                "cases": len(at),
+                "simulated_open": float(np.mean([r["open_emp"] for r in at])),
+                "simulated_fenced": float(np.mean([r["fenced_emp"] for r in at])),
+            }
+            for key, e in errors.items():
+                s[f"{key}_mean_error"] = float(e.mean())
+                s[f"{key}_largest_error"] = float(e.max())
+                s[f"{key}_within_0.03"] = float(np.mean(e <= 0.03))
+            summary.setdefault(name, {})[f"{delay:g}"] = s
+            lines.append(
+                f"| {name} | {delay:g} | {len(at)} | {s['simulated_open']:.3f} "
+                f"| {s['simulated_fenced']:.3f} | {s['open_mean_error']:.4f} "
+                f"| {100 * s['open_within_0.03']:.1f} % | {s['corrected_mean_error']:.4f} "
+                f"| {s['corrected_largest_error']:.4f} | {100 * s['corrected_within_0.03']:.1f} % "
+                f"| {s['uncorrected_mean_error']:.4f} "
+                f"| {100 * s['uncorrected_within_0.03']:.1f} % |"
+            )
     return "\n".join(lines) + "\n", summary
 
 
@@ -128,10 +126,18 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=2000)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=Path("docs/results/fence-coverage"))
+    parser.add_argument(
+        "--tables-only", action="store_true", help="rewrite the tables from OUT/cases.json"
+    )
     args = parser.parse_args()
-    rows = [
-        fenced_case(i, args.seed, delay, args.runs) for i in range(args.cases) for delay in DELAYS_S
-    ]
+    if args.tables_only:
+        rows = json.loads((args.out / "cases.json").read_text())
+    else:
+        rows = [
+            fenced_case(i, args.seed, delay, args.runs)
+            for i in range(args.cases)
+            for delay in DELAYS_S
+        ]
     text, summary = table(rows)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "table.md").write_text(text)
