@@ -100,6 +100,8 @@ def run_episode(
         detections=detections,
         per_target_logdet=world.logdets.copy(),
         info=dict(planner.episode_info()),
+        associations=world.associations,
+        claims=world.claims,
     )
 
 

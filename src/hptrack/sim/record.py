@@ -11,6 +11,7 @@ import numpy as np
 
 from hptrack.jsonout import json_text
 from hptrack.models.beliefs import position_logdet
+from hptrack.models.tracking import lost_tracks
 from hptrack.subtasks import read_subtasks
 
 if TYPE_CHECKING:
@@ -44,6 +45,10 @@ class EpisodeRecord:
         detections: ``(K+1, n)`` which targets were measured at each step.
         per_target_logdet: ``(n,)`` final ``log det Sigma^xy`` per target.
         info: planner-specific metadata (JSON-serialisable), e.g. its sub-task log.
+        associations: ``(m, 6)`` detections without identity: which report went to which
+            belief (`hptrack.sim.step.World.associations`); ``None`` with identity.
+        claims: ``(c, 3)`` the confirmed tentative tracks' claims
+            (`hptrack.sim.step.World.claims`); ``None`` with identity.
     """
 
     planner: str
@@ -59,6 +64,8 @@ class EpisodeRecord:
     detections: np.ndarray
     per_target_logdet: np.ndarray
     info: dict = field(default_factory=dict)
+    associations: np.ndarray | None = None
+    claims: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.agent_paths.ndim == 2:
@@ -113,7 +120,50 @@ class EpisodeRecord:
             "time_step": self.time_step,
             "duration": float(self.times[-1]),
             "info": info,
+        } | self.tracking_summary()
+
+    def tracking_summary(self) -> dict:
+        """Detections without identity: the reports, false alarms, wrong associations
+        (`wrong_associations`), claims and tracks lost (`tracks_lost`); empty with
+        identity."""
+        if self.associations is None or self.claims is None:
+            return {}
+        return {
+            "tracking": {
+                "reports": len(self.associations),
+                "false_alarms": int(np.sum(self.associations[:, 3] < 0)),
+                "wrong_associations": self.wrong_associations(),
+                "claims": len(self.claims),
+                "tracks_lost": int(np.sum(self.tracks_lost())),
+            }
         }
+
+    def wrong_associations(self) -> int:
+        """Reports that went to a belief not of their source (false alarms included) and
+        claims of a belief by another target's (or a false alarm's) track; 0 with identity."""
+        if self.associations is None or self.claims is None:
+            return 0
+        rows, claims = self.associations, self.claims
+        wrong = (rows[:, 4] >= 0) & (rows[:, 3] != rows[:, 4])
+        return int(np.sum(wrong) + np.sum(claims[:, 1] != claims[:, 2]))
+
+    def swapped(self) -> np.ndarray:
+        """``(n,)`` the beliefs whose last report or claim came from another source (a
+        target's track swapped, or a false alarm's); none with identity."""
+        out = np.zeros(len(self.target_ids), dtype=bool)
+        if self.associations is None or self.claims is None:
+            return out
+        rows = self.associations[self.associations[:, 4] >= 0]
+        events = np.concatenate([rows[:, [0, 4, 3]], self.claims])
+        for _, belief, source in events[np.argsort(events[:, 0], kind="stable")]:
+            out[int(belief)] = source != belief
+        return out
+
+    def tracks_lost(self) -> np.ndarray:
+        """``(n,)`` the targets lost at the end: outside their belief's 99 % ellipse
+        (`hptrack.models.tracking.lost_tracks`) or their belief swapped (`swapped`)."""
+        lost = lost_tracks(self.true_states[-1], self.belief_means[-1], self.belief_covariances[-1])
+        return lost | self.swapped()
 
     def save(self, path: str | Path) -> None:
         """Write the record to one compressed ``.npz`` file."""
@@ -136,7 +186,13 @@ class EpisodeRecord:
                 belief_covariances=self.belief_covariances,
                 detections=self.detections,
                 per_target_logdet=self.per_target_logdet,
+                **self._tracking_arrays(),
             )
+
+    def _tracking_arrays(self) -> dict:
+        if self.associations is None or self.claims is None:
+            return {}
+        return {"associations": self.associations, "claims": self.claims}
 
     @classmethod
     def load(cls, path: str | Path) -> EpisodeRecord:
