@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hptrack.models.sensor import detected_mask, draws_detection, measured_mask
+from hptrack.models.sensor import SensorPart, detected_mask, draws_detection, measured_mask
 
 
 class Detections(NamedTuple):
@@ -46,7 +46,7 @@ class Detector:
 
     def __init__(
         self,
-        sensor: tuple,
+        sensor: SensorPart,
         measurement_noise: np.ndarray,
         false_alarm_density: float,
         rng: np.random.Generator,

@@ -38,7 +38,7 @@ from hptrack.models.association import (
 )
 from hptrack.models.belief_motion import BeliefMotion
 from hptrack.models.measurement import kalman_update
-from hptrack.models.sensor import draws_detection
+from hptrack.models.sensor import DetectingFootprintSensor, SensorPart
 
 GATE_PROBABILITY = 0.99
 """``P_G``: the chance that the gate holds a detected target's report."""
@@ -70,10 +70,12 @@ def footprint_probability(
     return 0.5 * math.pi * (density * band * h) @ _WEIGHTS
 
 
-def detection_probability_at(sensor: tuple, agent: np.ndarray, positions: np.ndarray):
+def detection_probability_at(
+    sensor: SensorPart, agent: np.ndarray, positions: np.ndarray
+) -> np.ndarray:
     """``Pd`` ``(n,)`` of the sensor part at ``positions`` ``(n, 2)`` (m) from ``agent``,
     as if inside the footprint (`hptrack.models.sensor.table_probability`'s interpolation)."""
-    if not draws_detection(sensor):
+    if not isinstance(sensor, DetectingFootprintSensor):
         return np.ones(positions.shape[0])
     d = np.hypot(*(positions - agent).T)
     return np.interp(d, sensor.distances, sensor.probabilities)
@@ -140,7 +142,7 @@ class Tracker:
     def __init__(
         self,
         motion: BeliefMotion,
-        sensor: tuple,
+        sensor: SensorPart,
         noise: np.ndarray,
         false_alarm_density: float,
         association: str,
