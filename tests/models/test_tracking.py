@@ -161,7 +161,7 @@ def test_jpda_splits_a_report_between_two_close_beliefs():
     look = _tracker(1e-6, association="jpda").look(AGENT, means, covs, np.array([[0.0, 0.0]]))
     assert look.belief_of[0] in (0, 1) and 0.45 < look.weight[0] < 0.55
     assert abs(means[0, 0] + means[1, 0]) < 1e-9  # symmetric
-    assert gate_threshold(GATE_PROBABILITY) == pytest.approx(-2 * math.log(0.01))
+    assert gate_threshold(GATE_PROBABILITY) == pytest.approx(-2 * math.log(1e-4))
 
 
 def test_lost_tracks_by_the_99_percent_ellipse():
