@@ -10,9 +10,9 @@ target, today's), and without identity (``labelled: false``) with GNN at no clut
 ``U``, the wrong associations (reports that went to a belief not of their source, and claims of
 a belief by another target's track), the tracks lost at the end (the truth outside its
 belief's 99 % ellipse, or the belief's last report from another source), reports and false
-alarms. Episodes are appended to ``OUT/episodes.jsonl`` as they finish (a re-run resumes); the
-report is ``OUT/table.md`` and ``OUT/summary.json``: per planner and sensor the mean ``U`` with
-its standard error, and the paired difference against labelled.
+alarms (and those a belief took). Episodes are appended to ``OUT/episodes.jsonl`` as they
+finish (a re-run resumes); the report is ``OUT/table.md`` and ``OUT/summary.json``: per planner
+and sensor the mean ``U`` with its standard error, and the paired difference against labelled.
 
     python3 benchmarks/sensing_unlabelled.py --targets 6 --seeds 16 --workers 1 \\
         --out docs/results/sensing-unlabelled
@@ -65,6 +65,7 @@ def episode(job: tuple) -> dict:
         "tracks_lost": int(np.sum(record.tracks_lost())),
         "reports": tracking.get("reports", int(record.detections.sum())),
         "false_alarms": tracking.get("false_alarms", 0),
+        "false_alarms_taken": tracking.get("false_alarms_taken", 0),
         "claims": tracking.get("claims", 0),
     }
 
@@ -83,8 +84,8 @@ def report(rows: list[dict], out: Path, header: str, names: list[str]) -> None:
         "",
         "| n | planner | sensor | episodes | mean U | std. error | unlabelled - labelled, "
         "paired U | std. error | wrong associations / episode | tracks lost / episode | "
-        "false alarms / episode |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "false alarms / episode | taken by a belief / episode |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     summary: dict = {"setting": header, "rows": []}
     by = {(r["n"], r["planner"], r["sensor"], r["seed"]): r for r in rows}
@@ -107,10 +108,11 @@ def report(rows: list[dict], out: Path, header: str, names: list[str]) -> None:
                 wrong = float(np.mean([r["wrong_associations"] for r in mine]))
                 lost = float(np.mean([r["tracks_lost"] for r in mine]))
                 alarms = float(np.mean([r["false_alarms"] for r in mine]))
+                taken = float(np.mean([r["false_alarms_taken"] for r in mine]))
                 pair_text = f"{d:+.2f} | {d_se:.2f}" if name != "labelled" else "- | -"
                 lines.append(
                     f"| {n} | {planner} | {name} | {len(mine)} | {u:.2f} | {u_se:.2f} | "
-                    f"{pair_text} | {wrong:.2f} | {lost:.2f} | {alarms:.2f} |"
+                    f"{pair_text} | {wrong:.2f} | {lost:.2f} | {alarms:.2f} | {taken:.2f} |"
                 )
                 summary["rows"].append(
                     {
@@ -125,6 +127,7 @@ def report(rows: list[dict], out: Path, header: str, names: list[str]) -> None:
                         "wrong_associations": wrong,
                         "tracks_lost": lost,
                         "false_alarms": alarms,
+                        "false_alarms_taken": taken,
                     }
                 )
     out.mkdir(parents=True, exist_ok=True)

@@ -217,3 +217,13 @@ def test_an_unlabelled_episode_records_its_associations(tmp_path):
     twice = run_episode(parse_scenario(data), GreedyPlanner(), seed=1)
     np.testing.assert_array_equal(twice.associations, rows)
     assert twice.uncertainty == record.uncertainty
+
+
+def test_the_cli_refuses_clutter_with_named_detections(cli, tmp_path):
+    import yaml
+
+    path = tmp_path / "clutter.yaml"
+    path.write_text(yaml.safe_dump(_data(false_alarm_density=1e-6)))
+    cli("simulate", path).refused("false_alarm_density 1e-06", "labelled: false")
+    path.write_text(yaml.safe_dump(_data(labelled=False, confirmation=[0, 5])))
+    cli("simulate", path).refused("sensor.confirmation.0", "greater than or equal to 1")

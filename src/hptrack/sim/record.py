@@ -123,15 +123,18 @@ class EpisodeRecord:
         } | self.tracking_summary()
 
     def tracking_summary(self) -> dict:
-        """Detections without identity: the reports, false alarms, wrong associations
-        (`wrong_associations`), claims and tracks lost (`tracks_lost`); empty with
-        identity."""
+        """Detections without identity: the reports, false alarms (and those a belief took),
+        wrong associations (`wrong_associations`), claims and tracks lost (`tracks_lost`);
+        empty with identity."""
         if self.associations is None or self.claims is None:
             return {}
         return {
             "tracking": {
                 "reports": len(self.associations),
                 "false_alarms": int(np.sum(self.associations[:, 3] < 0)),
+                "false_alarms_taken": int(
+                    np.sum((self.associations[:, 3] < 0) & (self.associations[:, 4] >= 0))
+                ),
                 "wrong_associations": self.wrong_associations(),
                 "claims": len(self.claims),
                 "tracks_lost": int(np.sum(self.tracks_lost())),
