@@ -11,8 +11,9 @@ target, today's), and without identity (``labelled: false``) with GNN at no clut
 a belief by another target's track), the tracks lost at the end (the truth outside its
 belief's 99 % ellipse, or the belief's last report from another source), reports and false
 alarms (and those a belief took). Episodes are appended to ``OUT/episodes.jsonl`` as they
-finish (a re-run resumes); the report is ``OUT/table.md`` and ``OUT/summary.json``: per planner
-and sensor the mean ``U`` with its standard error, and the paired difference against labelled.
+finish (a re-run resumes); the report is ``OUT/table.md``, ``OUT/summary.json`` and
+``OUT/summary.csv``: per planner and sensor the mean ``U`` with its standard error, and the
+paired difference against labelled.
 
     python3 benchmarks/sensing_unlabelled.py --targets 6 --seeds 16 --workers 1 \\
         --out docs/results/sensing-unlabelled
@@ -21,6 +22,7 @@ and sensor the mean ``U`` with its standard error, and the paired difference aga
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import math
 from multiprocessing import Pool
@@ -133,6 +135,10 @@ def report(rows: list[dict], out: Path, header: str, names: list[str]) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "table.md").write_text("\n".join(lines) + "\n")
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    with (out / "summary.csv").open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(summary["rows"][0]))
+        writer.writeheader()
+        writer.writerows(summary["rows"])
     print("\n".join(lines))
 
 
