@@ -173,3 +173,13 @@ def test_jpda_gives_stone_soups_weights(seed):
         np.testing.assert_allclose(beta[i], want, rtol=0, atol=1e-9)
         shared += int(np.count_nonzero(want[1:]) > 0)
     assert shared >= 1
+
+
+def test_a_cluster_beyond_the_enumeration_bound_is_weighed_belief_by_belief():
+    rng = np.random.default_rng(5)
+    w = rng.normal(size=(3, 61))  # 61^3 joint choices, above MAX_JOINT_EVENTS
+    beta = jpda(w)
+    want = np.exp(w - w.max(axis=1, keepdims=True))
+    np.testing.assert_allclose(beta, want / want.sum(axis=1, keepdims=True), rtol=1e-13)
+    small = jpda(w[:, :4])  # 4^3 choices: exact, the rows couple
+    assert not np.allclose(small[0], np.exp(w[0, :4]) / np.exp(w[0, :4]).sum())

@@ -111,7 +111,7 @@ def clusters(gated: np.ndarray) -> list[np.ndarray]:
     return [np.array(sorted(g)) for g in groups.values()]
 
 
-def _events(options: list[list[int]], k: int):
+def _events(options: list[list[int]]):
     """Every joint event: one choice per belief (0 none, ``j + 1`` detection ``j``), no
     detection twice."""
     for event in itertools.product(*options):
@@ -135,7 +135,7 @@ def jpda(weights: np.ndarray) -> np.ndarray:
                 w = np.exp(weights[i] - np.max(weights[i]))
                 beta[i] = w / np.sum(w)
             continue
-        events = np.array(list(_events(options, k)))
+        events = np.array(list(_events(options)))
         logw = np.sum(weights[cluster[None, :], events], axis=1)
         w = np.exp(logw - np.max(logw))
         w /= np.sum(w)
