@@ -227,3 +227,17 @@ def test_the_cli_refuses_clutter_with_named_detections(cli, tmp_path):
     cli("simulate", path).refused("false_alarm_density 1e-06", "labelled: false")
     path.write_text(yaml.safe_dump(_data(labelled=False, confirmation=[0, 5])))
     cli("simulate", path).refused("sensor.confirmation.0", "greater than or equal to 1")
+
+
+def test_a_written_scenario_keeps_the_fields_with_their_comments(tmp_path):
+    from hptrack.scenario.io import load_scenario, save_scenario
+
+    fields = dict(labelled=False, false_alarm_density=1e-6, association="jpda", confirmation=[2, 4])
+    scenario = parse_scenario(_data(**fields))
+    path = tmp_path / "s.yaml"
+    save_scenario(scenario, path)
+    assert load_scenario(path) == scenario
+    lines = path.read_text().splitlines()
+    for name in fields:
+        (line,) = [x for x in lines if x.strip().startswith(f"{name}:")]
+        assert "  # " in line, line
