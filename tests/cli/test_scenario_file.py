@@ -5,7 +5,7 @@ import re
 import pytest
 
 from hptrack.scenario import load_scenario, random_scenario, save_scenario
-from hptrack.scenario.io import FIELD_COMMENTS
+from hptrack.scenario.io import FIELD_COMMENTS, IDENTITY_DEFAULTS
 
 
 def _fields_without_a_comment(text: str) -> list[str]:
@@ -63,6 +63,8 @@ def test_every_field_round_trips_with_its_comment(tmp_path):
     other_motions = {"diffusion", "damping", "acceleration_std", "jerk_intensity"}
     blocks = {"sensor", "sensor.model", "diameter", "vehicle", "vehicle.model", "motion"}  # unset
     blocks |= {"sensor.detection_probability", "sensor.negative_information"}  # when not default
+    blocks |= {"sensor.detection_probability"}  # written only when not 1
+    blocks |= {f"sensor.{name}" for name in IDENTITY_DEFAULTS}  # written when not the default
     assert written == set(FIELD_COMMENTS) - other_motions - blocks  # every field: its comment
     for motion, parameter in (
         ("random_walk", "diffusion"),

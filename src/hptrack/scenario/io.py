@@ -14,7 +14,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from hptrack.interface import InputError, one_line, shown
-from hptrack.scenario.model import NOISE_FIELDS, Scenario
+from hptrack.scenario.model import DEFAULT_CONFIRMATION, NOISE_FIELDS, Scenario
 
 
 class ScenarioError(InputError):
@@ -255,6 +255,10 @@ FIELD_COMMENTS = {
     "sensor.detection_probability": "chance a look detects a target inside: a number, or "
     "rows [distance from the centre m, Pd]",
     "sensor.negative_information": "true: a look that sees nothing updates the beliefs",
+    "sensor.false_alarm_density": "false detections per m^2 per look inside the footprint",
+    "sensor.labelled": "true: detections name their target; false: positions only",
+    "sensor.association": "gnn or jpda, for detections without identity",
+    "sensor.confirmation": "[M, N]: a new track claims a target after M of N looks",
     "diameter": "m, the footprint's diameter w",
     "vehicle": "how the agent moves (the paper's holonomic point by default)",
     "vehicle.model": "holonomic: straight at up to speed, any direction",
@@ -286,6 +290,16 @@ _BlockMappings.add_representer(
 )
 
 
+IDENTITY_DEFAULTS = {
+    "false_alarm_density": 0.0,
+    "labelled": True,
+    "association": "gnn",
+    "confirmation": list(DEFAULT_CONFIRMATION),
+}
+"""The ``sensor:`` fields of detections without identity at their defaults (as JSON), which a
+written file leaves out (so a file of the paper's sensor reads as before)."""
+
+
 def file_data(scenario: Scenario) -> dict:
     """The scenario as the data of its file: every field, ``None`` left out; a ``sensor:`` or
     ``vehicle:`` block holds the facts it stands for (the ``agent:`` block then leaves them
@@ -300,6 +314,9 @@ def file_data(scenario: Scenario) -> dict:
             data["sensor"].pop("detection_probability")
         if data["sensor"].get("negative_information") is False:  # the default, the paper's
             data["sensor"].pop("negative_information")
+        for name, default in IDENTITY_DEFAULTS.items():  # the paper's named detections
+            if data["sensor"].get(name) == default:
+                data["sensor"].pop(name)
         for name in ("sensor_diameter", *NOISE_FIELDS):
             data["agent"].pop(name, None)
     return data

@@ -107,6 +107,12 @@ NoiseStd = Annotated[Real, Field(ge=1e-6, le=1e4)]
 DEFAULT_SPEED = 30.0
 DEFAULT_DIAMETER = 100.0
 DEFAULT_NOISE_STD = float(np.sqrt(10.0))
+MAX_FALSE_ALARM_DENSITY = 1e-2
+"""Largest ``false_alarm_density``, per m^2 per look (one false alarm per 100 m^2)."""
+Count = Annotated[int, Strict(), Field(ge=1, le=100)]
+"""A whole number of looks (a confirmation rule's M or N)."""
+DEFAULT_CONFIRMATION = (3, 5)
+"""The default M-of-N confirmation rule of a tentative track."""
 NOISE_FIELDS = ("measurement_noise_std", "measurement_noise_covariance")
 """The fields that give ``R`` (the covariance, when given, takes precedence)."""
 
@@ -187,7 +193,15 @@ class FootprintSensorSpec(BaseModel):
 
     ``negative_information`` (default false, the paper's): a look that detects nothing updates
     the beliefs of the targets it could have seen (`hptrack.models.miss_update`), in the
-    simulator, the flight controller and the planner's sub-task model."""
+    simulator, the flight controller and the planner's sub-task model.
+
+    Detections without identity (`hptrack.models.detector`, `hptrack.models.tracking`):
+    ``labelled`` (default true, the paper's: every detection names its target); false: a look
+    reports positions only, and the simulator's tracker associates them with the beliefs by
+    ``association`` (``gnn`` or ``jpda``), a detection that no belief claims becoming a
+    tentative track that claims a target once it is detected at ``confirmation = [M, N]`` (M of
+    its first N looks). ``false_alarm_density``: false detections per m^2 per look inside the
+    footprint (a Poisson count, uniform positions; default 0), only with ``labelled: false``."""
 
     model_config = _STRICT
 
@@ -197,10 +211,26 @@ class FootprintSensorSpec(BaseModel):
     measurement_noise_covariance: Matrix2 | None = None
     detection_probability: DetectionProbability = 1.0
     negative_information: Annotated[bool, Strict()] = False
+    false_alarm_density: Annotated[Real, Field(ge=0.0, le=MAX_FALSE_ALARM_DENSITY)] = 0.0
+    labelled: Annotated[bool, Strict()] = True
+    association: Literal["gnn", "jpda"] = "gnn"
+    confirmation: tuple[Count, Count] = DEFAULT_CONFIRMATION
 
     @model_validator(mode="after")
     def _noise(self) -> Self:
         _check_noise_covariance(self.measurement_noise_covariance)
+        return self
+
+    @model_validator(mode="after")
+    def _identity(self) -> Self:
+        if self.false_alarm_density > 0.0 and self.labelled:
+            raise ValueError(
+                f"false_alarm_density {self.false_alarm_density:g} per m^2 needs labelled: false "
+                "(a false alarm names no target)"
+            )
+        m, n = self.confirmation
+        if m > n:
+            raise ValueError(f"confirmation [M, N] needs M <= N, value [{m}, {n}]")
         return self
 
     def noise_covariance(self) -> np.ndarray:

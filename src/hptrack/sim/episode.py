@@ -105,6 +105,8 @@ def run_episode(
         info=dict(planner.episode_info()),
         fence=mission.fence,
         mean_positions=mean_positions,
+        associations=world.associations,
+        claims=world.claims,
     )
 
 

@@ -52,6 +52,10 @@ class EpisodeRecord:
         mean_positions: ``(K+1, n, 2)`` the belief means' positions at every step, m (what
             the metrics need, whatever the belief stride; ``None`` in a record of an older
             hptrack or of a flight log, whose metrics then use the stored belief steps).
+        associations: ``(m, 6)`` detections without identity: which report went to which
+            belief (`hptrack.sim.step.World.associations`); ``None`` with identity.
+        claims: ``(c, 3)`` the confirmed tentative tracks' claims
+            (`hptrack.sim.step.World.claims`); ``None`` with identity.
     """
 
     planner: str
@@ -69,6 +73,8 @@ class EpisodeRecord:
     info: dict = field(default_factory=dict)
     fence: FenceSpec | None = None
     mean_positions: np.ndarray | None = None
+    associations: np.ndarray | None = None
+    claims: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.agent_paths.ndim == 2:
@@ -123,17 +129,19 @@ class EpisodeRecord:
 
     def tracks_lost(self) -> np.ndarray | None:
         """``(n,)`` which targets' tracks are lost at the end (`hptrack.sim.metrics.track_lost`:
-        truth outside the belief's 99 % ellipse, or a swapped track); ``None`` without the
+        truth outside the belief's 99 % ellipse, or a swapped track; without identity also a
+        belief whose last report came from another source, `swapped`); ``None`` without the
         truth."""
         truth = positions(self.true_states[-1])
         if not np.isfinite(truth).all():
             return None
-        return track_lost(
+        lost = track_lost(
             positions(self.belief_means[-1]),
             self.belief_covariances[-1][:, POSITION, POSITION],
             truth,
             gospa_cutoff(self.sensor_diameter),
         )
+        return lost | self.swapped()
 
     def metrics(self) -> dict:
         """The tracking metrics beside ``U`` (`hptrack.sim.metrics`): ``gospa_mean`` (over
@@ -174,7 +182,48 @@ class EpisodeRecord:
             "time_step": self.time_step,
             "duration": float(self.times[-1]),
             "info": info,
+        } | self.tracking_summary()
+
+    def tracking_summary(self) -> dict:
+        """Detections without identity: the reports, false alarms (and those a belief took),
+        wrong associations (`wrong_associations`), claims and tracks lost (`tracks_lost`);
+        empty with identity."""
+        if self.associations is None or self.claims is None:
+            return {}
+        lost = self.tracks_lost()
+        return {
+            "tracking": {
+                "reports": len(self.associations),
+                "false_alarms": int(np.sum(self.associations[:, 3] < 0)),
+                "false_alarms_taken": int(
+                    np.sum((self.associations[:, 3] < 0) & (self.associations[:, 4] >= 0))
+                ),
+                "wrong_associations": self.wrong_associations(),
+                "claims": len(self.claims),
+                "tracks_lost": None if lost is None else int(np.sum(lost)),
+            }
         }
+
+    def wrong_associations(self) -> int:
+        """Reports that went to a belief not of their source (false alarms included) and
+        claims of a belief by another target's (or a false alarm's) track; 0 with identity."""
+        if self.associations is None or self.claims is None:
+            return 0
+        rows, claims = self.associations, self.claims
+        wrong = (rows[:, 4] >= 0) & (rows[:, 3] != rows[:, 4])
+        return int(np.sum(wrong) + np.sum(claims[:, 1] != claims[:, 2]))
+
+    def swapped(self) -> np.ndarray:
+        """``(n,)`` the beliefs whose last report or claim came from another source (a
+        target's track swapped, or a false alarm's); none with identity."""
+        out = np.zeros(len(self.target_ids), dtype=bool)
+        if self.associations is None or self.claims is None:
+            return out
+        rows = self.associations[self.associations[:, 4] >= 0]
+        events = np.concatenate([rows[:, [0, 4, 3]], self.claims])
+        for _, belief, source in events[np.argsort(events[:, 0], kind="stable")]:
+            out[int(belief)] = source != belief
+        return out
 
     def save(self, path: str | Path) -> None:
         """Write the record to one compressed ``.npz`` file."""
@@ -197,8 +246,14 @@ class EpisodeRecord:
         }
         if self.mean_positions is not None:
             arrays["mean_positions"] = self.mean_positions
+        arrays |= self._tracking_arrays()
         with open(path, "wb") as fh:
             np.savez_compressed(fh, meta=np.array(json_text(meta)), **arrays)
+
+    def _tracking_arrays(self) -> dict:
+        if self.associations is None or self.claims is None:
+            return {}
+        return {"associations": self.associations, "claims": self.claims}
 
     @classmethod
     def load(cls, path: str | Path) -> EpisodeRecord:

@@ -18,9 +18,14 @@ order. A sensor that detects with a probability below one (``sensor_draws``) has
 ``SeedSequence(seed, spawn_key=(4,))`` (the fifth child of the same root, so the other four are
 unchanged): one uniform per target inside the footprint per look, in target order, the target
 detected when it is below ``Pd(d)`` (`hptrack.models.sensor.sensor_detects`). The paper's sensor
-draws nothing from it. A Generator's normals do not depend on how the draws are split, so
-`World` draws them in blocks (`NormalBlock`) and the kernels consume them in the simulator's
-order: the same seed gives the same mission as `hptrack.sim.episode.run_episode`.
+draws nothing from it. A sensor without identity (``labelled: false``) reports through
+`hptrack.models.detector.Detector` instead, every draw of its looks from a sixth stream,
+``SeedSequence(seed, spawn_key=(5,))``, and the beliefs are kept by
+`hptrack.models.tracking.Tracker` (the planners see its beliefs; `World.associations` and
+`World.claims` say which report went to which belief). A Generator's normals do not depend
+on how the draws are split, so `World` draws them in blocks (`NormalBlock`) and the kernels
+consume them in the simulator's order: the same seed gives the same mission as
+`hptrack.sim.episode.run_episode`.
 """
 
 from __future__ import annotations
@@ -29,7 +34,8 @@ import numba
 import numpy as np
 
 from hptrack.interface import MissionSpec, Observation
-from hptrack.models.beliefs import logdet_xy
+from hptrack.models.beliefs import logdet_xy, position_logdet
+from hptrack.models.detector import Detector
 from hptrack.models.mission import predict_covariance_on, predict_mean_on
 from hptrack.models.sensor import (
     draws_detection,
@@ -39,7 +45,8 @@ from hptrack.models.sensor import (
     sensor_missed,
     sensor_update,
 )
-from hptrack.models.state import position_of
+from hptrack.models.state import position_of, positions
+from hptrack.models.tracking import Tracker, new_track_covariance
 from hptrack.models.truth_motion import advance_truth
 from hptrack.models.vehicle import vehicle_move
 from hptrack.scenario.model import ConstantAccelerationSpec, Scenario, SingerSpec
@@ -103,6 +110,21 @@ def sense(sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z,
 
 
 @numba.njit(cache=True)
+def world_advance(mission, agent, waypoint, truth_motion, truth, z_motion, sqrt_q, means, covs):
+    """The step before sensing, in place: move by the mission's vehicle, true motion by
+    ``truth_motion`` with the unit normals ``z_motion`` ``(n, d)``, predict one step."""
+    vehicle_move(mission.vehicle, agent, waypoint)
+    advance_truth(truth_motion, mission, truth, z_motion, sqrt_q)
+    tau = mission.time_step
+    q = mission.process_noise
+    steps = tau / tau
+    elapsed = steps * tau
+    for i in range(truth.shape[0]):
+        predict_mean_on(mission, means[i], elapsed, means[i])
+        predict_covariance_on(mission, covs[i], q[i], steps, covs[i])
+
+
+@numba.njit(cache=True)
 def world_step(
     mission,
     agent,
@@ -120,20 +142,11 @@ def world_step(
     u,
     u_pos,
 ):
-    """One simulator step in place (module docstring): move by the mission's vehicle, true
-    motion by ``truth_motion`` with the unit normals ``z_motion`` ``(n, d)``, predict one step,
-    sense by the mission's sensor (``factor``: the Cholesky factor of ``R``; ``out``: `sense`'s
-    ``seen``, ``logdets`` and ``z``; ``u``, ``u_pos``: its detection uniforms). Returns the new
+    """One simulator step in place (module docstring): `world_advance`, then sense by the
+    mission's sensor (``factor``: the Cholesky factor of ``R``; ``out``: `sense`'s ``seen``,
+    ``logdets`` and ``z``; ``u``, ``u_pos``: its detection uniforms). Returns the new
     ``e_pos``, ``U`` and the new ``u_pos``."""
-    vehicle_move(mission.vehicle, agent, waypoint)
-    advance_truth(truth_motion, mission, truth, z_motion, sqrt_q)
-    tau = mission.time_step
-    q = mission.process_noise
-    steps = tau / tau
-    elapsed = steps * tau
-    for i in range(truth.shape[0]):
-        predict_mean_on(mission, means[i], elapsed, means[i])
-        predict_covariance_on(mission, covs[i], q[i], steps, covs[i])
+    world_advance(mission, agent, waypoint, truth_motion, truth, z_motion, sqrt_q, means, covs)
     seen, logdets, z = out
     return sense(
         mission.sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z, u, u_pos
@@ -174,6 +187,31 @@ class UniformBlock(NormalBlock):
 DETECTION_STREAM = 4
 """The spawn key of the detection stream, ``SeedSequence(seed, spawn_key=(4,))``: the fifth
 child of the simulator's root (the first four are its other streams)."""
+DETECTOR_STREAM = 5
+"""The spawn key of the detector's stream (detections without identity), the sixth child."""
+
+
+def unlabelled_parts(scenario: Scenario, seed: int) -> tuple[Detector, Tracker] | None:
+    """The detector and tracker of a scenario whose sensor reports no identity (``None`` for a
+    labelled one): the detector's Generator from `DETECTOR_STREAM` of ``seed``."""
+    spec = scenario.sensor_spec()
+    if spec.labelled:
+        return None
+    mission = scenario.mission_spec()
+    sensor, noise = mission.record.sensor, spec.noise_covariance()
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(DETECTOR_STREAM,)))
+    detector = Detector(sensor, noise, spec.false_alarm_density, rng)
+    tracker = Tracker(
+        mission.motion,
+        sensor,
+        noise,
+        spec.false_alarm_density,
+        spec.association,
+        spec.confirmation,
+        float(np.max(mission.process_noise)),
+        new_track_covariance(noise, scenario.covariances()),
+    )
+    return detector, tracker
 
 
 class World:
@@ -197,6 +235,11 @@ class World:
         logdets: ``(n,)`` per-target ``log det Sigma^xy``.
         uncertainty: ``U = sum(logdets)``.
         planner_seed: the planner's stream of the seed.
+        associations: ``(m, 6)`` without identity, one row a report: step, x, y (m), its
+            source (target index, -1 a false alarm), the belief it went to (-1 none) and the
+            weight (`hptrack.models.tracking.TrackerLook`); ``None`` with identity.
+        claims: ``(c, 3)`` without identity, one row a confirmed tentative track: step, the
+            belief it re-initialised, the source of the report that confirmed it.
     """
 
     def __init__(self, scenario: Scenario, seed: int | None = None) -> None:
@@ -234,6 +277,9 @@ class World:
         self.seen = np.zeros(n, dtype=bool)
         self.logdets = np.empty(n)
         self.step_index = 0
+        self._unlabelled = unlabelled_parts(scenario, self.seed)
+        self._rows: list[np.ndarray] = []
+        self._claims: list[tuple[int, int, int]] = []
         self._sense()
 
     @property
@@ -267,7 +313,40 @@ class World:
         if self._detection is not None:
             self._detection.pos = u_pos
 
+    def _track(self) -> None:
+        """Sense without identity: the detector's reports, the tracker's beliefs."""
+        assert self._unlabelled is not None
+        detector, tracker = self._unlabelled
+        reports = detector.look(self.agent, positions(self.truth))
+        look = tracker.look(self.agent, self.means, self.covariances, reports.positions)
+        self.seen[:] = look.seen
+        self.logdets[:] = position_logdet(self.covariances)
+        self.uncertainty = float(np.sum(self.logdets))
+        k = self.step_index
+        self._rows.append(
+            np.column_stack(
+                [np.full(len(look.weight), k), reports.positions, reports.sources]
+                + [look.belief_of, look.weight]
+            )
+        )
+        self._claims += [(k, c.belief, int(reports.sources[c.detection])) for c in look.claims]
+
+    @property
+    def associations(self) -> np.ndarray | None:
+        if self._unlabelled is None:
+            return None
+        return np.concatenate([np.empty((0, 6)), *self._rows])
+
+    @property
+    def claims(self) -> np.ndarray | None:
+        if self._unlabelled is None:
+            return None
+        return np.array(self._claims, dtype=float).reshape(-1, 3)
+
     def _sense(self) -> None:
+        if self._unlabelled is not None:
+            self._track()
+            return
         n = self.n_targets
         self._sensor.ensure(2 * n)
         u, u_pos = self._uniforms()
@@ -307,6 +386,14 @@ class World:
         wp = self._waypoint
         wp[0] = waypoint_x
         wp[1] = waypoint_y
+        if self._unlabelled is not None:
+            world_advance(
+                self.mission.record, self.agent, wp, self.truth_motion, self.truth, z,
+                self._sqrt_q, self.means, self.covariances,
+            )  # fmt: skip
+            self.step_index += 1
+            self._track()
+            return self.uncertainty
         u, u_pos = self._uniforms()
         sensor.pos, self.uncertainty, u_pos = world_step(
             self.mission.record,
