@@ -227,6 +227,8 @@ def test_the_cli_refuses_clutter_with_named_detections(cli, tmp_path):
     cli("simulate", path).refused("false_alarm_density 1e-06", "labelled: false")
     path.write_text(yaml.safe_dump(_data(labelled=False, confirmation=[0, 5])))
     cli("simulate", path).refused("sensor.confirmation.0", "greater than or equal to 1")
+    path.write_text(yaml.safe_dump(_data(labelled=False, negative_information=True)))
+    cli("simulate", path).refused("negative_information needs labelled: true")
 
 
 def test_a_written_scenario_keeps_the_fields_with_their_comments(tmp_path):

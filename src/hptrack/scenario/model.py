@@ -228,6 +228,11 @@ class FootprintSensorSpec(BaseModel):
                 f"false_alarm_density {self.false_alarm_density:g} per m^2 needs labelled: false "
                 "(a false alarm names no target)"
             )
+        if self.negative_information and not self.labelled:
+            raise ValueError(
+                "negative_information needs labelled: true (the tracker of detections without "
+                "identity does not update on misses)"
+            )
         m, n = self.confirmation
         if m > n:
             raise ValueError(f"confirmation [M, N] needs M <= N, value [{m}, {n}]")
