@@ -302,8 +302,6 @@ class TourPlanner:
         gone = np.zeros(problem.n_targets, dtype=bool)
 
         def score(order: np.ndarray, settle: float, start: int = 0) -> tuple[float, int]:
-            if order.size == 0:
-                order = np.array([-1], dtype=np.int64)  # never available: nothing to pursue
             value, first = tour_score(
                 env, root, scratch, order, start, settle, s.min_find, draws, gone, work
             )
