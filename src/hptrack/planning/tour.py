@@ -19,7 +19,9 @@ Which tour (every decision):
    the agent, in the better of the two directions;
 2. the targets kept: each target's gain from leaving it out of the full tour, then the tours
    without the ``k`` best of those with a positive gain, for every ``k``; the best score wins;
-3. the dwell: the chosen tour with and without its dwells.
+3. the dwell: the chosen tour with and without its dwells;
+4. the entry: the chosen tour entered at each of its targets (a one-step rollout over the
+   tour: the first sub-task that, followed by the tour, scores best).
 
 The planner flies the best tour's first sub-task (a pursuit, a dwell, or the follow), then plans
 again. A miss keeps the target in the action list by default (``miss="keep"``, its belief grown,
