@@ -20,6 +20,7 @@ from hptrack.baselines.stationary import StationaryPlanner
 from hptrack.interface import InputError, Planner, TruthReader
 from hptrack.learning.policy_planner import AdfqPlanner, AdfqSettings, Sb3Planner, Sb3Settings
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
+from hptrack.planning.tour import TourPlanner, TourSettings
 from hptrack.settings import NoSettings, PlannerSettings
 
 
@@ -43,6 +44,11 @@ PLANNERS: dict[str, PlannerEntry] = {
         MctsSettings,
         HierarchicalPlanner,
         "the paper's hierarchical planner (MCTS over coverage sub-tasks)",
+    ),
+    "tour": PlannerEntry(
+        TourSettings,
+        TourPlanner,
+        "revisit tour over the whole budget, scored in the sub-task MDP",
     ),
     "stationary": PlannerEntry(NoSettings, StationaryPlanner, "stays at its start"),
     "greedy": PlannerEntry(NoSettings, GreedyPlanner, "chases the most uncertain reachable target"),

@@ -41,6 +41,13 @@ def set_velocity(state, vx, vy):
     state[3] = vy
 
 
+@numba.njit(cache=True, inline="always")
+def velocity_variance_of(covariance):
+    """The mean of the two velocity variances of one state covariance, (m/s)^2 (compiled
+    code)."""
+    return 0.5 * (covariance[2, 2] + covariance[3, 3])
+
+
 def positions(states: np.ndarray) -> np.ndarray:
     """The positions ``(..., 2)`` of stacked states ``(..., 4)``, m (a view)."""
     return states[..., POSITION]

@@ -25,6 +25,7 @@ import numpy as np
 
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.mission import position_covariance_on
+from hptrack.models.state import velocity_variance_of
 from hptrack.planning.rollout import available_actions, register_policy
 from hptrack.planning.stream import uniform
 from hptrack.planning.subtask_mdp import I_LAST, I_STEP, intercept_of, is_dwell
@@ -176,8 +177,7 @@ def tour(policy, env, state, rng, candidates):
     si, base_cov = state[0], state[2]
     last = si[I_LAST]
     if last >= 0:
-        velocity_variance = 0.5 * (base_cov[last, 2, 2] + base_cov[last, 3, 3])
-        if velocity_variance > policy.settle_velocity_variance:
+        if velocity_variance_of(base_cov[last]) > policy.settle_velocity_variance:
             dwells = 0
             for k in range(count):
                 if is_dwell(env, candidates[k]):
