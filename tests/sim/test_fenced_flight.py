@@ -38,7 +38,9 @@ def fenced(n_targets: int, seed: int, budget: float = 240.0) -> tuple:
     return parse_scenario(data), circle
 
 
-@pytest.mark.parametrize("planner", ["greedy", "clairvoyant", "mcts", "arvi", "astar", "coverage"])
+@pytest.mark.parametrize(
+    "planner", ["greedy", "clairvoyant", "mcts", "arvi", "astar", "coverage", "tour"]
+)
 def test_every_planner_keeps_out_of_the_zone(planner):
     scenario, (cx, cy, radius) = fenced(3, seed=4)
     options = dict(QUICK.get(planner, {}))

@@ -328,6 +328,21 @@ def sees(fence, x, y, radius):
     return False
 
 
+def sight_gap(fence: Fence, start: Sequence[float], point: Sequence[float]) -> float:
+    """How far ``point`` (m) is from the nearest free point, m, or ``inf`` when the UAV cannot
+    fly there from ``start``."""
+    fx, fy = nearest_free(fence, float(point[0]), float(point[1]))
+    if not math.isfinite(fenced_route(fence, float(start[0]), float(start[1]), fx, fy)[0]):
+        return math.inf
+    return math.hypot(fx - point[0], fy - point[1])
+
+
+def in_sight(fence: Fence, start: Sequence[float], point: Sequence[float], radius: float) -> bool:
+    """Whether a footprint of ``radius`` m flown from ``start`` inside ``fence`` can cover
+    ``point`` (`sight_gap`)."""
+    return sight_gap(fence, start, point) <= radius
+
+
 def fenced_distance(fence: Fence, a: Sequence[float], b: Sequence[float]) -> float:
     """The length of the shortest free flight from ``a`` to ``b`` (m; `fenced_route`)."""
     return float(fenced_route(fence, float(a[0]), float(a[1]), float(b[0]), float(b[1]))[0])

@@ -270,12 +270,11 @@ FIXED_POINT_ROUNDS = 200
 
 
 @numba.njit(cache=True)
-def fenced_move(vehicle, agent, waypoint):
-    """`FencedHolonomicVehicle`: by at most ``v_a tau`` along the shortest free flight towards
-    ``waypoint`` (its nearest free point), through as many corners as the step reaches; from a
-    point that is not free, straight towards the nearest free one."""
-    fence = vehicle.fence
-    left = vehicle.step_length
+def move_fenced(fence, step_length, agent, waypoint):
+    """In place: by at most ``step_length`` m along the shortest free flight of ``fence``
+    towards ``waypoint`` (its nearest free point), through as many corners as the step
+    reaches; from a point that is not free, straight towards the nearest free one."""
+    left = step_length
     if not point_free(fence, agent[0], agent[1]):
         gx, gy = nearest_free(fence, agent[0], agent[1])
         move_agent(agent, np.array([gx, gy]), left)
@@ -297,25 +296,35 @@ def fenced_move(vehicle, agent, waypoint):
 
 
 @numba.njit(cache=True)
-def fenced_intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy):
-    """`FencedHolonomicVehicle`: the intercept time by the fixed point of the shortest free
-    flight (module docstring), s; ``inf`` when it cannot catch the point."""
-    fence = vehicle.fence
-    t = intercept_time(agent_x, agent_y, x, y, vx, vy, vehicle.speed)
+def fenced_intercept(fence, speed, agent_x, agent_y, x, y, vx, vy):
+    """The intercept time (s) at ``speed`` (m/s) inside ``fence`` by the fixed point of the
+    shortest free flight (module docstring); ``inf`` when the point cannot be caught."""
+    t = intercept_time(agent_x, agent_y, x, y, vx, vy, speed)
     if math.isinf(t):
         return t
-    if not point_free(fence, agent_x, agent_y):
-        agent_x, agent_y = nearest_free(fence, agent_x, agent_y)
+    ax, ay = nearest_free(fence, agent_x, agent_y)  # the agent itself when it is free
     for _ in range(FIXED_POINT_ROUNDS):
         gx, gy = nearest_free(fence, x + vx * t, y + vy * t)
-        length = fenced_route(fence, agent_x, agent_y, gx, gy)[0]
+        length = fenced_route(fence, ax, ay, gx, gy)[0]
         if not math.isfinite(length):
             return math.inf
-        after = length / vehicle.speed
+        after = length / speed
         if abs(after - t) <= 1e-12 * (1.0 + t):
             return after
         t = after
     return t
+
+
+@numba.njit(cache=True, inline="always")
+def fenced_move(vehicle, agent, waypoint):
+    """`FencedHolonomicVehicle`: `move_fenced` by at most ``v_a tau``."""
+    move_fenced(vehicle.fence, vehicle.step_length, agent, waypoint)
+
+
+@numba.njit(cache=True, inline="always")
+def fenced_intercept_time(vehicle, agent_x, agent_y, x, y, vx, vy):
+    """`FencedHolonomicVehicle`: `fenced_intercept` at ``v_a``."""
+    return fenced_intercept(vehicle.fence, vehicle.speed, agent_x, agent_y, x, y, vx, vy)
 
 
 @numba.njit(cache=True, inline="always")
@@ -363,8 +372,9 @@ def _fenced_reach_times(vehicle, agent, positions, velocities, radius, out):
         if dx * dx + dy * dy <= radius * radius:
             out[k] = 0.0
         else:
-            out[k] = fenced_intercept_time(
-                vehicle,
+            out[k] = fenced_intercept(
+                vehicle.fence,
+                vehicle.speed,
                 agent[k, 0],
                 agent[k, 1],
                 positions[k, 0],

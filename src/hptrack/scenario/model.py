@@ -40,7 +40,7 @@ from hptrack.models.belief_motion import (
     extended_prior,
 )
 from hptrack.models.beliefs import position_logdet
-from hptrack.models.fence import CIRCLE_SIDES, FenceSpec, fenced_route, nearest_free, point_free
+from hptrack.models.fence import CIRCLE_SIDES, FenceSpec, in_sight, point_free, sight_gap
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import MAX_TARGETS, steps_left
 from hptrack.models.motion import ProcessNoiseForm
@@ -600,14 +600,13 @@ class Scenario(BaseModel):
             )
         radius = 0.5 * self.sensor_spec().diameter
         for i, target in enumerate(self.targets):
-            mx, my = target.mean[0], target.mean[1]
-            fx, fy = nearest_free(fence, mx, my)
-            gap = math.hypot(fx - mx, fy - my)
-            if gap > radius or not math.isfinite(fenced_route(fence, x, y, fx, fy)[0]):
+            mean = target.mean[:2]
+            if not in_sight(fence, (x, y), mean, radius):
                 raise ValueError(
-                    f"targets.{i}.mean: target {target.id!r} at ({mx:g}, {my:g}) m is out of "
-                    f"the UAV's sight: {gap:.3g} m from the nearest point it may fly to that "
-                    f"it can reach, beyond the footprint's radius {radius:g} m"
+                    f"targets.{i}.mean: target {target.id!r} at ({mean[0]:g}, {mean[1]:g}) m is "
+                    f"out of the UAV's sight: {sight_gap(fence, (x, y), mean):.3g} m from the "
+                    f"nearest point it may fly to and reach, beyond the footprint's radius "
+                    f"{radius:g} m"
                 )
 
     def _speed_field(self) -> str:
