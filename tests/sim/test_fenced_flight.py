@@ -96,3 +96,16 @@ def test_a_bad_fence_is_one_line(cli, tmp_path, fence, agent, needles):
     path = tmp_path / "fenced.yaml"
     path.write_text(yaml.safe_dump(_with_fence(fence, **agent)))
     cli("scenario", "check", path).refused(*needles)
+
+
+def test_a_random_fenced_scenario_is_written_and_read_back(cli, tmp_path):
+    from hptrack.scenario import load_scenario
+
+    path = tmp_path / "fenced.yaml"
+    result = cli("scenario", "random", "--targets", 4, "--seed", 2, "--no-fly", "-o", path)
+    assert result.code == 0, result.err
+    scenario = load_scenario(path)
+    assert scenario.fence is not None and 1 <= len(scenario.fence.exclusions) <= 3
+    plain = tmp_path / "plain.yaml"
+    assert cli("scenario", "random", "--targets", 4, "--seed", 2, "-o", plain).code == 0
+    assert load_scenario(plain).targets == scenario.targets

@@ -46,6 +46,7 @@ from hptrack.models.mission import MAX_TARGETS
 from hptrack.registry import PLANNERS, make_planner
 from hptrack.scenario import Scenario, load_scenario, random_scenario, save_scenario
 from hptrack.scenario.model import MAX_STEPS
+from hptrack.scenario.random import with_no_fly
 from hptrack.sim.episode import record_bytes, run_episode
 from hptrack.sim.metrics import gospa_cutoff
 
@@ -266,6 +267,14 @@ def scenario_random(
     output: Annotated[Path, typer.Option("--output", "-o", help="YAML file to write.")] = Path(
         "scenario.yaml"
     ),
+    no_fly: Annotated[
+        bool,
+        typer.Option(
+            "--no-fly",
+            help="Add one to three random no-fly circles covering 10-25 % of the targets' "
+            "square (a fence: block, margin 10 m).",
+        ),
+    ] = False,
 ) -> None:
     """Write the paper's random scenario (Sec. V) to a YAML file."""
     check_seed(seed)
@@ -273,7 +282,8 @@ def scenario_random(
         raise InputError(f"--targets must be between 1 and {MAX_TARGETS}, got {targets}")
     check_output_path(output, "--output")
     with writing(output, "--output"):
-        save_scenario(random_scenario(targets, seed=seed, homogeneous=homogeneous), output)
+        scenario = random_scenario(targets, seed=seed, homogeneous=homogeneous)
+        save_scenario(with_no_fly(scenario, seed) if no_fly else scenario, output)
     console.print(f"{targets}-target scenario (seed {seed}) written to {escape(str(output))}")
 
 
