@@ -57,6 +57,7 @@ import numpy as np
 
 from hptrack.interface import CurrentPlan, Planner
 from hptrack.models.beliefs import position_logdet
+from hptrack.models.fence import nearest_free, point_free
 from hptrack.models.mission import STEP_TOLERANCE
 from hptrack.runtime.beliefs import BeliefTimeline
 from hptrack.runtime.clock import MissionClock
@@ -148,6 +149,7 @@ class MissionController:
         self._det_seq = 0
         self._mode: str | None = None
         self._hold_at = np.asarray(scenario.agent.position, dtype=float)
+        self._fence = None if scenario.fence is None else scenario.fence.spec().compiled()
         self._last_tick: dict | None = None
         self.plan: CurrentPlan | None = None
         """What the planner said it is doing after its last flown call."""
@@ -400,11 +402,25 @@ class MissionController:
                 }
             )
         if hold:
-            return Setpoint(
-                self._hold_at.copy(), True, mode, detail, self._hold_at.copy(), np.zeros(2)
-            )
-        reference, velocity = self._leg.at(t)
+            reference, velocity = self._inside(t, self._hold_at.copy(), np.zeros(2))
+            return Setpoint(self._hold_at.copy(), True, mode, detail, reference, velocity)
+        reference, velocity = self._inside(t, *self._leg.at(t))
         return Setpoint(self._waypoint.copy(), False, mode, detail, reference, velocity)
+
+    def _inside(
+        self, t: float, reference: np.ndarray, velocity: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The reference (m) and feed-forward (m/s) to send at ``t`` s: as they are where the
+        fence's free space (shrunk by its margin) holds the reference, else the reference
+        projected onto the free space (`nearest_free`) with no feed-forward, logged as a
+        ``fence`` record."""
+        if self._fence is None or point_free(self._fence, reference[0], reference[1]):
+            return reference, velocity
+        projected = np.array(nearest_free(self._fence, reference[0], reference[1]))
+        self.journal.write(
+            {"kind": "fence", "t": t, "reference": reference, "projected": projected}
+        )
+        return projected, np.zeros(2)
 
     def _fly(self, waypoint: np.ndarray, t: float) -> None:
         """Make ``waypoint`` the decision flown from the latest odometry at time ``t``: a leg
