@@ -148,6 +148,14 @@ def _live_view(status: dict) -> Group:
         f"{status.get('distance_from_home_m', 0):.0f} m at "
         f"{status.get('altitude_m', 0):.0f} m altitude",
     )
+    fence = status.get("fence")
+    if fence is not None:
+        where = {None: "", True: "; vehicle inside", False: "; vehicle in the margin"}
+        head.add_row(
+            "fence",
+            f"margin {fence['margin_m']:g} m{where[fence['vehicle_free']]}; "
+            f"{fence['projections']} setpoints projected inside",
+        )
     rejected = status.get("rejected") or {}
     refused = ", ".join(f"{k} {v}" for k, v in rejected.items()) or "none"
     if status.get("dropped_lines"):

@@ -150,6 +150,8 @@ class MissionController:
         self._mode: str | None = None
         self._hold_at = np.asarray(scenario.agent.position, dtype=float)
         self._fence = None if scenario.fence is None else scenario.fence.spec().compiled()
+        self.fence_projections = 0
+        """Setpoints projected into the fence's free space (`_inside`)."""
         self._last_tick: dict | None = None
         self.plan: CurrentPlan | None = None
         """What the planner said it is doing after its last flown call."""
@@ -417,6 +419,7 @@ class MissionController:
         if self._fence is None or point_free(self._fence, reference[0], reference[1]):
             return reference, velocity
         projected = np.array(nearest_free(self._fence, reference[0], reference[1]))
+        self.fence_projections += 1
         self.journal.write(
             {"kind": "fence", "t": t, "reference": reference, "projected": projected}
         )
@@ -551,6 +554,15 @@ class MissionController:
                 "rejected": dict(self.rejected),
                 "finished": self.finished,
                 "end": self.end,
+                "fence": None
+                if self._fence is None
+                else {
+                    "margin_m": self.scenario.fence.margin,
+                    "vehicle_free": None
+                    if self._odom is None
+                    else bool(point_free(self._fence, *self._odom[1])),
+                    "projections": self.fence_projections,
+                },
             }
 
     def episode_record(self, truth: np.ndarray | None = None) -> EpisodeRecord:

@@ -1103,6 +1103,13 @@ async def fly_mission(
                 mission_time_s=flown_s,
                 max_gap_s=flight.max_gap_s,
             )
+            if flown_fence is not None:
+                flight.say(
+                    f"{controller.fence_projections} setpoints projected into the fence's free "
+                    "space",
+                    kind="geofence",
+                    projections=controller.fence_projections,
+                )
             intake.stop()
             _say_intake(flight, intake, drops_before, kernel_drops(sock))
             action, confirmed = await flight.safe_end(system, reason, detail)
