@@ -98,8 +98,9 @@ def fence_difference(
     centres and radii, in order; margins are not compared), else one line on the first
     difference."""
     if (scenario.inclusion is None) != (vehicle.inclusion is None):
-        has = "has" if vehicle.inclusion is not None else "has no"
-        return f"the vehicle's fence {has} an inclusion polygon and the scenario's not"
+        if vehicle.inclusion is None:
+            return "the vehicle's fence has no inclusion polygon, the scenario's has one"
+        return "the vehicle's fence has an inclusion polygon, the scenario's has none"
     rings = [("inclusion", scenario.inclusion or (), vehicle.inclusion or ())]
     if len(scenario.polygons) != len(vehicle.polygons):
         return (
@@ -144,8 +145,7 @@ def fence_block(spec: FenceSpec) -> dict:
 def fence_summary(spec: FenceSpec) -> str:
     """The zones of ``spec`` in a few words."""
     parts = ["an inclusion polygon"] if spec.inclusion is not None else []
-    if spec.polygons:
-        parts.append(f"{len(spec.polygons)} exclusion polygons")
-    if spec.circles:
-        parts.append(f"{len(spec.circles)} exclusion circles")
+    for count, kind in ((len(spec.polygons), "polygon"), (len(spec.circles), "circle")):
+        if count:
+            parts.append(f"{count} exclusion {kind}{'s' if count > 1 else ''}")
     return ", ".join(parts) or "no zones"
