@@ -483,7 +483,7 @@ def _parameters(pairs: list[str] | None) -> dict[str, float]:
 def _misbehaviour_flags(message: str) -> str:
     """A `Misbehaviour` message with its field named as the ``vehicle-sim`` option."""
     field_name = message.split(" ", 1)[0]
-    flag = "--" + field_name.removesuffix("_s").replace("_", "-")
+    flag = "--" + field_name.removesuffix("_s").removesuffix("_m").replace("_", "-")
     return flag + message[len(field_name) :]
 
 
