@@ -25,7 +25,8 @@ each tick until the planner answers; the late plan is logged, not flown. A call 
 the vehicle where it is until a later call succeeds. Each decision is flown as a `Leg`
 from the odometry of the moment it arrives, at the planned speed, shifted by the vehicle's lag
 behind the reference it was flying (``keep_lag``), so that the lag a position loop needs to fly
-the planned speed is not lost at every decision.
+the planned speed is not lost at every decision. With a fence, a reference outside its free
+space (the fence shrunk by the margin) is sent projected onto it (`nearest_free`), and logged.
 
 Bad input changes nothing; it is counted and logged with its reason: non-finite or malformed
 values, an unknown target id, an event before the start or after the end of the mission, a

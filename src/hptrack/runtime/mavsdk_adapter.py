@@ -3,7 +3,9 @@ package, 4.x, a binding of the MAVSDK C library), as offboard position setpoints
 
 Sequence: connect and wait for an autopilot; wait for a local position; read the vehicle's
 horizontal speed and acceleration limits (PX4's ``MPC_XY_VEL_MAX`` and ``MPC_ACC_HOR``) and
-build the mission controller with them (the caller decides the planned speed); hand the planner
+put the scenario's fence on the vehicle, or take the vehicle's (`sync_fence`: upload, read back,
+compare, ``GF_ACTION``); build the mission controller with them (the caller decides the planned
+speed); hand the planner
 its first tick (it compiles or loads its kernels then) and, meanwhile, arm and take off to the
 mission altitude if asked (else the vehicle must already be armed and in the air); wait for the
 first plan; send a first setpoint (where the vehicle is, at the mission altitude) and start
