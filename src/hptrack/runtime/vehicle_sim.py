@@ -618,9 +618,9 @@ class VehicleSim:
         """Whether the vehicle is inside an exclusion or outside every inclusion."""
         east, north = float(self.position[1]), float(self.position[0])
         inside_any, inclusions = False, False
-        for inclusion, shape, centre, radius in self._fence_local:
+        for inclusion, shape, centre, circle_m in self._fence_local:
             if shape is None:
-                inside = math.dist((east, north), centre) < radius
+                inside = math.dist((east, north), centre) < circle_m
             else:
                 inside = shape.contains(Point(east, north))
             if inclusion:
