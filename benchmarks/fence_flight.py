@@ -7,11 +7,15 @@ breaches the stub saw, and the vehicle's closest approach to a no-fly zone or th
 area's edge (its flown track, 10 Hz) against the margin; then the replay's mismatches.
 
     python3 benchmarks/fence_flight.py --json docs/results/fence-flight/stub.json
+
+writes the figures as JSON and, beside it, as a one-row CSV (``stub.csv``, the breaches
+counted) for the docs' quotes.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import importlib.util
 import json
 import subprocess
@@ -43,6 +47,15 @@ def closest_approach_m(scenario, track: list) -> float:
     zones += [circle_polygon(x, y, r) for x, y, r in spec.circles]
     edges = [LineString([*spec.inclusion, spec.inclusion[0]])] if spec.inclusion else []
     return min(Point(row[2], row[1]).distance(shape) for row in track for shape in zones + edges)
+
+
+def write_csv(figures: dict, path: Path) -> None:
+    """``figures`` as a one-row CSV at ``path`` (the breaches counted)."""
+    row = {**figures, "breaches": len(figures["breaches"])}
+    with path.open("w", newline="") as out:
+        writer = csv.DictWriter(out, fieldnames=list(row))
+        writer.writeheader()
+        writer.writerow(row)
 
 
 def main() -> None:
@@ -93,6 +106,7 @@ def main() -> None:
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(figures, indent=2) + "\n")
+        write_csv(figures, args.json.with_suffix(".csv"))
 
 
 if __name__ == "__main__":
