@@ -1,6 +1,7 @@
 """``hptrack fly`` with a fence against ``hptrack vehicle-sim``: the fence uploaded, read back
 and flown with no setpoint outside the free space, the log replayed with its fence; a vehicle
-that keeps another fence refused before arming; ``--fence-from-vehicle`` flying the vehicle's."""
+that keeps another fence refused before arming; ``--fence-from-vehicle`` flying the vehicle's;
+a breach of the vehicle's fence held by PX4's hold and left to the pilot by ``fly``."""
 
 import importlib.util
 import json
@@ -9,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 pytest.importorskip("mavsdk")
 pytest.importorskip("pymavlink")
@@ -144,3 +146,35 @@ def test_fence_from_vehicle_flies_the_vehicles_fence(tmp_path):
     assert stats["fence_breaches"] == []
     summary = _replay(run["log"], tmp_path)
     assert summary["mismatches"] == 0, summary["first_mismatches"]
+
+
+def test_a_breach_holds_the_vehicle_and_fly_leaves_it_to_the_pilot(tmp_path):
+    """The stub holds the example's fence; ``fly`` flies a copy without it (so it leaves the
+    vehicle's fence alone and flies straight at p1, through the no-fly square): the stub's
+    GF_ACTION hold takes it out of OFFBOARD, and ``fly`` ends as when a pilot takes over."""
+    run = _FLOOD.start_dry_run(tmp_path, FENCED, BUDGET_S, ["--hold-fence"])
+    data = yaml.safe_load(run["scenario"].read_text())
+    del data["fence"]
+    open_space = tmp_path / "open.yaml"
+    open_space.write_text(yaml.safe_dump(data))
+    command = [str(open_space) if a == str(run["scenario"]) else a for a in run["fly"]]
+    try:
+        fly = subprocess.run(
+            [*command, "--log", str(run["log"])], capture_output=True, text=True, timeout=240
+        )
+    finally:
+        _FLOOD.end_process(run["stub"])
+    stats = json.loads(run["stats"].read_text())
+    assert fly.returncode == 4, fly.stdout + fly.stderr
+    out = " ".join(fly.stdout.split())
+    assert "the pilot took over: the vehicle left OFFBOARD for HOLD at mission time" in out
+    assert "fence" not in out  # no fence in the scenario: the vehicle's is left alone
+    assert [b["action"] for b in stats["fence_breaches"]] == ["hold"]
+    assert stats["final_mode"] == "hold"
+    scenario = load_scenario(run["scenario"])
+    fence = scenario.fence.spec()._replace(margin=0.0).compiled()
+    north, east, _ = stats["position_ned"]
+    assert not point_free(fence, east, north)  # it holds where it crossed into the square
+    assert all(point_free(fence, e, n) for _, n, e, _, _ in stats["track"])  # in OFFBOARD
+    summary = _replay(run["log"], tmp_path)
+    assert summary["ended_by"] == "pilot took over" and summary["mismatches"] == 0
