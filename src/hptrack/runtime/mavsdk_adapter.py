@@ -898,7 +898,8 @@ async def sync_fence(flight: _Flight, system: Any, fence: FenceSpec | None) -> F
     try:
         flown = from_geodetic(held, origin, margin)
     except ValueError as err:
-        raise InputError(f"--fence-from-vehicle: {err}") from None
+        where = "--fence-from-vehicle" if options.fence_from_vehicle else "the uploaded fence"
+        raise InputError(f"{where}: {err}") from None
     if options.fence_from_vehicle:
         if not held:
             raise InputError("--fence-from-vehicle: the vehicle holds no fence")
@@ -946,7 +947,7 @@ async def say_fence_margin(flight: _Flight, system: Any, speed: float, margin: f
         f"{PX4_VELOCITY_TRACKING:g} of its velocity setpoint, MPC_XY_P {gain:g} 1/s)"
         + (
             f"; the margin is below the lag: the vehicle may fly up to {lag - margin:.1f} m "
-            "into a zone's margin edge"
+            "past the fence"
             if margin < lag
             else ""
         ),
