@@ -316,3 +316,21 @@ def test_a_scenario_without_a_fence_sends_its_references_as_they_are(flight_scen
         ctrl.setpoint(0.05 * i)
     assert ctrl.fence_projections == 0 and ctrl.status()["fence"] is None
     assert not [r for r in ctrl.log.records if r["kind"] == "fence"]
+
+
+def test_the_margin_is_said_beside_the_lag_and_a_margin_below_it_warned_of(fenced):
+    from hptrack.runtime.mavsdk_adapter import FlightOptions, say_fence_margin
+
+    async def body(flight, system, vehicle):
+        await say_fence_margin(flight, system, 8.0, 5.0)
+        await say_fence_margin(flight, system, 8.0, 1.0)
+        return [r["message"] for r in flight.early]
+
+    said = _with_stub(fenced, body, FlightOptions())
+    assert said == [
+        "fence margin 5 m; tracking lag at 8 m/s 2.1 m (PX4 flies 0.8 of its velocity setpoint, "
+        "MPC_XY_P 0.95 1/s)",
+        "fence margin 1 m; tracking lag at 8 m/s 2.1 m (PX4 flies 0.8 of its velocity setpoint, "
+        "MPC_XY_P 0.95 1/s); the margin is below the lag: the vehicle may fly up to 1.1 m past "
+        "the fence",
+    ]
