@@ -148,6 +148,33 @@ def test_fence_from_vehicle_flies_the_vehicles_fence(tmp_path):
     assert summary["mismatches"] == 0, summary["first_mismatches"]
 
 
+def test_a_breach_with_gf_action_warning_is_said_and_the_mission_goes_on(tmp_path):
+    """As below with ``GF_ACTION`` 1 on the stub: the vehicle's warning is said and logged,
+    and the mission ends by its budget."""
+    run = _FLOOD.start_dry_run(tmp_path, FENCED, 8.0, ["--hold-fence", "--param", "GF_ACTION=1"])
+    data = yaml.safe_load(run["scenario"].read_text())
+    del data["fence"]
+    open_space = tmp_path / "open.yaml"
+    open_space.write_text(yaml.safe_dump(data))
+    command = [str(open_space) if a == str(run["scenario"]) else a for a in run["fly"]]
+    try:
+        fly = subprocess.run(
+            [*command, "--log", str(run["log"])], capture_output=True, text=True, timeout=240
+        )
+    finally:
+        _FLOOD.end_process(run["stub"])
+    stats = json.loads(run["stats"].read_text())
+    assert fly.returncode == 0, fly.stdout + fly.stderr
+    out = " ".join(fly.stdout.split())
+    assert "vehicle says (CRITICAL): Geofence violation, action warning" in out
+    assert "ended by budget" in out
+    assert [b["action"] for b in stats["fence_breaches"]] == ["warning"]
+    texts = [r for r in read_log(run["log"]).records if r["kind"] == "vehicle_text"]
+    assert [(r["severity"], r["text"]) for r in texts] == [
+        ("CRITICAL", "Geofence violation, action warning")
+    ]
+
+
 def test_a_breach_holds_the_vehicle_and_fly_leaves_it_to_the_pilot(tmp_path):
     """The stub holds the example's fence; ``fly`` flies a copy without it (so it leaves the
     vehicle's fence alone and flies straight at p1, through the no-fly square): the stub's
@@ -168,7 +195,8 @@ def test_a_breach_holds_the_vehicle_and_fly_leaves_it_to_the_pilot(tmp_path):
     assert fly.returncode == 4, fly.stdout + fly.stderr
     out = " ".join(fly.stdout.split())
     assert "the pilot took over: the vehicle left OFFBOARD for HOLD at mission time" in out
-    assert "fence" not in out  # no fence in the scenario: the vehicle's is left alone
+    assert "fence:" not in out  # no fence in the scenario: the vehicle's is left alone
+    assert "vehicle says (CRITICAL): Geofence violation, action hold" in out
     assert [b["action"] for b in stats["fence_breaches"]] == ["hold"]
     assert stats["final_mode"] == "hold"
     scenario = load_scenario(run["scenario"])

@@ -17,14 +17,16 @@ position setpoints with velocity feed-forward (converted to NED by
 `enu_to_ned`), so that PX4 flies the planned speed.
 
 The vehicle's mode and arming are watched throughout, and every change is logged (``vehicle``
-records) and said. The take-off is done when PX4 leaves TAKEOFF for HOLD (its AUTO_LOITER) at
-the altitude; a disarm, a mode change, or a lost position during the take-off ends it at once
-(`FlightError`, exit code 3, an ``abort`` record). Offboard counts as started only once the
-vehicle reports OFFBOARD (`OFFBOARD_ATTEMPTS` tries of `OFFBOARD_CONFIRM_S`); leaving OFFBOARD
-during the mission is a pilot (or a failsafe) taking over: the mission ends at once and nothing
-more is commanded. A vehicle that does not move towards its reference is warned of
-(`FOLLOW_DISTANCE_M`). The flight locks onto the MAVLink system and component ids of the
-autopilot found at connection; odometry from any other source is refused and counted.
+records) and said, as is every ``STATUSTEXT`` of severity warning or above (``vehicle_text``
+records: a geofence breach's warning, say). The take-off is done when PX4 leaves TAKEOFF for
+HOLD (its AUTO_LOITER) at the altitude; a disarm, a mode change, or a lost position during the
+take-off ends it at once (`FlightError`, exit code 3, an ``abort`` record). Offboard counts as
+started only once the vehicle reports OFFBOARD (`OFFBOARD_ATTEMPTS` tries of
+`OFFBOARD_CONFIRM_S`); leaving OFFBOARD during the mission is a pilot (or a failsafe) taking
+over: the mission ends at once and nothing more is commanded. A vehicle that does not move
+towards its reference is warned of (`FOLLOW_DISTANCE_M`). The flight locks onto the MAVLink
+system and component ids of the autopilot found at connection; odometry from any other source is
+refused and counted.
 
 Safe ends: the budget's end, Ctrl-C (or SIGTERM), a lost link (no telemetry for
 ``lost_link_s``), a setpoint beyond ``max_distance_m`` from home (the vehicle's position at the
@@ -80,7 +82,12 @@ from mavsdk.asyncio.plugins.offboard import (
     VelocityNedYaw,
 )
 from mavsdk.asyncio.plugins.param import ParamAsync, ParamError
-from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync, TelemetryError
+from mavsdk.asyncio.plugins.telemetry import (
+    FlightMode,
+    StatusTextType,
+    TelemetryAsync,
+    TelemetryError,
+)
 
 from hptrack.interface import InputError
 from hptrack.models.fence import FenceSpec
@@ -513,7 +520,17 @@ class _Flight:
             async for value in telemetry.subscribe_in_air():
                 self.vehicle.in_air = bool(value)
 
-        await asyncio.gather(modes(), armed(), in_air())
+        async def texts() -> None:
+            async for text in telemetry.subscribe_status_text():
+                if text.type.value >= StatusTextType.WARNING.value:
+                    self.say(
+                        f"vehicle says ({text.type.name}): {text.text}",
+                        kind="vehicle_text",
+                        severity=text.type.name,
+                        text=text.text,
+                    )
+
+        await asyncio.gather(modes(), armed(), in_air(), texts())
 
     def detection_line(self, line: bytes, received: float | None) -> None:
         """One line of a detection datagram, received at mission time ``received`` (``None``
