@@ -73,6 +73,12 @@ def test_replay_writes_the_figure_and_the_summary(flight_cli, flight_scenario, t
             "--takeoff-failure 'fire': expected one of disarm, sensors, posctl",
         ),
         (["targets-sim", "{scenario}", "--mavlink", "udpin://{busy}"], "the port is in use"),
+        (["fly", "{scenario}", "--fence-action", "6"], "--fence-action 6: expected one of 0..5"),
+        (["vehicle-sim", "{scenario}", "--hold-fence"], "has no fence: block"),
+        (
+            ["vehicle-sim", "{scenario}", "--fence-shift", "1e5"],
+            "--fence-shift must be a number in [-1e4, 1e4], got 100000.0",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_exit_code_2(flight_cli, example_path, tmp_path, args, message):
@@ -184,6 +190,28 @@ def test_the_live_view_shows_dropped_detection_lines():
     console = Console(width=200, record=True)
     console.print(_live_view({**status, "dropped_lines": 0}))
     assert "dropped" not in console.export_text()
+
+
+def test_the_live_view_shows_the_fence():
+    from rich.console import Console
+
+    from hptrack.cli.flight import _live_view
+
+    status = {
+        "t": 12.0,
+        "budget": 60.0,
+        "plan": None,
+        "target_ids": ("p1",),
+        "fence": {"margin_m": 5.0, "vehicle_free": False, "projections": 3},
+    }
+    console = Console(width=200, record=True)
+    console.print(_live_view(status))
+    assert "margin 5 m; vehicle in the margin; 3 setpoints projected inside" in (
+        console.export_text()
+    )
+    console = Console(width=200, record=True)
+    console.print(_live_view({**status, "fence": None}))
+    assert "margin" not in console.export_text()
 
 
 @pytest.mark.slow  # a process of its own: its imports take most of its 10-20 s

@@ -92,6 +92,7 @@ FLIGHT_FLAGS = {
     "connect_timeout_s": "--connect-timeout",
     "first_plan_timeout_s": "--first-plan-timeout",
     "log_failure": "--on-log-failure",
+    "fence_action": "--fence-action",
 }
 """`FlightOptions` fields by the ``fly`` option that sets them."""
 
@@ -147,6 +148,14 @@ def _live_view(status: dict) -> Group:
         f"{status.get('distance_from_home_m', 0):.0f} m at "
         f"{status.get('altitude_m', 0):.0f} m altitude",
     )
+    fence = status.get("fence")
+    if fence is not None:
+        where = {None: "", True: "; vehicle inside", False: "; vehicle in the margin"}
+        head.add_row(
+            "fence",
+            f"margin {fence['margin_m']:g} m{where[fence['vehicle_free']]}; "
+            f"{fence['projections']} setpoints projected inside",
+        )
     rejected = status.get("rejected") or {}
     refused = ", ".join(f"{k} {v}" for k, v in rejected.items()) or "none"
     if status.get("dropped_lines"):
@@ -256,6 +265,21 @@ def fly(
             "--live/--no-live", help="Live view (default: when the console is a terminal)."
         ),
     ] = None,
+    fence_action: Annotated[
+        int,
+        typer.Option(
+            help="PX4's GF_ACTION set with a fence: 0 none, 1 warning, 2 hold, 3 return, "
+            "4 terminate, 5 land."
+        ),
+    ] = 2,
+    fence_from_vehicle: Annotated[
+        bool,
+        typer.Option(
+            "--fence-from-vehicle",
+            help="Fly the fence the vehicle holds (downloaded; the scenario's margin) instead "
+            "of uploading the scenario's.",
+        ),
+    ] = False,
 ) -> None:
     """Fly SCENARIO on a PX4 vehicle: offboard position setpoints from the mission
     controller, detections as JSON lines over UDP, a safe end in hold (or return)."""
@@ -273,7 +297,9 @@ def fly(
         log_path = Path(f"hptrack-flight-{time.strftime('%Y%m%d-%H%M%S')}.jsonl")
     check_output_path(log_path, "--log")
 
+    from hptrack.models.fence import FenceSpec
     from hptrack.runtime.controller import MissionController
+    from hptrack.runtime.geofence import fence_block
     from hptrack.runtime.links import bind_check, check_connection
     from hptrack.runtime.log import MissionLog
     from hptrack.runtime.mavsdk_adapter import (
@@ -298,6 +324,8 @@ def fly(
             connect_timeout_s=connect_timeout,
             first_plan_timeout_s=first_plan_timeout,
             log_failure=on_log_failure,
+            fence_action=fence_action,
+            fence_from_vehicle=fence_from_vehicle,
         )
     except ValueError as err:
         raise InputError(_flag_names(str(err))) from None
@@ -314,7 +342,9 @@ def fly(
         target = view.console if view is not None else console
         target.print(escape(text), highlight=False, soft_wrap=True)  # paths stay whole
 
-    def build(limits: VehicleLimits) -> MissionController:
+    scenario_fence = scenario.fence.spec() if scenario.fence is not None else None
+
+    def build(limits: VehicleLimits, fence: FenceSpec | None) -> MissionController:
         scenario_speed = scenario.vehicle_spec().speed
         speed = planned_speed(scenario_speed, limits, cap_speed)
         on_message(
@@ -324,7 +354,9 @@ def fly(
         data = file_data(scenario)
         data["agent"].pop("speed", None)
         data["vehicle"] = {**data.get("vehicle", {}), "speed": speed}
-        flown = parse_scenario(data, f"{scenario_path} with the vehicle's speed")
+        if fence is not None and fence != scenario_fence:  # the vehicle's
+            data["fence"] = fence_block(fence)
+        flown = parse_scenario(data, f"{scenario_path} with the vehicle's speed and fence")
         on_message(f"mission log: {log_path}")
         return MissionController(
             flown,
@@ -358,7 +390,14 @@ def fly(
     try:
         if view is not None:
             view.start()
-        result = run_flight(build, log, options, on_status, on_message)
+        result = run_flight(
+            build,
+            log,
+            options,
+            on_status,
+            on_message,
+            fence=scenario_fence,
+        )
     except FlightError as err:
         error_console.print(
             f"[bold red]error:[/] {escape(str(err))}", highlight=False, soft_wrap=True
@@ -444,7 +483,7 @@ def _parameters(pairs: list[str] | None) -> dict[str, float]:
 def _misbehaviour_flags(message: str) -> str:
     """A `Misbehaviour` message with its field named as the ``vehicle-sim`` option."""
     field_name = message.split(" ", 1)[0]
-    flag = "--" + field_name.removesuffix("_s").replace("_", "-")
+    flag = "--" + field_name.removesuffix("_s").removesuffix("_m").replace("_", "-")
     return flag + message[len(field_name) :]
 
 
@@ -520,10 +559,26 @@ def vehicle_sim(
             "quadrotor's, 0.8; 1 for an ideal velocity loop)."
         ),
     ] = None,
+    fence_shift: Annotated[
+        float,
+        typer.Option(
+            help="Keep an uploaded fence moved this far north (a vehicle whose fence is not "
+            "the one sent), m."
+        ),
+    ] = 0.0,
+    hold_fence: Annotated[
+        bool,
+        typer.Option(
+            "--hold-fence",
+            help="Start holding the scenario's fence, as a vehicle it was uploaded to before "
+            "(for fly --fence-from-vehicle).",
+        ),
+    ] = False,
 ) -> None:
     """A MAVLink vehicle stub for dry runs: a quadrotor that flies as PX4 does (take-off,
-    position loop, speed and acceleration limits, offboard-loss failsafe, parameters) and
-    sends detections of the scenario's simulated targets; it prints its mode changes."""
+    position loop, speed and acceleration limits, offboard-loss failsafe, parameters, the
+    geofence and GF_ACTION) and sends detections of the scenario's simulated targets; it
+    prints its mode changes."""
     check_seed(seed)
     scenario = load_scenario(scenario_path)
     duration = scenario.budget + 300.0 if duration is None else duration
@@ -543,9 +598,12 @@ def vehicle_sim(
             leave_offboard_to=leave_offboard_to,
             takeoff_failure=takeoff_failure,
             takeoff_failure_after_s=takeoff_failure_after,
+            fence_shift_m=fence_shift,
         )
     except ValueError as err:
         raise InputError(_misbehaviour_flags(str(err))) from None
+    if hold_fence and scenario.fence is None:
+        raise InputError(f"--hold-fence: {scenario_path} has no fence: block")
 
     def on_event(text: str) -> None:
         console.print(escape(f"vehicle stub {text}"), highlight=False)
@@ -563,6 +621,8 @@ def vehicle_sim(
         misbehaviour=misbehaviour,
         velocity_tracking=PX4_VELOCITY_TRACKING if velocity_tracking is None else velocity_tracking,
     )
+    if hold_fence and scenario.fence is not None:
+        vehicle.hold_fence(scenario.fence.spec())
     stop = threading.Event()
     previous = {
         sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)

@@ -28,7 +28,8 @@ each tick until the planner answers; the late plan is logged, not flown. A call 
 the vehicle where it is until a later call succeeds. Each decision is flown as a `Leg`
 from the odometry of the moment it arrives, at the planned speed, shifted by the vehicle's lag
 behind the reference it was flying (``keep_lag``), so that the lag a position loop needs to fly
-the planned speed is not lost at every decision.
+the planned speed is not lost at every decision. With a fence, a reference outside its free
+space (the fence shrunk by the margin) is sent projected onto it (`nearest_free`), and logged.
 
 Bad input changes nothing; it is counted and logged with its reason: non-finite or malformed
 values, an unknown target id, an event before the start or after the end of the mission, a
@@ -61,6 +62,7 @@ import numpy as np
 
 from hptrack.interface import CurrentPlan, Planner
 from hptrack.models.beliefs import position_logdet
+from hptrack.models.fence import nearest_free, point_free
 from hptrack.models.mission import STEP_TOLERANCE
 from hptrack.models.sensor import informs_misses, look_missed
 from hptrack.runtime.beliefs import BeliefTimeline
@@ -157,6 +159,9 @@ class MissionController:
         self._det_seq = 0
         self._mode: str | None = None
         self._hold_at = np.asarray(scenario.agent.position, dtype=float)
+        self._fence = None if scenario.fence is None else scenario.fence.spec().compiled()
+        self.fence_projections = 0
+        """Setpoints projected into the fence's free space (`_inside`)."""
         self._last_tick: dict | None = None
         self.plan: CurrentPlan | None = None
         """What the planner said it is doing after its last flown call."""
@@ -412,11 +417,26 @@ class MissionController:
                 }
             )
         if hold:
-            return Setpoint(
-                self._hold_at.copy(), True, mode, detail, self._hold_at.copy(), np.zeros(2)
-            )
-        reference, velocity = self._leg.at(t)
+            reference, velocity = self._inside(t, self._hold_at.copy(), np.zeros(2))
+            return Setpoint(self._hold_at.copy(), True, mode, detail, reference, velocity)
+        reference, velocity = self._inside(t, *self._leg.at(t))
         return Setpoint(self._waypoint.copy(), False, mode, detail, reference, velocity)
+
+    def _inside(
+        self, t: float, reference: np.ndarray, velocity: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The reference (m) and feed-forward (m/s) to send at ``t`` s: as they are where the
+        fence's free space (shrunk by its margin) holds the reference, else the reference
+        projected onto the free space (`nearest_free`) with no feed-forward, logged as a
+        ``fence`` record."""
+        if self._fence is None or point_free(self._fence, reference[0], reference[1]):
+            return reference, velocity
+        projected = np.array(nearest_free(self._fence, reference[0], reference[1]))
+        self.fence_projections += 1
+        self.journal.write(
+            {"kind": "fence", "t": t, "reference": reference, "projected": projected}
+        )
+        return projected, np.zeros(2)
 
     def _fly(self, waypoint: np.ndarray, t: float) -> None:
         """Make ``waypoint`` the decision flown from the latest odometry at time ``t``: a leg
@@ -547,6 +567,15 @@ class MissionController:
                 "rejected": dict(self.rejected),
                 "finished": self.finished,
                 "end": self.end,
+                "fence": None
+                if self._fence is None
+                else {
+                    "margin_m": self.scenario.fence.margin,
+                    "vehicle_free": None
+                    if self._odom is None
+                    else bool(point_free(self._fence, *self._odom[1])),
+                    "projections": self.fence_projections,
+                },
             }
 
     def episode_record(self, truth: np.ndarray | None = None) -> EpisodeRecord:

@@ -10,6 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+PX4_VELOCITY_TRACKING = 0.8
+"""The share of its velocity setpoint that PX4's SIH quadrotor flies in steady flight: about
+6.3-6.5 m/s on straight legs while PX4's own velocity setpoint was 8.1-8.5 m/s (PX4 main of
+early 2025); 1 is an ideal velocity loop."""
+
 
 @dataclass(frozen=True)
 class Setpoint:
@@ -59,8 +64,15 @@ class Leg:
     def lag(self, t: float, position: np.ndarray, limit_m: float) -> np.ndarray:
         """How far the reference at mission time ``t`` s is ahead of the vehicle at
         ``position`` (m), at most ``limit_m`` long, m: a position loop ``v = v_ff + P (p_ref -
-        p)`` that flies a share ``s`` of its command needs ``(1 / s - 1) v / P`` of it to fly
-        ``v`` (2.1 m for PX4's 0.8 at 8 m/s), so the next leg starts that far ahead too."""
+        p)`` that flies a share ``s`` of its command needs `tracking_lag_m` of it to fly ``v``,
+        so the next leg starts that far ahead too."""
         ahead = self.at(t)[0] - position
         norm = float(np.hypot(*ahead))
         return ahead if norm <= limit_m else ahead * (limit_m / norm)
+
+
+def tracking_lag_m(speed_m_s: float, tracking: float, gain_per_s: float) -> float:
+    """How far behind its reference a position loop ``v = v_ff + P (p_ref - p)`` that flies a
+    share ``tracking`` of its command flies at ``speed_m_s`` in steady flight, m:
+    ``(1 / s - 1) v / P`` (2.1 m for PX4's 0.8 at 8 m/s with ``MPC_XY_P`` 0.95 1/s)."""
+    return (1.0 / tracking - 1.0) * speed_m_s / gain_per_s

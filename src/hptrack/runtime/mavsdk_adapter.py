@@ -3,7 +3,9 @@ package, 4.x, a binding of the MAVSDK C library), as offboard position setpoints
 
 Sequence: connect and wait for an autopilot; wait for a local position; read the vehicle's
 horizontal speed and acceleration limits (PX4's ``MPC_XY_VEL_MAX`` and ``MPC_ACC_HOR``) and
-build the mission controller with them (the caller decides the planned speed); hand the planner
+put the scenario's fence on the vehicle, or take the vehicle's (`sync_fence`: upload, read back,
+compare, ``GF_ACTION``); build the mission controller with them (the caller decides the planned
+speed); hand the planner
 its first tick (it compiles or loads its kernels then) and, meanwhile, arm and take off to the
 mission altitude if asked (else the vehicle must already be armed and in the air); wait for the
 first plan; send a first setpoint (where the vehicle is, at the mission altitude) and start
@@ -15,14 +17,16 @@ position setpoints with velocity feed-forward (converted to NED by
 `enu_to_ned`), so that PX4 flies the planned speed.
 
 The vehicle's mode and arming are watched throughout, and every change is logged (``vehicle``
-records) and said. The take-off is done when PX4 leaves TAKEOFF for HOLD (its AUTO_LOITER) at
-the altitude; a disarm, a mode change, or a lost position during the take-off ends it at once
-(`FlightError`, exit code 3, an ``abort`` record). Offboard counts as started only once the
-vehicle reports OFFBOARD (`OFFBOARD_ATTEMPTS` tries of `OFFBOARD_CONFIRM_S`); leaving OFFBOARD
-during the mission is a pilot (or a failsafe) taking over: the mission ends at once and nothing
-more is commanded. A vehicle that does not move towards its reference is warned of
-(`FOLLOW_DISTANCE_M`). The flight locks onto the MAVLink system and component ids of the
-autopilot found at connection; odometry from any other source is refused and counted.
+records) and said, as is every ``STATUSTEXT`` of severity warning or above (``vehicle_text``
+records: a geofence breach's warning, say). The take-off is done when PX4 leaves TAKEOFF for
+HOLD (its AUTO_LOITER) at the altitude; a disarm, a mode change, or a lost position during the
+take-off ends it at once (`FlightError`, exit code 3, an ``abort`` record). Offboard counts as
+started only once the vehicle reports OFFBOARD (`OFFBOARD_ATTEMPTS` tries of
+`OFFBOARD_CONFIRM_S`); leaving OFFBOARD during the mission is a pilot (or a failsafe) taking
+over: the mission ends at once and nothing more is commanded. A vehicle that does not move
+towards its reference is warned of (`FOLLOW_DISTANCE_M`). The flight locks onto the MAVLink
+system and component ids of the autopilot found at connection; odometry from any other source is
+refused and counted.
 
 Safe ends: the budget's end, Ctrl-C (or SIGTERM), a lost link (no telemetry for
 ``lost_link_s``), a setpoint beyond ``max_distance_m`` from home (the vehicle's position at the
@@ -61,6 +65,15 @@ from mavsdk import LogLevel, log_subscribe
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.exceptions import MavsdkConnectionError
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError
+from mavsdk.asyncio.plugins.geofence import (
+    Circle,
+    FenceType,
+    GeofenceAsync,
+    GeofenceData,
+    GeofenceError,
+    Point,
+    Polygon,
+)
 from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 from mavsdk.asyncio.plugins.offboard import (
     OffboardAsync,
@@ -69,12 +82,29 @@ from mavsdk.asyncio.plugins.offboard import (
     VelocityNedYaw,
 )
 from mavsdk.asyncio.plugins.param import ParamAsync, ParamError
-from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
+from mavsdk.asyncio.plugins.telemetry import (
+    FlightMode,
+    StatusTextType,
+    TelemetryAsync,
+    TelemetryError,
+)
 
 from hptrack.interface import InputError
+from hptrack.models.fence import FenceSpec
 from hptrack.runtime.controller import MissionController
 from hptrack.runtime.frames import enu_to_ned, ned_to_enu
+from hptrack.runtime.geofence import (
+    FENCE_ACTIONS,
+    FENCE_TOLERANCE_M,
+    GeoZone,
+    fence_block,
+    fence_difference,
+    fence_summary,
+    from_geodetic,
+    to_geodetic,
+)
 from hptrack.runtime.intake import DetectionIntake, IntakeLimits
+from hptrack.runtime.legs import PX4_VELOCITY_TRACKING, tracking_lag_m
 from hptrack.runtime.links import connection_problem
 from hptrack.runtime.log import ABORT, MISSION_START_MESSAGE, MissionLog
 from hptrack.runtime.network import (
@@ -124,6 +154,9 @@ class FlightOptions:
         log_failure: when the mission log stops growing, ``"continue"`` (say it and fly on)
             or ``"hold"`` (end the mission in hold).
         intake: the bounds of the detection intake (its slice is one setpoint period).
+        fence_action: PX4's ``GF_ACTION`` set with a fence (`FENCE_ACTIONS`; 2, hold).
+        fence_from_vehicle: fly the fence the vehicle holds instead of uploading the
+            scenario's.
     """
 
     connection: str = "udpin://127.0.0.1:14540"
@@ -139,6 +172,8 @@ class FlightOptions:
     first_plan_timeout_s: float = 600.0
     log_failure: str = "continue"
     intake: IntakeLimits = field(default_factory=IntakeLimits)
+    fence_action: int = 2
+    fence_from_vehicle: bool = False
 
     def __post_init__(self) -> None:
         """Raises `ValueError` (one line naming the field and the value) for a number outside
@@ -149,6 +184,12 @@ class FlightOptions:
             if isinstance(value, bool) or not (math.isfinite(value) and inside and value <= high):
                 interval = f"{'[' if closed else '('}{low:g}, {high:g}]"
                 raise ValueError(f"{name} must be a number in {interval}, got {value}")
+        if isinstance(self.fence_action, bool) or self.fence_action not in FENCE_ACTIONS:
+            raise ValueError(
+                f"fence_action {self.fence_action!r}: expected one of 0..5 (PX4's GF_ACTION: "
+                + ", ".join(f"{k} {v}" for k, v in FENCE_ACTIONS.items())
+                + ")"
+            )
         if self.log_failure not in LOG_FAILURES:
             raise ValueError(
                 f"log_failure {self.log_failure[:40]!r}: expected {' or '.join(LOG_FAILURES)}"
@@ -288,7 +329,9 @@ _TODO = {
 }
 
 
-def plain_error(err: ActionError | OffboardError | ParamError, doing: str, now: str) -> str:
+def plain_error(
+    err: ActionError | OffboardError | ParamError | GeofenceError, doing: str, now: str
+) -> str:
     """One sentence for a MAVSDK error raised while ``doing`` (``"switching to offboard"``):
     what happened, what the vehicle does ``now``, what to do."""
     result = err.result.name
@@ -477,7 +520,17 @@ class _Flight:
             async for value in telemetry.subscribe_in_air():
                 self.vehicle.in_air = bool(value)
 
-        await asyncio.gather(modes(), armed(), in_air())
+        async def texts() -> None:
+            async for text in telemetry.subscribe_status_text():
+                if text.type.value >= StatusTextType.WARNING.value:
+                    self.say(
+                        f"vehicle says ({text.type.name}): {text.text}",
+                        kind="vehicle_text",
+                        severity=text.type.name,
+                        text=text.text,
+                    )
+
+        await asyncio.gather(modes(), armed(), in_air(), texts())
 
     def detection_line(self, line: bytes, received: float | None) -> None:
         """One line of a detection datagram, received at mission time ``received`` (``None``
@@ -787,16 +840,154 @@ async def read_limits(system: Any) -> VehicleLimits:
     return VehicleLimits(speed, acceleration, detail)
 
 
+def _geofence_data(zones: list[GeoZone]) -> GeofenceData:
+    """MAVSDK's geofence of ``zones``."""
+    kinds = {True: FenceType.INCLUSION, False: FenceType.EXCLUSION}
+    return GeofenceData(
+        polygons=[
+            Polygon([Point(lat, lon) for lat, lon in z.points], kinds[z.inclusion])
+            for z in zones
+            if z.radius_m is None
+        ],
+        circles=[
+            Circle(Point(*z.points[0]), z.radius_m, kinds[z.inclusion])
+            for z in zones
+            if z.radius_m is not None
+        ],
+    )
+
+
+def _zones(data: GeofenceData) -> list[GeoZone]:
+    """The zones of MAVSDK's geofence ``data``: inclusions first, then the polygons and the
+    circles in the vehicle's order."""
+    polygons = [
+        GeoZone(
+            p.fence_type == FenceType.INCLUSION,
+            tuple((q.latitude_deg, q.longitude_deg) for q in p.points),
+        )
+        for p in data.polygons
+    ]
+    circles = [
+        GeoZone(
+            c.fence_type == FenceType.INCLUSION,
+            ((c.point.latitude_deg, c.point.longitude_deg),),
+            float(c.radius),
+        )
+        for c in data.circles
+    ]
+    zones = polygons + circles
+    return [z for z in zones if z.inclusion] + [z for z in zones if not z.inclusion]
+
+
+async def sync_fence(flight: _Flight, system: Any, fence: FenceSpec | None) -> FenceSpec | None:
+    """Put the scenario's ``fence`` on the vehicle (upload, download, compare within
+    `FENCE_TOLERANCE_M`) or, with ``fence_from_vehicle``, take the vehicle's (the scenario's
+    margin kept); set ``GF_ACTION``; log a ``geofence`` record. Returns the fence to fly (the
+    scenario's itself once the vehicle holds it), or ``None`` (no fence in the scenario: the
+    vehicle's is left alone).
+
+    Raises:
+        InputError: the vehicle's fence differs from the scenario's, or cannot be flown.
+        FlightError: the vehicle did not answer the fence protocol or the parameter.
+    """
+    options = flight.options
+    if fence is None and not options.fence_from_vehicle:
+        return None
+    try:
+        origin_msg = await TelemetryAsync(system).get_gps_global_origin()
+    except TelemetryError as err:
+        raise FlightError(
+            f"the vehicle gave no GPS_GLOBAL_ORIGIN ({err}): the fence cannot be placed; "
+            "nothing was flown"
+        ) from None
+    origin = (float(origin_msg.latitude_deg), float(origin_msg.longitude_deg))
+    geofence = GeofenceAsync(system)
+    margin = fence.margin if fence is not None else 0.0
+    try:
+        if not options.fence_from_vehicle:
+            await geofence.upload_geofence(_geofence_data(to_geodetic(fence, origin)))
+        held = _zones(await geofence.download_geofence())
+    except GeofenceError as err:
+        doing = "uploading the fence" if not options.fence_from_vehicle else "reading its fence"
+        raise FlightError(
+            plain_error(err, doing, "the vehicle is still on the ground; nothing was flown")
+        ) from None
+    try:
+        flown = from_geodetic(held, origin, margin)
+    except ValueError as err:
+        where = "--fence-from-vehicle" if options.fence_from_vehicle else "the uploaded fence"
+        raise InputError(f"{where}: {err}") from None
+    if options.fence_from_vehicle:
+        if not held:
+            raise InputError("--fence-from-vehicle: the vehicle holds no fence")
+        source = "the vehicle's"
+    else:
+        difference = fence_difference(fence, flown)
+        if difference is not None:
+            raise InputError(
+                f"the vehicle's fence differs from the scenario's after the upload: "
+                f"{difference}; nothing was flown"
+            )
+        source = f"the scenario's, uploaded and read back (within {FENCE_TOLERANCE_M:g} m)"
+    action = options.fence_action
+    try:
+        await ParamAsync(system).set_param_int("GF_ACTION", action)
+    except ParamError as err:
+        raise FlightError(
+            plain_error(err, f"setting GF_ACTION to {action}", "nothing was flown")
+        ) from None
+    flight.say(
+        f"fence: {source}, {fence_summary(flown)}; GF_ACTION {action} "
+        f"({FENCE_ACTIONS[action]}) on a breach",
+        kind="geofence",
+        source="vehicle" if options.fence_from_vehicle else "scenario",
+        origin=list(origin),
+        action=action,
+        fence=fence_block(flown),
+    )
+    return flown if options.fence_from_vehicle else fence
+
+
+async def say_fence_margin(flight: _Flight, system: Any, speed: float, margin: float) -> None:
+    """Say the fence's margin (m) beside the vehicle's tracking lag at the planned ``speed``
+    (m/s): `tracking_lag_m` with PX4's measured `PX4_VELOCITY_TRACKING` and the vehicle's
+    ``MPC_XY_P``; a margin below it is warned of (the vehicle may cross the margin's edge by
+    the difference)."""
+    try:
+        gain = float(await ParamAsync(system).get_param_float("MPC_XY_P"))
+    except ParamError:
+        flight.say(f"fence margin {margin:g} m; the vehicle's MPC_XY_P is unknown (not PX4?)")
+        return
+    lag = tracking_lag_m(speed, PX4_VELOCITY_TRACKING, gain)
+    flight.say(
+        f"fence margin {margin:g} m; tracking lag at {speed:g} m/s {lag:.1f} m (PX4 flies "
+        f"{PX4_VELOCITY_TRACKING:g} of its velocity setpoint, MPC_XY_P {gain:g} 1/s)"
+        + (
+            f"; the margin is below the lag: the vehicle may fly up to {lag - margin:.1f} m "
+            "past the fence"
+            if margin < lag
+            else ""
+        ),
+        kind="geofence",
+        margin_m=margin,
+        lag_m=lag,
+        speed_m_s=speed,
+        mpc_xy_p=gain,
+    )
+
+
 async def fly_mission(
-    build: Callable[[VehicleLimits], MissionController],
+    build: Callable[[VehicleLimits, FenceSpec | None], MissionController],
     log: MissionLog,
     options: FlightOptions,
     on_status: Callable[[dict], None] = lambda status: None,
     on_message: Callable[[str], None] = lambda text: None,
     stop: asyncio.Event | None = None,
+    fence: FenceSpec | None = None,
 ) -> FlightResult:
-    """Fly the mission of the controller that ``build`` makes from the vehicle's limits, on the
-    vehicle at ``options.connection``, logging to ``log`` (module docstring).
+    """Fly the mission of the controller that ``build`` makes from the vehicle's limits and the
+    fence flown (`sync_fence` with the scenario's ``fence``), on the vehicle at
+    ``options.connection``, logging to ``log`` (module docstring).
 
     Raises:
         FlightError: the mission could not start (nothing was commanded, or the vehicle was
@@ -834,8 +1025,13 @@ async def fly_mission(
                 )
             flight.say("vehicle found; local position received")
             limits = await read_limits(system)
-            controller = build(limits)
+            flown_fence = await sync_fence(flight, system, fence)
+            controller = build(limits, flown_fence)
             flight.attach(controller)
+            if flown_fence is not None:
+                await say_fence_margin(
+                    flight, system, controller.mission.agent_speed, flown_fence.margin
+                )
             if flight.log_failed():
                 raise FlightError(
                     f"the mission log cannot be written ({log.stopped}); nothing was flown"
@@ -927,6 +1123,13 @@ async def fly_mission(
                 mission_time_s=flown_s,
                 max_gap_s=flight.max_gap_s,
             )
+            if flown_fence is not None:
+                flight.say(
+                    f"{controller.fence_projections} setpoints projected into the fence's free "
+                    "space",
+                    kind="geofence",
+                    projections=controller.fence_projections,
+                )
             intake.stop()
             _say_intake(flight, intake, drops_before, kernel_drops(sock))
             action, confirmed = await flight.safe_end(system, reason, detail)
@@ -1117,11 +1320,12 @@ async def _watch_take_off(flight: _Flight, ground_m: float | None = None) -> str
 
 
 def run_flight(
-    build: Callable[[VehicleLimits], MissionController],
+    build: Callable[[VehicleLimits, FenceSpec | None], MissionController],
     log: MissionLog,
     options: FlightOptions,
     on_status: Callable[[dict], None] = lambda status: None,
     on_message: Callable[[str], None] = lambda text: None,
+    fence: FenceSpec | None = None,
 ) -> FlightResult:
     """`fly_mission` in its own event loop; Ctrl-C and SIGTERM end the mission safely
     (hold or return) instead of killing the program."""
@@ -1132,7 +1336,7 @@ def run_flight(
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
         try:
-            return await fly_mission(build, log, options, on_status, on_message, stop)
+            return await fly_mission(build, log, options, on_status, on_message, stop, fence)
         finally:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)

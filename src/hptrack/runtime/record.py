@@ -108,4 +108,5 @@ class MissionHistory:
             detections=detections,
             per_target_logdet=position_logdet(self.final["covariances"]),
             info=info,
+            fence=self.mission.fence,
         )

@@ -109,6 +109,7 @@ def _differences(logged: list[dict], replayed: list[dict]) -> list[str]:
             "tick": ("logdet", "means", "agent"),
             "plan": ("waypoint",),
             "mode": ("position",),
+            "fence": ("reference", "projected"),
             "end": ("U",),
         }.get(kind, ())
         for key in numbers:

@@ -26,6 +26,13 @@ Flight as PX4 flies it:
 * the take-off ends by a TAKEOFF -> HOLD mode change (PX4's AUTO_LOITER, which MAVSDK reports as
   HOLD); offboard entered during the take-off is overridden by that change, as PX4 was seen
   doing;
+* the fence: MAVLink's mission protocol for ``MAV_MISSION_TYPE_FENCE`` (upload by
+  ``MISSION_COUNT`` / ``MISSION_REQUEST_INT`` / ``MISSION_ITEM_INT`` / ``MISSION_ACK``, download
+  from ``MISSION_REQUEST_LIST``, ``MISSION_CLEAR_ALL``) with inclusion and exclusion polygons
+  (``param1`` the vertex count) and circles (``param1`` the radius), kept after a link loss;
+  armed and in the air, a breach (inside an exclusion, or outside every inclusion) does
+  ``GF_ACTION`` once (`hptrack.runtime.geofence.FENCE_ACTIONS`: a ``STATUSTEXT`` warning, hold,
+  return, terminate (disarm) or land); ``GPS_GLOBAL_ORIGIN`` on request;
 * it speaks as MAVLink system ``system_id``, component ``component_id``, and obeys only
   commands and setpoints addressed to it (so two stubs can share a port).
 
@@ -46,6 +53,7 @@ from __future__ import annotations
 import logging
 import math
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable
@@ -54,9 +62,19 @@ from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
+from shapely.geometry import Point, Polygon
 
 from hptrack.interface import InputError
-from hptrack.runtime.frames import enu_to_ned, ned_to_enu
+from hptrack.models.fence import FenceSpec
+from hptrack.runtime.frames import (
+    EARTH_RADIUS_M,
+    enu_to_ned,
+    geodetic_to_local,
+    local_to_geodetic,
+    ned_to_enu,
+)
+from hptrack.runtime.geofence import FENCE_ACTIONS, GeoZone, to_geodetic
+from hptrack.runtime.legs import PX4_VELOCITY_TRACKING
 from hptrack.runtime.network import udp_address
 from hptrack.runtime.targets import TargetDetector
 from hptrack.scenario.model import Scenario
@@ -84,17 +102,18 @@ PX4_PARAMETERS: dict[str, float] = {
     "RTL_RETURN_ALT": 30.0,
     "NAV_RCL_ACT": 0.0,
     "COM_RCL_EXCEPT": 4.0,
+    "GF_ACTION": 2.0,
+    "GF_PREDICT": 0.0,
 }
 """PX4's defaults (as read over MAVLink from PX4 SITL with the SIH quadrotor): speeds m/s,
-accelerations m/s^2, gains 1/s, times s, altitudes m, tilt degrees."""
+accelerations m/s^2, gains 1/s, times s, altitudes m, tilt degrees; ``GF_ACTION`` hold,
+``GF_PREDICT`` off (the stub has no breach predictor)."""
+INTEGER_PARAMETERS = ("GF_ACTION", "GF_PREDICT")
+"""Parameters PX4 keeps as ``INT32`` (sent byte-wise in ``PARAM_VALUE``'s float, as PX4 does)."""
 
 AIRFRAME_SPEED_M_S = 10.0
 """Top horizontal speed of PX4's SIH quadrotor (its drag at the 45 degree tilt limit), m/s."""
 
-PX4_VELOCITY_TRACKING = 0.8
-"""The share of its velocity setpoint that PX4's SIH quadrotor flies in steady flight: about
-6.3-6.5 m/s on straight legs while PX4's own velocity setpoint was 8.1-8.5 m/s (PX4 main of
-early 2025); 1 is an ideal velocity loop."""
 
 _SENSORS = (
     mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
@@ -106,7 +125,15 @@ _SENSORS = (
     | mavlink.MAV_SYS_STATUS_PREARM_CHECK
 )
 _HOME_LAT_DEG, _HOME_LON_DEG, _HOME_ALT_M = 47.397742, 8.545594, 488.0
-_EARTH_RADIUS_M = 6_378_137.0
+"""The local frame's origin (PX4 SITL's default, Zurich), degrees and m above sea level."""
+_FENCE = mavlink.MAV_MISSION_TYPE_FENCE
+_FENCE_COMMANDS = {
+    mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION: (True, False),
+    mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION: (False, False),
+    mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION: (True, True),
+    mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION: (False, True),
+}
+"""The fence items: ``(inclusion, circle)`` of each command."""
 _STREAM_S = 0.5
 """Offboard is accepted only with a setpoint received within this, s (PX4 wants >= 2 Hz)."""
 _VELOCITY_IGNORED = 0b111000
@@ -134,6 +161,8 @@ class Misbehaviour:
         leave_offboard_to: the mode it then switches to (`LEAVE_OFFBOARD_MODES`).
         takeoff_failure: ``None``, or how the take-off fails (`TAKEOFF_FAILURES`).
         takeoff_failure_after_s: that long after the take-off began, s.
+        fence_shift_m: keep an uploaded fence moved this far north (a vehicle whose fence
+            is not the one sent), m.
     """
 
     refuse_offboard: str | None = None
@@ -141,6 +170,7 @@ class Misbehaviour:
     leave_offboard_to: str = "posctl"
     takeoff_failure: str | None = None
     takeoff_failure_after_s: float = 2.0
+    fence_shift_m: float = 0.0
 
     def __post_init__(self) -> None:
         """Raises `ValueError` (one line naming the field and the value) for an unknown
@@ -157,6 +187,21 @@ class Misbehaviour:
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and 0.0 < value <= 86400.0):
                 raise ValueError(f"{name} must be a number in (0, 86400], got {value}")
+        if not (math.isfinite(self.fence_shift_m) and abs(self.fence_shift_m) <= 1e4):
+            raise ValueError(
+                f"fence_shift_m must be a number in [-1e4, 1e4], got {self.fence_shift_m}"
+            )
+
+
+def _items(zones: list[GeoZone]) -> list[tuple[int, float, int, int]]:
+    """Fence ``zones`` as mission items ``(command, param1, lat 1e7, lon 1e7)``."""
+    codes = {value: command for command, value in _FENCE_COMMANDS.items()}
+    items = []
+    for zone in zones:
+        command = codes[(zone.inclusion, zone.radius_m is not None)]
+        param1 = zone.radius_m if zone.radius_m is not None else float(len(zone.points))
+        items += [(command, param1, round(a * 1e7), round(b * 1e7)) for a, b in zone.points]
+    return items
 
 
 def _custom_mode(mode: str) -> int:
@@ -212,6 +257,10 @@ class VehicleStats:
     max_speed_m_s: float = 0.0
     track: list[tuple[float, float, float, float, float]] = field(default_factory=list)
     """``(t s, north m, east m, v_north m/s, v_east m/s)`` at 10 Hz while in offboard."""
+    setpoints: list[tuple[float, float, float]] = field(default_factory=list)
+    """``(t s, north m, east m)`` of every position setpoint received."""
+    fence_breaches: list[tuple[float, str]] = field(default_factory=list)
+    """``(t s, action)`` of every fence breach."""
 
     def as_json(
         self, final_mode: str, armed: bool, position_ned: np.ndarray, detections: dict
@@ -250,6 +299,8 @@ class VehicleStats:
             "max_speed_m_s": self.max_speed_m_s,
             "position_ned": position_ned.tolist(),
             "track": [list(row) for row in self.track],
+            "setpoint_positions": [list(row) for row in self.setpoints],
+            "fence_breaches": [{"t": t, "action": a} for t, a in self.fence_breaches],
         }
 
 
@@ -330,6 +381,13 @@ class VehicleSim:
         self._offboard_since: float | None = None
         self._sensors_ok = True
         self._heartbeat_due = False
+        self.fence: list[GeoZone] = []
+        """The fence the vehicle holds (kept after a link loss)."""
+        self._fence_local: list[tuple[bool, Polygon | None, tuple[float, float], float]] = []
+        """Each zone as ``(inclusion, polygon or None, circle centre, radius)``, east-north m."""
+        self._upload: list[tuple[int, float, int, int]] | None = None  # items so far
+        self._upload_count = 0
+        self._breached = False
         self.stats = VehicleStats()
         self._start = time.monotonic()
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -436,17 +494,26 @@ class VehicleSim:
                     self._target, self._target_velocity = values, velocity
                     self._last_setpoint = self._now()
                     self.stats.setpoint_times.append(self._last_setpoint)
+                    self.stats.setpoints.append((self._last_setpoint, *values[:2].tolist()))
         elif kind in ("COMMAND_LONG", "COMMAND_INT"):
             if msg.target_system in (0, self.system_id) and msg.target_component in (
                 0,
                 self.component_id,
             ):
                 self._command(msg)
+        elif kind.startswith("MISSION_") and getattr(msg, "mission_type", None) == _FENCE:
+            if msg.target_system in (0, self.system_id):
+                self._fence_message(kind, msg)
         elif kind == "PARAM_SET":
             name = _param_name(msg.param_id)
-            if name in self._params and math.isfinite(msg.param_value):
-                self._params[name] = float(msg.param_value)
-                self._say(f"parameter {name} = {msg.param_value:g}")
+            value = (
+                struct.unpack("<i", struct.pack("<f", msg.param_value))[0]
+                if name in INTEGER_PARAMETERS
+                else msg.param_value
+            )
+            if name in self._params and math.isfinite(value):
+                self._params[name] = float(value)
+                self._say(f"parameter {name} = {value:g}")
                 self._send_param(name)
         elif kind == "PARAM_REQUEST_READ":
             name = _param_name(msg.param_id)
@@ -463,13 +530,130 @@ class VehicleSim:
 
     def _send_param(self, name: str) -> None:
         names = list(self._params)
+        integer = name in INTEGER_PARAMETERS
+        value = (
+            struct.unpack("<f", struct.pack("<i", round(self._params[name])))[0]
+            if integer
+            else self._params[name]
+        )
         self._mav.param_value_send(
             name.encode(),
-            self._params[name],
-            mavlink.MAV_PARAM_TYPE_REAL32,
+            value,
+            mavlink.MAV_PARAM_TYPE_INT32 if integer else mavlink.MAV_PARAM_TYPE_REAL32,
             len(names),
             names.index(name),
         )
+
+    # --- fence ------------------------------------------------------------------------------
+    def _fence_message(self, kind: str, msg: Any) -> None:
+        """The mission protocol for the fence (module docstring)."""
+        to = (msg.get_srcSystem(), msg.get_srcComponent())
+        if kind == "MISSION_COUNT":
+            self._upload, self._upload_count = [], int(msg.count)
+            if msg.count == 0:
+                self._store_fence([])
+                self._mav.mission_ack_send(*to, mavlink.MAV_MISSION_ACCEPTED, _FENCE)
+            else:
+                self._mav.mission_request_int_send(*to, 0, _FENCE)
+        elif kind == "MISSION_ITEM_INT" and self._upload is not None:
+            if msg.seq == len(self._upload):
+                self._upload.append((msg.command, float(msg.param1), msg.x, msg.y))
+            if len(self._upload) < self._upload_count:
+                self._mav.mission_request_int_send(*to, len(self._upload), _FENCE)
+                return
+            result = self._store_fence(self._upload)
+            self._upload = None
+            self._mav.mission_ack_send(*to, result, _FENCE)
+        elif kind == "MISSION_REQUEST_LIST":
+            self._mav.mission_count_send(*to, len(self._fence_items()), _FENCE)
+        elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+            items = self._fence_items()
+            if 0 <= msg.seq < len(items):
+                command, param1, x, y = items[msg.seq]
+                self._mav.mission_item_int_send(
+                    *to, msg.seq, mavlink.MAV_FRAME_GLOBAL_INT, command, 0, 1,
+                    param1, 0.0, 0.0, 0.0, x, y, 0.0, _FENCE,
+                )  # fmt: skip
+        elif kind == "MISSION_CLEAR_ALL":
+            self._store_fence([])
+            self._mav.mission_ack_send(*to, mavlink.MAV_MISSION_ACCEPTED, _FENCE)
+
+    def _store_fence(self, items: list[tuple[int, float, int, int]]) -> int:
+        """Keep the uploaded ``items`` (command, param1, lat 1e7, lon 1e7) as the fence;
+        returns the ``MISSION_ACK`` result (a bad item or vertex count is refused)."""
+        zones, i = [], 0
+        shift = math.degrees(self.misbehaviour.fence_shift_m / EARTH_RADIUS_M)
+        while i < len(items):
+            command, param1, _, _ = items[i]
+            if command not in _FENCE_COMMANDS:
+                return mavlink.MAV_MISSION_UNSUPPORTED
+            inclusion, circle = _FENCE_COMMANDS[command]
+            size = 1 if circle else int(param1)
+            group = items[i : i + size]
+            if size < (1 if circle else 3) or len(group) < size:
+                return mavlink.MAV_MISSION_INVALID_PARAM1
+            if any(c != command or (not circle and int(p) != size) for c, p, _, _ in group):
+                return mavlink.MAV_MISSION_INVALID_SEQUENCE
+            points = tuple((x * 1e-7 + shift, y * 1e-7) for _, _, x, y in group)
+            zones.append(GeoZone(inclusion, points, param1 if circle else None))
+            i += size
+        self.fence = zones
+        self._fence_local = []
+        for zone in zones:
+            local = [geodetic_to_local(_HOME_LAT_DEG, _HOME_LON_DEG, *p)[::-1] for p in zone.points]
+            shape = Polygon(local) if zone.radius_m is None else None
+            self._fence_local.append((zone.inclusion, shape, local[0], zone.radius_m or 0.0))
+        self._say(f"fence: {len(zones)} zones ({len(items)} items)" if zones else "fence cleared")
+        return mavlink.MAV_MISSION_ACCEPTED
+
+    def hold_fence(self, spec: FenceSpec) -> None:
+        """Hold ``spec`` (a scenario's fence, local metres) as if it had been uploaded."""
+        self._store_fence(_items(to_geodetic(spec, (_HOME_LAT_DEG, _HOME_LON_DEG))))
+
+    def _fence_items(self) -> list[tuple[int, float, int, int]]:
+        """The fence as mission items (command, param1, lat 1e7, lon 1e7)."""
+        return _items(self.fence)
+
+    def outside_fence(self) -> bool:
+        """Whether the vehicle is inside an exclusion or outside every inclusion."""
+        east, north = float(self.position[1]), float(self.position[0])
+        inside_any, inclusions = False, False
+        for inclusion, shape, centre, circle_m in self._fence_local:
+            if shape is None:
+                inside = math.dist((east, north), centre) < circle_m
+            else:
+                inside = shape.contains(Point(east, north))
+            if inclusion:
+                inclusions = True
+                inside_any = inside_any or inside
+            elif inside:
+                return True
+        return inclusions and not inside_any
+
+    def _check_fence(self) -> None:
+        """On a breach (armed, in the air), do ``GF_ACTION`` once until the vehicle is back
+        inside."""
+        if not self._fence_local or not self.armed or not self._airborne():
+            return
+        breached = self.outside_fence()
+        if breached and not self._breached:
+            action = int(self._params["GF_ACTION"])
+            name = FENCE_ACTIONS.get(action, "none")
+            self.stats.fence_breaches.append((self._now(), name))
+            self._say(f"geofence breached: GF_ACTION {action} ({name})")
+            self._mav.statustext_send(
+                mavlink.MAV_SEVERITY_CRITICAL, f"Geofence violation, action {name}".encode()
+            )
+            why = "geofence breached"
+            if name == "hold":
+                self._set_mode("hold", why)
+            elif name == "return":
+                self._set_mode("rtl", why)
+            elif name == "land":
+                self._set_mode("land", why)
+            elif name == "terminate":
+                self._disarm("geofence breached: flight termination")
+        self._breached = breached
 
     def _streaming(self) -> bool:
         return self._now() - self._last_setpoint <= _STREAM_S
@@ -533,6 +717,11 @@ class VehicleSim:
             elif wanted == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
                 self._ack(cmd, accepted)
                 self._send_home()
+            elif wanted == mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN:
+                self._ack(cmd, accepted)
+                self._mav.gps_global_origin_send(
+                    round(_HOME_LAT_DEG * 1e7), round(_HOME_LON_DEG * 1e7), round(_HOME_ALT_M * 1e3)
+                )
             else:
                 self._ack(cmd, mavlink.MAV_RESULT_UNSUPPORTED)
         elif cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
@@ -547,16 +736,15 @@ class VehicleSim:
             | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
             | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
             | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+            | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+            | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
         )
         self._mav.autopilot_version_send(
             capabilities, (1 << 24) | (15 << 16), 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 1
         )
 
     def _geodetic(self, ned: np.ndarray) -> tuple[int, int, int]:
-        lat = _HOME_LAT_DEG + math.degrees(ned[0] / _EARTH_RADIUS_M)
-        lon = _HOME_LON_DEG + math.degrees(
-            ned[1] / (_EARTH_RADIUS_M * math.cos(math.radians(_HOME_LAT_DEG)))
-        )
+        lat, lon = local_to_geodetic(_HOME_LAT_DEG, _HOME_LON_DEG, ned[0], ned[1])
         return int(lat * 1e7), int(lon * 1e7), int((_HOME_ALT_M - ned[2]) * 1000)
 
     def _send_home(self) -> None:
@@ -673,6 +861,7 @@ class VehicleSim:
                 np.clip(goal[2] - self.position[2], -p["MPC_Z_VEL_MAX_UP"], p["MPC_Z_VEL_MAX_DN"])
             )
         self.position += self.velocity * dt
+        self._check_fence()
         if self.position[2] >= self.home[2]:
             self.position[2] = self.home[2]
             self.velocity[2] = 0.0
