@@ -15,6 +15,7 @@ EXPECTED = {
     "env_ppo.py",
     "fly_simulated.py",
     "paper-flight.yaml",
+    "fenced-flight.yaml",
     "stonesoup_tracking.py",
 }
 
