@@ -15,13 +15,12 @@ and the targets never detected::
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
-from sensing_blind import mean_se
 
 from hptrack.experiments.benchmark import BenchmarkConfig, run_benchmark
+from hptrack.experiments.report import mean_se, write_tables
 from hptrack.experiments.store import ResultStore
 from hptrack.registry import planner_settings
 
@@ -97,10 +96,7 @@ def report(rows: dict, out: Path, iterations: int) -> None:
                     "never_detected_fenced": never[1],
                 }
             )
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "table.md").write_text("\n".join(lines) + "\n")
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print("\n".join(lines))
+    write_tables(out, lines, summary)
 
 
 def main() -> None:

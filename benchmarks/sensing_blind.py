@@ -17,13 +17,12 @@ difference known - blind (negative: knowing the sensor helps), with its standard
 from __future__ import annotations
 
 import argparse
-import json
-import math
 from pathlib import Path
 
 import numpy as np
 
 from hptrack.experiments.benchmark import BenchmarkConfig, run_benchmark
+from hptrack.experiments.report import mean_se, write_tables
 from hptrack.experiments.store import ResultStore
 from hptrack.registry import planner_settings
 
@@ -48,12 +47,6 @@ def configs(
             blind=blind,
         )
     return out
-
-
-def mean_se(values: np.ndarray) -> tuple[float, float]:
-    """The mean and its standard error (sample standard deviation over sqrt of the count)."""
-    se = float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else math.nan
-    return float(np.mean(values)), se
 
 
 def report(by_variant: dict[str, dict], out: Path, pd: float, iterations: int) -> None:
@@ -99,10 +92,7 @@ def report(by_variant: dict[str, dict], out: Path, pd: float, iterations: int) -
         summary.setdefault("paired", []).append(
             {"n": n, "known_minus_blind": mean, "se": se, "scenarios": len(seeds)}
         )
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "table.md").write_text("\n".join(lines) + "\n")
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print("\n".join(lines))
+    write_tables(out, lines, summary)
 
 
 def main() -> None:

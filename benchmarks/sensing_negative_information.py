@@ -29,12 +29,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
+from hptrack.experiments.report import mean_se, write_tables
 from hptrack.registry import make_planner, planner_settings
 from hptrack.scenario import random_scenario
 from hptrack.scenario.model import FootprintSensorSpec
@@ -70,12 +70,6 @@ def episode(job: tuple[str, int, int, float, int]) -> dict:
         "inside_99": float(np.mean(nees <= CHI2_99)),
         "never_detected": int(np.sum(~record.detections.any(axis=0))),
     }
-
-
-def mean_se(values: np.ndarray) -> tuple[float, float]:
-    """The mean and its standard error (sample standard deviation over sqrt of the count)."""
-    se = float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else math.nan
-    return float(np.mean(values)), se
 
 
 def report(rows: list[dict], out: Path, pd: float, iterations: int) -> None:
@@ -136,10 +130,7 @@ def report(rows: list[dict], out: Path, pd: float, iterations: int) -> None:
             summary["paired"].append(
                 {"n": n, "pair": f"{a} - {b}", "mean": mean, "se": se, "scenarios": len(seeds)}
             )
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "table.md").write_text("\n".join(lines) + "\n")
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print("\n".join(lines))
+    write_tables(out, lines, summary)
 
 
 def main() -> None:

@@ -24,12 +24,12 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import math
 from multiprocessing import Pool
 from pathlib import Path
 
 import numpy as np
 
+from hptrack.experiments.report import mean_se
 from hptrack.registry import make_planner
 from hptrack.scenario import random_scenario
 from hptrack.scenario.model import FootprintSensorSpec
@@ -70,13 +70,6 @@ def episode(job: tuple) -> dict:
         "false_alarms_taken": tracking.get("false_alarms_taken", 0),
         "claims": tracking.get("claims", 0),
     }
-
-
-def mean_se(values) -> tuple[float, float]:
-    """The mean and its standard error (sample standard deviation over sqrt of the count)."""
-    v = np.asarray(values, dtype=float)
-    se = float(np.std(v, ddof=1) / math.sqrt(len(v))) if len(v) > 1 else math.nan
-    return float(np.mean(v)), se
 
 
 def report(rows: list[dict], out: Path, header: str, names: list[str]) -> None:

@@ -16,13 +16,13 @@ tour's wall and CPU time per decision.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
 from hptrack.experiments.benchmark import BenchmarkConfig, run_benchmark
+from hptrack.experiments.report import mean_se, write_tables
 from hptrack.experiments.store import ResultStore
 from hptrack.registry import planner_settings
 
@@ -57,12 +57,6 @@ def configs(
         )
     out["clairvoyant"] = one("clairvoyant", None, targets, seeds)  # the slowest at n = 20
     return out
-
-
-def mean_se(values: np.ndarray) -> tuple[float, float]:
-    """The mean and its standard error (sample standard deviation over sqrt of the count)."""
-    se = float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else math.nan
-    return float(np.mean(values)), se
 
 
 def report(by_variant: dict[str, dict], out: Path, command: str) -> None:
@@ -173,10 +167,7 @@ def report(by_variant: dict[str, dict], out: Path, command: str) -> None:
                 "max_cpu_s": float(cpu.max()),
             }
         )
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "table.md").write_text("\n".join(lines) + "\n")
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print("\n".join(lines))
+    write_tables(out, lines, summary)
 
 
 def main() -> None:

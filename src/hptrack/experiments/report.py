@@ -6,9 +6,13 @@ protocol."""
 from __future__ import annotations
 
 import csv
+import json
 import math
 from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
+
+import numpy as np
 
 from hptrack.experiments.benchmark import BenchmarkConfig, gap_closed, reductions, summarise
 from hptrack.experiments.store import EpisodeKey
@@ -19,6 +23,23 @@ from hptrack.sim.record import METRICS, EpisodeRow
 def mean_std(mean: float, std: float) -> str:
     """A table cell ``mean ± std`` with two decimals (``-`` for no values)."""
     return "-" if math.isnan(mean) else f"{mean:.2f} ± {std:.2f}"
+
+
+def mean_se(values: Sequence[float] | np.ndarray) -> tuple[float, float]:
+    """The mean and its standard error (the sample standard deviation over the square root of
+    the count; NaN for fewer than two values)."""
+    v = np.asarray(values, dtype=float)
+    se = float(np.std(v, ddof=1) / math.sqrt(v.size)) if v.size > 1 else math.nan
+    return float(np.mean(v)), se
+
+
+def write_tables(out: Path, lines: list[str], summary: dict) -> None:
+    """Write a result folder: ``table.md`` (the ``lines``) and ``summary.json``, and print the
+    table."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "table.md").write_text("\n".join(lines) + "\n")
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print("\n".join(lines))
 
 
 def effort_label(key: EpisodeKey) -> str:
