@@ -148,10 +148,10 @@ def test_fence_from_vehicle_flies_the_vehicles_fence(tmp_path):
     assert summary["mismatches"] == 0, summary["first_mismatches"]
 
 
-def test_a_breach_with_gf_action_warning_is_said_and_the_mission_goes_on(tmp_path):
-    """As below with ``GF_ACTION`` 1 on the stub: the vehicle's warning is said and logged,
-    and the mission ends by its budget."""
-    run = _FLOOD.start_dry_run(tmp_path, FENCED, 8.0, ["--hold-fence", "--param", "GF_ACTION=1"])
+def _fly_past_the_vehicles_fence(tmp_path, budget, stub_args):
+    """A dry run whose stub holds the example's fence (``stub_args``) while ``fly`` flies a
+    copy of the example without it: ``(run, fly's completed process, the stub's stats)``."""
+    run = _FLOOD.start_dry_run(tmp_path, FENCED, budget, stub_args)
     data = yaml.safe_load(run["scenario"].read_text())
     del data["fence"]
     open_space = tmp_path / "open.yaml"
@@ -163,7 +163,15 @@ def test_a_breach_with_gf_action_warning_is_said_and_the_mission_goes_on(tmp_pat
         )
     finally:
         _FLOOD.end_process(run["stub"])
-    stats = json.loads(run["stats"].read_text())
+    return run, fly, json.loads(run["stats"].read_text())
+
+
+def test_a_breach_with_gf_action_warning_is_said_and_the_mission_goes_on(tmp_path):
+    """As below with ``GF_ACTION`` 1 on the stub: the vehicle's warning is said and logged,
+    and the mission ends by its budget."""
+    run, fly, stats = _fly_past_the_vehicles_fence(
+        tmp_path, 8.0, ["--hold-fence", "--param", "GF_ACTION=1"]
+    )
     assert fly.returncode == 0, fly.stdout + fly.stderr
     out = " ".join(fly.stdout.split())
     assert "vehicle says (CRITICAL): Geofence violation, action warning" in out
@@ -179,19 +187,7 @@ def test_a_breach_holds_the_vehicle_and_fly_leaves_it_to_the_pilot(tmp_path):
     """The stub holds the example's fence; ``fly`` flies a copy without it (so it leaves the
     vehicle's fence alone and flies straight at p1, through the no-fly square): the stub's
     GF_ACTION hold takes it out of OFFBOARD, and ``fly`` ends as when a pilot takes over."""
-    run = _FLOOD.start_dry_run(tmp_path, FENCED, BUDGET_S, ["--hold-fence"])
-    data = yaml.safe_load(run["scenario"].read_text())
-    del data["fence"]
-    open_space = tmp_path / "open.yaml"
-    open_space.write_text(yaml.safe_dump(data))
-    command = [str(open_space) if a == str(run["scenario"]) else a for a in run["fly"]]
-    try:
-        fly = subprocess.run(
-            [*command, "--log", str(run["log"])], capture_output=True, text=True, timeout=240
-        )
-    finally:
-        _FLOOD.end_process(run["stub"])
-    stats = json.loads(run["stats"].read_text())
+    run, fly, stats = _fly_past_the_vehicles_fence(tmp_path, BUDGET_S, ["--hold-fence"])
     assert fly.returncode == 4, fly.stdout + fly.stderr
     out = " ".join(fly.stdout.split())
     assert "the pilot took over: the vehicle left OFFBOARD for HOLD at mission time" in out
