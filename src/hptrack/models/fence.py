@@ -20,6 +20,7 @@ loops of the planners.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -52,8 +53,15 @@ class FenceSpec(NamedTuple):
     margin: float = 0.0
 
     def compiled(self) -> Fence:
-        """The compiled `Fence` (`compile_fence`)."""
-        return compile_fence(self.inclusion, self.polygons, self.circles, self.margin)
+        """The compiled `Fence` (`compile_fence`, built once per fence and shared)."""
+        return _compiled(
+            FenceSpec(
+                None if self.inclusion is None else _corners(self.inclusion),
+                tuple(_corners(ring) for ring in self.polygons),
+                tuple((float(x), float(y), float(r)) for x, y, r in self.circles),
+                float(self.margin),
+            )
+        )
 
 
 class Fence(NamedTuple):
@@ -61,8 +69,8 @@ class Fence(NamedTuple):
 
     Attributes:
         bounded: whether an operating area bounds the free space (its outer ring).
-        edges: ``(E, 4)`` the free space's boundary segments ``[x0, y0, x1, y1]``, m.
-        rings: ``(E,)`` the ring each segment belongs to (for the even-odd inside test).
+        edges: ``(E, 4)`` the free space's boundary segments ``[x0, y0, x1, y1]``, m (the
+            even-odd inside test counts crossings of all of them).
         nodes: ``(V, 2)`` the visibility graph's nodes (the corners, moved inside), m.
         lengths: ``(V, V)`` the shortest flight between two nodes, m (``inf``: none).
         first: ``(V, V)`` the node after ``i`` on the shortest flight from ``i`` to ``j``
@@ -71,7 +79,6 @@ class Fence(NamedTuple):
 
     bounded: bool
     edges: np.ndarray
-    rings: np.ndarray
     nodes: np.ndarray
     lengths: np.ndarray
     first: np.ndarray
@@ -152,22 +159,10 @@ def compile_fence(
         if rings
         else np.zeros((0, 4))
     )
-    ring_of = (
-        np.concatenate([np.full(len(r) - 1, k) for k, r in enumerate(rings)])
-        if rings
-        else np.zeros(0, np.int64)
-    )
     # the nodes: the corners moved NODE_OFFSET into the free space
     inside = geometry.buffer(-NODE_OFFSET if bounded else NODE_OFFSET, join_style="mitre")
     corners = np.concatenate([r[:-1] for r in rings_of(inside)]) if rings else np.zeros((0, 2))
-    fence = Fence(
-        bounded,
-        edges,
-        ring_of.astype(np.int64),
-        corners,
-        np.zeros((0, 0)),
-        np.zeros((0, 0), np.int64),
-    )
+    fence = Fence(bounded, edges, corners, np.zeros((0, 0)), np.zeros((0, 0), np.int64))
     free = np.array([point_free(fence, x, y) for x, y in corners], dtype=bool)
     corners = corners[free]
     sees = visibility(fence._replace(nodes=corners))
@@ -176,17 +171,37 @@ def compile_fence(
     lengths, predecessors = shortest_path(
         graph, method="D", directed=False, return_predecessors=True
     )
-    # first[i, j]: walk back from j along the predecessors of the tree rooted at i
-    first = np.full(lengths.shape, -1, dtype=np.int64)
-    for i in range(len(corners)):
-        for j in range(len(corners)):
-            if i == j or not np.isfinite(lengths[i, j]):
+    return Fence(bounded, edges, corners, lengths, first_steps(predecessors))
+
+
+@numba.njit(cache=True)
+def first_steps(predecessors):
+    """``first[i, j]``: the node after ``i`` on the shortest path from ``i`` to ``j`` (``-1``
+    for ``i == j`` or no path), from scipy's ``predecessors`` (walked back from ``j`` along
+    the tree rooted at ``i``)."""
+    v = predecessors.shape[0]
+    first = np.full((v, v), -1, dtype=np.int64)
+    for i in range(v):
+        for j in range(v):
+            if i == j or predecessors[i, j] < 0:
                 continue
             k = j
             while predecessors[i, k] != i:
                 k = predecessors[i, k]
             first[i, j] = k
-    return Fence(bounded, edges, ring_of.astype(np.int64), corners, lengths, first)
+    return first
+
+
+def _corners(ring) -> tuple[tuple[float, float], ...]:
+    return tuple((float(x), float(y)) for x, y in ring)
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled(spec: FenceSpec) -> Fence:
+    fence = compile_fence(spec.inclusion, spec.polygons, spec.circles, spec.margin)
+    for array in (fence.edges, fence.nodes, fence.lengths, fence.first):
+        array.flags.writeable = False
+    return fence
 
 
 @numba.njit(cache=True, inline="always")
