@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import reprlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -96,6 +96,21 @@ def one_line(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
 
 
 @dataclass(frozen=True, eq=False)
+class TeamMember:
+    """One UAV of a team (`MissionSpec.members`): what differs between the vehicles.
+
+    Attributes:
+        speed: ``v_a``, m/s.
+        sensor_diameter: footprint diameter ``w``, m.
+        measurement_noise: ``(2, 2)`` its sensor's ``R``, m^2.
+    """
+
+    speed: float
+    sensor_diameter: float
+    measurement_noise: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
 class MissionSpec:
     """The static facts of a mission that a planner may use (SI units).
 
@@ -108,8 +123,12 @@ class MissionSpec:
         process_noise_form: which per-step ``Q`` (`hptrack.models.motion`).
         process_noise: ``(n,)`` per-target noise intensities ``q``, m^2/s^3.
         target_ids: the targets' names.
-        n_vehicles: ``m``, the vehicles flown (every planner today flies one and refuses
-            more, `one_vehicle`); they share the speed and the sensor.
+        n_vehicles: ``m``, the vehicles flown (a planner that flies one refuses more,
+            `one_vehicle`); without ``members`` they share the speed and the sensor.
+        members: a team's UAVs, each with its own speed and sensor (`TeamMember`; the first
+            is the one-vehicle fields' ``agent_speed``, ``sensor_diameter`` and
+            ``measurement_noise``); ``()``: ``n_vehicles`` alike. `vehicle_mission` gives each
+            UAV's mission alone.
         belief_motion: how the beliefs assume the targets move, a registered part of
             `hptrack.models.belief_motion`; ``None``: constant velocity with
             ``process_noise_form``.
@@ -136,6 +155,7 @@ class MissionSpec:
     detection_probability: float | tuple[tuple[float, float], ...] = 1.0
     fence: FenceSpec | None = None
     negative_information: bool = False
+    members: tuple[TeamMember, ...] = ()
     record: Mission = field(init=False, repr=False)
     """The mission's constants as the compiled kernels take them (built and validated once,
     with the spec)."""
@@ -147,6 +167,16 @@ class MissionSpec:
             isinstance(self.n_vehicles, int | np.integer) and self.n_vehicles >= 1
         ):
             raise ValueError(f"n_vehicles must be a whole number >= 1, got {self.n_vehicles!r}")
+        if self.members:
+            object.__setattr__(self, "members", tuple(self.members))
+            if self.n_vehicles not in (1, len(self.members)):
+                raise ValueError(
+                    f"n_vehicles {self.n_vehicles} is not the {len(self.members)} members"
+                )
+            object.__setattr__(self, "n_vehicles", len(self.members))
+            first = self.members[0]
+            if (first.speed, first.sensor_diameter) != (self.agent_speed, self.sensor_diameter):
+                raise ValueError("members[0] must be the mission's agent_speed and sensor")
         record = mission_record(
             self.time_step,
             self.budget,
@@ -169,6 +199,28 @@ class MissionSpec:
     def n_steps(self) -> int:
         """Number of simulation steps in the budget (``B / tau``)."""
         return self.record.n_steps
+
+    def vehicle_mission(self, j: int) -> MissionSpec:
+        """UAV ``j``'s mission alone (its speed and sensor, one vehicle): what a planner of
+        one UAV of a team is told. A mission of one vehicle is its own."""
+        if not 0 <= j < self.n_vehicles:
+            raise IndexError(f"vehicle {j} of a team of {self.n_vehicles}")
+        if self.n_vehicles == 1:
+            return self
+        cache = self.__dict__.setdefault("_vehicle_missions", {})
+        if j not in cache:
+            member = self.members[j] if self.members else None
+            cache[j] = replace(
+                self,
+                n_vehicles=1,
+                members=(),
+                agent_speed=self.agent_speed if member is None else member.speed,
+                sensor_diameter=self.sensor_diameter if member is None else member.sensor_diameter,
+                measurement_noise=(
+                    self.measurement_noise if member is None else member.measurement_noise
+                ),
+            )
+        return cache[j]
 
     @property
     def step_length(self) -> float:
@@ -204,7 +256,8 @@ def one_vehicle(planner: str, mission: MissionSpec) -> None:
     if mission.n_vehicles != 1:
         raise InputError(
             f"planner {planner!r} flies one vehicle; the mission's n_vehicles is "
-            f"{mission.n_vehicles}"
+            f"{mission.n_vehicles} (a team flies with team-mcts, team-cbba, team-greedy or "
+            "team-clairvoyant)"
         )
 
 

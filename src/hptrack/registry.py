@@ -22,6 +22,13 @@ from hptrack.learning.policy_planner import AdfqPlanner, AdfqSettings, Sb3Planne
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.planning.tour import TourPlanner, TourSettings
 from hptrack.settings import NoSettings, PlannerSettings
+from hptrack.teams.sequential import (
+    TeamClairvoyantPlanner,
+    TeamGreedyPlanner,
+    TeamGreedySettings,
+    TeamMctsPlanner,
+    TeamMctsSettings,
+)
 
 
 @dataclass(frozen=True)
@@ -68,6 +75,21 @@ PLANNERS: dict[str, PlannerEntry] = {
         AdfqSettings,
         AdfqPlanner,
         "Deep ADFQ policy (-o model=PATH, epsilon; default: shipped model for n)",
+    ),
+    "team-mcts": PlannerEntry(
+        TeamMctsSettings,
+        TeamMctsPlanner,
+        "a team: the hierarchical planner on every UAV, planned one UAV at a time",
+    ),
+    "team-greedy": PlannerEntry(
+        TeamGreedySettings,
+        TeamGreedyPlanner,
+        "a team: greedy on every UAV, each on targets no other UAV claims",
+    ),
+    "team-clairvoyant": PlannerEntry(
+        TeamGreedySettings,
+        TeamClairvoyantPlanner,
+        "READS THE TRUE TARGET STATES: a team of perfect-knowledge references",
     ),
     "sb3": PlannerEntry(
         Sb3Settings,

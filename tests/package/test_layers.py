@@ -18,6 +18,7 @@ LAYERS = [
     "coverage",
     "planning",
     "baselines",
+    "teams",
     "sim",
     "viz",
     "envs",

@@ -43,6 +43,9 @@ class ClairvoyantPlanner:
 
     def __init__(self, settings: NoSettings | None = None) -> None:
         self.settings = settings or NoSettings()
+        self.claimed: np.ndarray | None = None
+        """``(n,)`` bool: targets another UAV of a team has claimed, never planned while they
+        are (set by a team planner, `hptrack.teams`); ``None``: none."""
 
     def reset(
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
@@ -95,7 +98,8 @@ class ClairvoyantPlanner:
         a1 = reach_times(
             vehicle, obs.agent_position, true_positions, true_velocities, m.sensor_radius
         )[t1]
-        ok = (a1 <= left) & ((t1 != leaving) | (n == 1))
+        free = np.ones(n, dtype=bool) if self.claimed is None else ~self.claimed
+        ok = (a1 <= left) & ((t1 != leaving) | (n == 1)) & free[t1]
         t1, s1, a1 = t1[ok], s1[ok], a1[ok]
         if t1.size == 0:  # no target can be met in time: to the nearest, staying to the end
             return int(np.argmin(np.hypot(*(true_positions - obs.agent_position).T))), left
@@ -113,7 +117,7 @@ class ClairvoyantPlanner:
         a2 = free1[k1] + reach_times(
             vehicle, leave[k1], moved_positions, moved_velocities, m.sensor_radius
         )
-        ok = (t2 != t1[k1]) & (a2 <= left)
+        ok = (t2 != t1[k1]) & (a2 <= left) & free[t2]
         k1, t2, s2, a2 = k1[ok], t2[ok], s2[ok], a2[ok]
         s2 = np.minimum(s2, left - a2)
         gain2 = base[t2] - self._final_logdets(covs[t2], q[t2], a2, s2, left)
@@ -151,6 +155,11 @@ class ClairvoyantPlanner:
             m.record.vehicle, obs.agent_position, position[None], velocity[None], 0.0
         )[0]
         return position + velocity * (meet if math.isfinite(meet) else 0.0)
+
+    @property
+    def target(self) -> int | None:
+        """The target visited now (``None``: none yet)."""
+        return self._target
 
     def current_plan(self) -> CurrentPlan:
         """No sub-tasks of the paper's kind: nothing to show."""

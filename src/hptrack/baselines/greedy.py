@@ -29,6 +29,9 @@ class GreedyPlanner:
 
     def __init__(self, settings: NoSettings | None = None) -> None:
         self.settings = settings or NoSettings()
+        self.claimed: np.ndarray | None = None
+        """``(n,)`` bool: targets another UAV of a team has claimed, never chosen while they
+        are (set by a team planner, `hptrack.teams`); ``None``: none."""
 
     def reset(
         self, mission: MissionSpec, observation: Observation, rng: np.random.Generator
@@ -44,14 +47,17 @@ class GreedyPlanner:
         closing = self._mission.agent_speed - speeds(obs.means)
         return distance / closing
 
-    def _choose(self, obs: Observation) -> int:
+    def _choose(self, obs: Observation) -> int | None:
+        if self.claimed is not None and self.claimed.all():
+            return None  # a team's other UAVs hold every target
         reach = self._reach_times(obs)
-        candidates = (~self._given_up) & (reach <= obs.remaining_budget)
+        free = True if self.claimed is None else ~self.claimed
+        candidates = (~self._given_up) & (reach <= obs.remaining_budget) & free
         if not candidates.any():
             self._given_up[:] = False
-            candidates = reach <= obs.remaining_budget
+            candidates = (reach <= obs.remaining_budget) & free
         if not candidates.any():
-            return int(np.argmin(reach))
+            return int(np.argmin(np.where(free, reach, np.inf)))
         predicted = self._mission.motion.predict(
             obs.means, obs.covariances, self._mission.process_noise, reach
         )[1]
@@ -63,6 +69,8 @@ class GreedyPlanner:
         if self._target is not None and obs.detected[self._target]:
             self._given_up[:] = False
             self._target = None
+        if self._target is not None and self.claimed is not None and self.claimed[self._target]:
+            self._target = None
         if self._target is not None:
             mean = positions(obs.means[self._target])
             if np.hypot(*(mean - obs.agent_position)) < self._mission.step_length:
@@ -70,7 +78,14 @@ class GreedyPlanner:
                 self._target = None
         if self._target is None:
             self._target = self._choose(obs)
+        if self._target is None:
+            return obs.agent_position.copy()
         return positions(obs.means[self._target]).copy()
+
+    @property
+    def target(self) -> int | None:
+        """The target chased now (``None``: none)."""
+        return self._target
 
     def current_plan(self) -> CurrentPlan:
         """No sub-tasks: nothing to show."""

@@ -29,7 +29,7 @@ from pydantic import (
     model_validator,
 )
 
-from hptrack.interface import MissionSpec, Observation
+from hptrack.interface import MissionSpec, Observation, TeamMember
 from hptrack.models.belief_motion import (
     BeliefMotion,
     ConstantAccelerationMotion,
@@ -496,8 +496,16 @@ process_noise_form)`` gives the mission record's motion part. Without a ``truth_
 simulated targets move by the same model."""
 
 
+MAX_AGENTS = 16
+"""Most UAVs in a team (``agents:``)."""
+
+
 class Scenario(BaseModel):
-    """A whole mission. ``seed`` drives the true initial states (when not given) and all noise."""
+    """A whole mission. ``seed`` drives the true initial states (when not given) and all noise.
+
+    ``agent`` is the one UAV; ``agents``, a list of the same blocks, is a team (each UAV with
+    its own start, speed, footprint and noise; the ``sensor:`` and ``vehicle:`` blocks are
+    shared by all). Give one or the other; `team` is the list either way."""
 
     model_config = _STRICT
 
@@ -508,13 +516,45 @@ class Scenario(BaseModel):
     motion: MotionSpec | None = None
     truth_motion: TruthMotionSpec | None = None
     agent: AgentSpec = AgentSpec()
+    agents: Annotated[list[AgentSpec], Field(min_length=1, max_length=MAX_AGENTS)] | None = None
     sensor: SensorSpec | None = None
     vehicle: VehicleSpec | None = None
     fence: FenceBlockSpec | None = None
     targets: Annotated[list[TargetSpec], Field(min_length=1, max_length=MAX_TARGETS)]
 
+    @property
+    def team(self) -> list[AgentSpec]:
+        """The UAVs flown: ``agents``, or the one ``agent``."""
+        return [self.agent] if self.agents is None else list(self.agents)
+
+    @property
+    def n_vehicles(self) -> int:
+        """``m``, the UAVs flown."""
+        return len(self.team)
+
+    def _check_team(self) -> None:
+        """Refuse ``agent:`` beside ``agents:``, and a team without identity whose sensors
+        differ (one tracker keeps the beliefs of every UAV's looks)."""
+        if self.agents is None:
+            return
+        if self.agent != AgentSpec():
+            raise ValueError(
+                "give agent (one UAV) or agents (a team), not both: agent is "
+                f"{self.agent.model_dump(exclude_defaults=True)}"
+            )
+        sensors = {(s.diameter, s.noise_covariance().tobytes()) for s in self._sensors()}
+        if not self.sensor_spec().labelled and len(sensors) > 1:
+            raise ValueError(
+                "sensor.labelled false needs every UAV of agents with the same sensor_diameter "
+                "and measurement noise (one tracker keeps the beliefs)"
+            )
+
+    def _sensors(self) -> list[FootprintSensorSpec]:
+        return [self.sensor_spec(j) for j in range(self.n_vehicles)]
+
     @model_validator(mode="after")
     def _consistent(self) -> Self:
+        self._check_team()
         model = self.motion_spec.model
         if self.process_noise_form != "continuous" and model != "constant_velocity":
             raise ValueError(
@@ -551,10 +591,11 @@ class Scenario(BaseModel):
                 raise ValueError(f"targets.{i}.id: duplicate target id {target.id!r}")
             seen.add(target.id)
             speed = float(speeds(np.array(target.mean)))
-            if speed >= self.vehicle_spec().speed:
+            slowest = min(range(self.n_vehicles), key=lambda j: self.vehicle_spec(j).speed)
+            if speed >= self.vehicle_spec(slowest).speed:
                 raise ValueError(
                     f"targets.{i}.mean: target {target.id!r} mean speed {speed:g} m/s is not "
-                    f"below {self._speed_field()} {self.vehicle_spec().speed:g} m/s"
+                    f"below {self._speed_field(slowest)} {self.vehicle_spec(slowest).speed:g} m/s"
                 )
             self._check_drift(i, "mean", target.mean)
             if target.truth is not None:
@@ -592,12 +633,15 @@ class Scenario(BaseModel):
             fence = self.fence.spec().compiled()
         except ValueError as err:
             raise ValueError(f"fence: {err}") from None
-        x, y = self.agent.position
-        if not point_free(fence, x, y):
-            raise ValueError(
-                f"agent.position ({x:g}, {y:g}) m is not where the fence lets the UAV fly "
-                "(in a no-fly zone, outside the operating area or within the margin)"
-            )
+        for j, agent in enumerate(self.team):
+            x, y = agent.position
+            if not point_free(fence, x, y):
+                raise ValueError(
+                    f"{self._agent_field(j)}.position ({x:g}, {y:g}) m is not where the fence "
+                    "lets the UAV fly (in a no-fly zone, outside the operating area or within "
+                    "the margin)"
+                )
+        x, y = self.team[0].position
         radius = 0.5 * self.sensor_spec().diameter
         for i, target in enumerate(self.targets):
             mean = target.mean[:2]
@@ -609,58 +653,69 @@ class Scenario(BaseModel):
                     f"{radius:g} m"
                 )
 
-    def _speed_field(self) -> str:
-        """Where the vehicle's speed is written: ``vehicle.speed`` or ``agent.speed``."""
+    def _agent_field(self, j: int) -> str:
+        """Where UAV ``j`` is written: ``agent`` or ``agents.j``."""
+        return "agent" if self.agents is None else f"agents.{j}"
+
+    def _speed_field(self, j: int = 0) -> str:
+        """Where UAV ``j``'s speed is written: ``vehicle.speed`` or its block's ``speed``."""
         given = self.vehicle is not None and "speed" in self.vehicle.model_fields_set
-        return "vehicle.speed" if given else "agent.speed"
+        return "vehicle.speed" if given else f"{self._agent_field(j)}.speed"
 
     def _check_world_given_once(self) -> None:
-        """Refuse a fact that the ``agent:`` block and the ``sensor:`` or ``vehicle:`` block
-        give with different values (the blocks are the newer spelling of the agent's)."""
-        agent = self.agent.model_fields_set
+        """Refuse a fact that an ``agent:`` (or ``agents:``) block and the ``sensor:`` or
+        ``vehicle:`` block give with different values (the blocks are the newer spelling of
+        the agent's)."""
+        for j, agent_spec in enumerate(self.team):
+            self._check_given_once(self._agent_field(j), agent_spec)
+
+    def _check_given_once(self, where: str, agent_spec: AgentSpec) -> None:
+        agent = agent_spec.model_fields_set
         if self.vehicle is not None and {"speed"} <= agent & self.vehicle.model_fields_set:
-            if self.vehicle.speed != self.agent.speed:
+            if self.vehicle.speed != agent_spec.speed:
                 raise ValueError(
-                    f"vehicle.speed {self.vehicle.speed:g} m/s and agent.speed "
-                    f"{self.agent.speed:g} m/s disagree: give the speed once (vehicle.speed)"
+                    f"vehicle.speed {self.vehicle.speed:g} m/s and {where}.speed "
+                    f"{agent_spec.speed:g} m/s disagree: give the speed once (vehicle.speed)"
                 )
         if self.sensor is None:
             return
         given = self.sensor.model_fields_set
         if "diameter" in given and "sensor_diameter" in agent:
-            if self.sensor.diameter != self.agent.sensor_diameter:
+            if self.sensor.diameter != agent_spec.sensor_diameter:
                 raise ValueError(
-                    f"sensor.diameter {self.sensor.diameter:g} m and agent.sensor_diameter "
-                    f"{self.agent.sensor_diameter:g} m disagree: give the diameter once "
+                    f"sensor.diameter {self.sensor.diameter:g} m and {where}.sensor_diameter "
+                    f"{agent_spec.sensor_diameter:g} m disagree: give the diameter once "
                     "(sensor.diameter)"
                 )
         if given & set(NOISE_FIELDS) and agent & set(NOISE_FIELDS):
-            ours, theirs = self.sensor.noise_covariance(), self.agent.noise_covariance()
+            ours, theirs = self.sensor.noise_covariance(), agent_spec.noise_covariance()
             if not np.array_equal(ours, theirs):
                 raise ValueError(
-                    f"the sensor's R {ours.tolist()} m^2 and the agent's R {theirs.tolist()} "
+                    f"the sensor's R {ours.tolist()} m^2 and {where}'s R {theirs.tolist()} "
                     "m^2 disagree: give the measurement noise once (sensor.measurement_noise_std "
                     "or sensor.measurement_noise_covariance)"
                 )
 
-    def vehicle_spec(self) -> HolonomicVehicleSpec:
-        """The vehicle the scenario flies: the ``vehicle:`` block, with ``agent.speed`` where
-        the block gives no speed (the default: the paper's holonomic point at 30 m/s)."""
+    def vehicle_spec(self, j: int = 0) -> HolonomicVehicleSpec:
+        """The vehicle UAV ``j`` flies: the ``vehicle:`` block, with its ``agent`` block's
+        speed where the block gives no speed (the default: the paper's holonomic point at
+        30 m/s)."""
         vehicle = self.vehicle or HolonomicVehicleSpec()
         if "speed" in vehicle.model_fields_set:
             return vehicle
-        return vehicle.model_copy(update={"speed": self.agent.speed})
+        return vehicle.model_copy(update={"speed": self.team[j].speed})
 
-    def sensor_spec(self) -> FootprintSensorSpec:
-        """The sensor the scenario flies: the ``sensor:`` block, with the ``agent:`` block's
+    def sensor_spec(self, j: int = 0) -> FootprintSensorSpec:
+        """The sensor UAV ``j`` flies: the ``sensor:`` block, with its ``agent`` block's
         diameter and noise where the block gives none (the default: the paper's 100 m
         footprint, ``R = 10 I``)."""
+        agent = self.team[j]
         sensor = self.sensor or FootprintSensorSpec()
         given, update = sensor.model_fields_set, {}
         if "diameter" not in given:
-            update["diameter"] = self.agent.sensor_diameter
+            update["diameter"] = agent.sensor_diameter
         if not given & set(NOISE_FIELDS):
-            update |= {name: getattr(self.agent, name) for name in NOISE_FIELDS}
+            update |= {name: getattr(agent, name) for name in NOISE_FIELDS}
         return sensor.model_copy(update=update) if update else sensor
 
     def _check_drift(self, i: int, field: str, state: tuple[float, ...]) -> None:
@@ -680,7 +735,7 @@ class Scenario(BaseModel):
     def _check_variances(self, covs: np.ndarray, when: str) -> None:
         """Refuse position variances the Kalman update cannot handle (`MAX_UPDATE_RATIO`)
         or wider than the area (`MAX_POSITION_VARIANCE`)."""
-        r_min = float(np.linalg.eigvalsh(self.sensor_spec().noise_covariance())[0])
+        r_min = min(float(np.linalg.eigvalsh(s.noise_covariance())[0]) for s in self._sensors())
         limit = min(MAX_POSITION_VARIANCE, MAX_UPDATE_RATIO * r_min)
         largest = np.linalg.eigvalsh(covs[:, :2, :2])[:, -1]
         for i, value in enumerate(largest):
@@ -750,7 +805,16 @@ class Scenario(BaseModel):
         return PositionMeasurementModel(sensor.noise_covariance(), sensor.diameter)
 
     def mission_spec(self) -> MissionSpec:
-        """The static facts a planner may use."""
+        """The static facts a planner may use (a team's: each UAV's speed and sensor in
+        ``members``, the first UAV's also in the one-vehicle fields)."""
+        members = tuple(
+            TeamMember(
+                self.vehicle_spec(j).speed,
+                self.sensor_spec(j).diameter,
+                self.sensor_spec(j).noise_covariance(),
+            )
+            for j in range(self.n_vehicles)
+        )
         return MissionSpec(
             time_step=self.time_step,
             budget=self.budget,
@@ -764,6 +828,7 @@ class Scenario(BaseModel):
             detection_probability=self.sensor_spec().detection_probability,
             fence=self.fence.spec() if self.fence else None,
             negative_information=self.sensor_spec().negative_information,
+            members=members if self.n_vehicles > 1 else (),
         )
 
     def initial_observation(self) -> Observation:
@@ -771,7 +836,7 @@ class Scenario(BaseModel):
         start position, the prior beliefs, nothing detected (pass it with `mission_spec`
         to `hptrack.plan` or a planner's ``reset``)."""
         arrays = [
-            np.array(self.agent.position, dtype=float),
+            self.starts(),
             self.means(),
             self.covariances(),
             np.zeros(len(self.targets), dtype=bool),
@@ -779,6 +844,10 @@ class Scenario(BaseModel):
         for a in arrays:
             a.flags.writeable = False
         return Observation(0, 0.0, float(self.budget), *arrays)
+
+    def starts(self) -> np.ndarray:
+        """``(m, 2)`` the UAVs' start positions, m."""
+        return np.array([agent.position for agent in self.team], dtype=float)
 
     def never_observed_uncertainty(self) -> float:
         """``U`` of a mission that measures nothing: every prior grown to the budget's end."""

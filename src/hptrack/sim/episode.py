@@ -84,7 +84,7 @@ def run_episode(
         if reader is not None:
             reader.see_truth(world.truth.copy())
         waypoint = vehicle_waypoints(planner.act(observation), mission.n_vehicles, planner.name)
-        world.step(float(waypoint[0, 0]), float(waypoint[0, 1]))
+        world.step_team(waypoint)
         store(k)
         observation = world.observation()
         if on_step is not None:

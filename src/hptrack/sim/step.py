@@ -153,6 +153,13 @@ def world_step(
     )
 
 
+@numba.njit(cache=True)
+def move_vehicle(mission, agent, waypoint):
+    """Move ``agent`` in place towards ``waypoint`` by the mission's vehicle (a team's UAVs
+    after the first, which `world_step` moves)."""
+    vehicle_move(mission.vehicle, agent, waypoint)
+
+
 class NormalBlock:
     """Unit normals of one Generator, drawn ``size`` at a time and handed out in order.
 
@@ -193,7 +200,8 @@ DETECTOR_STREAM = 5
 
 def unlabelled_parts(scenario: Scenario, seed: int) -> tuple[Detector, Tracker] | None:
     """The detector and tracker of a scenario whose sensor reports no identity (``None`` for a
-    labelled one): the detector's Generator from `DETECTOR_STREAM` of ``seed``."""
+    labelled one): the detector's Generator from `DETECTOR_STREAM` of ``seed`` (a team's UAVs
+    have alike sensors, `Scenario`, and share both, looking in turn)."""
     spec = scenario.sensor_spec()
     if spec.labelled:
         return None
@@ -225,7 +233,9 @@ class World:
     Attributes (read them, do not write them):
         mission: the mission facts.
         step_index: current step ``k``.
-        agents: ``(m, 2)`` the vehicles' positions, m (``m = 1``: the scenario's agent).
+        agents: ``(m, 2)`` the vehicles' positions, m (the scenario's `Scenario.team`; a
+            team's UAVs move at once, then look in turn, each by its own sensor, the first
+            drawing first).
         agent: ``(2,)`` the first vehicle's position, m (a view of ``agents``).
         truth: ``(n, d)`` true target states (``d`` the truth motion's state size).
         truth_motion: how they move (`hptrack.models.truth_motion`; random parameters such
@@ -255,13 +265,18 @@ class World:
         truth_rng = np.random.default_rng(truth_seq)
         self.truth = np.ascontiguousarray(initial_true_states(scenario, truth_rng))
         self.truth_motion = scenario.truth_motion_model(truth_rng)
-        self.agents = np.array([scenario.agent.position], dtype=float)
+        self.agents = scenario.starts()
         self.agent = self.agents[0]
+        self._records = [mission.vehicle_mission(j).record for j in range(mission.n_vehicles)]
+        self._factors = [
+            np.linalg.cholesky(np.array(r.sensor.measurement_noise, dtype=float))
+            for r in self._records
+        ]
+        self._seen_by = np.zeros(mission.n_targets, dtype=bool)
         self.means = np.ascontiguousarray(scenario.means())
         self.covariances = np.ascontiguousarray(scenario.covariances())
         self.q = np.ascontiguousarray(mission.process_noise, dtype=float)
         self._sqrt_q = np.sqrt(self.q)
-        self._factor = np.linalg.cholesky(np.array(mission.measurement_noise, dtype=float))
         self._truth_size = self.truth.shape[1]
         self._motion = NormalBlock(
             np.random.default_rng(motion_seq), BLOCK_STEPS * n * self._truth_size
@@ -317,19 +332,21 @@ class World:
         """Sense without identity: the detector's reports, the tracker's beliefs."""
         assert self._unlabelled is not None
         detector, tracker = self._unlabelled
-        reports = detector.look(self.agent, positions(self.truth))
-        look = tracker.look(self.agent, self.means, self.covariances, reports.positions)
-        self.seen[:] = look.seen
+        self.seen[:] = False
+        k = self.step_index
+        for agent in self.agents:
+            reports = detector.look(agent, positions(self.truth))
+            look = tracker.look(agent, self.means, self.covariances, reports.positions)
+            self.seen |= look.seen
+            self._rows.append(
+                np.column_stack(
+                    [np.full(len(look.weight), k), reports.positions, reports.sources]
+                    + [look.belief_of, look.weight]
+                )
+            )
+            self._claims += [(k, c.belief, int(reports.sources[c.detection])) for c in look.claims]
         self.logdets[:] = position_logdet(self.covariances)
         self.uncertainty = float(np.sum(self.logdets))
-        k = self.step_index
-        self._rows.append(
-            np.column_stack(
-                [np.full(len(look.weight), k), reports.positions, reports.sources]
-                + [look.belief_of, look.weight]
-            )
-        )
-        self._claims += [(k, c.belief, int(reports.sources[c.detection])) for c in look.claims]
 
     @property
     def associations(self) -> np.ndarray | None:
@@ -347,19 +364,24 @@ class World:
         if self._unlabelled is not None:
             self._track()
             return
+        self._look(0, self.seen)
+        self._team_looks()
+
+    def _look(self, j: int, seen: np.ndarray) -> None:
+        """UAV ``j``'s look by its own sensor, into ``seen``."""
         n = self.n_targets
         self._sensor.ensure(2 * n)
         u, u_pos = self._uniforms()
         self._sensor.pos, self.uncertainty, u_pos = sense(
-            self.mission.record.sensor,
-            self.agent,
+            self._records[j].sensor,
+            self.agents[j],
             self.truth,
             self.means,
             self.covariances,
-            self._factor,
+            self._factors[j],
             self._sensor.values,
             self._sensor.pos,
-            self.seen,
+            seen,
             self.logdets,
             self._z,
             u,
@@ -367,9 +389,27 @@ class World:
         )
         self._used(u_pos)
 
+    def _team_looks(self) -> None:
+        """The looks of a team's UAVs after the first, in order (``seen``: by any)."""
+        for j in range(1, self.agents.shape[0]):
+            self._look(j, self._seen_by)
+            self.seen |= self._seen_by
+
+    def step_team(self, waypoints: np.ndarray) -> float:
+        """Advance one step with each UAV flying towards its row of ``waypoints`` ``(m, 2)``
+        m; returns ``U`` after it.
+
+        Raises:
+            RuntimeError: the budget is already spent.
+        """
+        for j in range(1, self.agents.shape[0]):
+            if self.step_index < self.n_steps:
+                move_vehicle(self._records[j], self.agents[j], np.asarray(waypoints[j], float))
+        return self.step(float(waypoints[0][0]), float(waypoints[0][1]))
+
     def step(self, waypoint_x: float, waypoint_y: float) -> float:
-        """Advance one step with the agent flying towards ``(waypoint_x, waypoint_y)`` m;
-        returns ``U`` after it.
+        """Advance one step with the (first) UAV flying towards ``(waypoint_x, waypoint_y)``
+        m (a team's others moved by `step_team`); returns ``U`` after it.
 
         Raises:
             RuntimeError: the budget is already spent.
@@ -405,7 +445,7 @@ class World:
             self._sqrt_q,
             self.means,
             self.covariances,
-            self._factor,
+            self._factors[0],
             sensor.values,
             sensor.pos,
             (self.seen, self.logdets, self._z),
@@ -413,6 +453,7 @@ class World:
             u_pos,
         )
         self._used(u_pos)
+        self._team_looks()
         self.step_index += 1
         return self.uncertainty
 
