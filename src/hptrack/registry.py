@@ -38,6 +38,8 @@ class PlannerEntry:
     settings_type: type[PlannerSettings]
     factory: Callable[[Any], Planner]
     summary: str
+    flies_team: bool = False
+    """It flies a team of UAVs (the others fly one and refuse more)."""
 
     @property
     def reads_truth(self) -> bool:
@@ -80,16 +82,19 @@ PLANNERS: dict[str, PlannerEntry] = {
         TeamMctsSettings,
         TeamMctsPlanner,
         "a team: the hierarchical planner on every UAV, planned one UAV at a time",
+        flies_team=True,
     ),
     "team-greedy": PlannerEntry(
         TeamGreedySettings,
         TeamGreedyPlanner,
         "a team: greedy on every UAV, each on targets no other UAV claims",
+        flies_team=True,
     ),
     "team-clairvoyant": PlannerEntry(
         TeamGreedySettings,
         TeamClairvoyantPlanner,
         "READS THE TRUE TARGET STATES: a team of perfect-knowledge references",
+        flies_team=True,
     ),
     "sb3": PlannerEntry(
         Sb3Settings,
@@ -107,6 +112,22 @@ def planner_entry(name: str) -> PlannerEntry:
         raise InputError(
             f"unknown planner {name!r}; choose from {', '.join(sorted(PLANNERS))}"
         ) from None
+
+
+def check_team(planners: Any, team: int) -> None:
+    """Refuse, before any work, a planner of one UAV for a team of ``team`` (and a team
+    planner is fine with one).
+
+    Raises:
+        InputError: one of ``planners`` flies one UAV and ``team > 1``.
+    """
+    if team > 1:
+        for name in planners:
+            if not planner_entry(name).flies_team:
+                teams = ", ".join(n for n, e in PLANNERS.items() if e.flies_team)
+                raise InputError(
+                    f"planner {name!r} flies one UAV; a team of {team} flies with one of {teams}"
+                )
 
 
 def planner_settings(name: str, options: dict[str, Any] | None = None) -> PlannerSettings:

@@ -45,7 +45,7 @@ from hptrack.interface import InputError, one_line
 from hptrack.models.mission import MAX_TARGETS
 from hptrack.registry import PLANNERS, make_planner
 from hptrack.scenario import Scenario, load_scenario, random_scenario, save_scenario
-from hptrack.scenario.model import MAX_STEPS
+from hptrack.scenario.model import MAX_AGENTS, MAX_STEPS
 from hptrack.scenario.random import with_no_fly
 from hptrack.sim.episode import record_bytes, run_episode
 from hptrack.sim.metrics import gospa_cutoff
@@ -88,15 +88,28 @@ def draw_seed() -> int:
     return int(np.random.SeedSequence().generate_state(1, np.uint32)[0])
 
 
+def _check_team_size(team: int) -> None:
+    if not 1 <= team <= MAX_AGENTS:
+        raise InputError(f"--team must be between 1 and {MAX_AGENTS}, got {team}")
+
+
 def _load_or_random(
-    path: Path | None, random: bool, targets: int, seed: int | None, homogeneous: bool
+    path: Path | None,
+    random: bool,
+    targets: int,
+    seed: int | None,
+    homogeneous: bool,
+    team: int = 1,
 ) -> Scenario:
     if (path is None) == (not random):
         raise InputError("give either a SCENARIO file or --random")
+    if not random and team != 1:
+        raise InputError("--team goes with --random (a scenario file gives its team as agents:)")
     if random:
         if not 1 <= targets <= MAX_TARGETS:
             raise InputError(f"--targets must be between 1 and {MAX_TARGETS}, got {targets}")
-        return random_scenario(targets, seed=seed, homogeneous=homogeneous)
+        _check_team_size(team)
+        return random_scenario(targets, seed=seed, homogeneous=homogeneous, team=team)
     scenario = load_scenario(path)
     return scenario if seed is None else scenario.with_seed(seed)
 
@@ -108,6 +121,7 @@ def simulate(
     ] = None,
     random: Annotated[bool, typer.Option("--random", help="Use a random scenario.")] = False,
     targets: Annotated[int, typer.Option(help="Targets in a --random scenario.")] = 4,
+    team: Annotated[int, typer.Option(help="UAVs in a --random scenario, all from its start.")] = 1,
     homogeneous: Annotated[
         bool, typer.Option("--homogeneous/--heterogeneous", help=SETTING_HELP)
     ] = False,
@@ -158,7 +172,7 @@ def simulate(
     drawn = random and seed is None
     if drawn:
         seed = draw_seed()
-    scenario = _load_or_random(scenario_path, random, targets, seed, homogeneous)
+    scenario = _load_or_random(scenario_path, random, targets, seed, homogeneous, team)
     settings = planner_settings_for((planner,), option, iterations, time_limit)[planner]
     _check_record_size(len(scenario.targets), scenario.n_steps, belief_stride)
     if drawn:
@@ -261,6 +275,9 @@ def _print_summary(record) -> None:
 def scenario_random(
     targets: Annotated[int, typer.Option(help="Number of targets.")],
     seed: Annotated[int, typer.Option(help="Seed; fixes every drawn value.")] = 0,
+    team: Annotated[
+        int, typer.Option(help="UAVs (agents:), all from the start; 1: one agent:.")
+    ] = 1,
     homogeneous: Annotated[
         bool, typer.Option("--homogeneous/--heterogeneous", help=SETTING_HELP)
     ] = False,
@@ -280,9 +297,10 @@ def scenario_random(
     check_seed(seed)
     if not 1 <= targets <= MAX_TARGETS:
         raise InputError(f"--targets must be between 1 and {MAX_TARGETS}, got {targets}")
+    _check_team_size(team)
     check_output_path(output, "--output")
     with writing(output, "--output"):
-        scenario = random_scenario(targets, seed=seed, homogeneous=homogeneous)
+        scenario = random_scenario(targets, seed=seed, homogeneous=homogeneous, team=team)
         save_scenario(with_no_fly(scenario, seed) if no_fly else scenario, output)
     console.print(f"{targets}-target scenario (seed {seed}) written to {escape(str(output))}")
 

@@ -93,6 +93,12 @@ def benchmark(
             "square to every scenario (margin 10 m).",
         ),
     ] = False,
+    team: Annotated[
+        int,
+        typer.Option(
+            help="UAVs per scenario, all from the start (a team flies with the team-* planners)."
+        ),
+    ] = 1,
     iterations: Annotated[
         int | None, typer.Option(help="Tree-search iterations per decision.")
     ] = None,
@@ -157,7 +163,7 @@ def benchmark(
         summarise,
     )
     from hptrack.experiments.store import ResultStore
-    from hptrack.registry import planner_entry
+    from hptrack.registry import check_team, planner_entry
 
     check_seed(first_seed, "--first-seed")
     if scenarios < 1:
@@ -201,7 +207,9 @@ def benchmark(
         detection_probability=detection_probability,
         blind=blind,
         no_fly=no_fly,
+        team=team,
     )
+    check_team(names, team)
     scenario_for(config.keys()[0])  # a bad --motion value is refused before any work
     with ExitStack() as stack:
         store = ResultStore(db)

@@ -25,8 +25,8 @@ import numpy as np
 from hptrack.experiments.store import EpisodeKey, ResultStore
 from hptrack.experiments.workers import stop_workers, worker_pool
 from hptrack.interface import InputError, MissionSpec
-from hptrack.registry import planner_entry, planner_settings
-from hptrack.scenario.model import FootprintSensorSpec, Scenario
+from hptrack.registry import check_team, planner_entry, planner_settings
+from hptrack.scenario.model import MAX_AGENTS, FootprintSensorSpec, Scenario
 from hptrack.scenario.random import random_scenario, with_no_fly
 from hptrack.settings import PlannerSettings
 from hptrack.sim.episode import run_episode
@@ -58,6 +58,7 @@ class BenchmarkConfig:
             misses (`hptrack.sim.episode.run_episode`'s ``planner_mission``).
         no_fly: each scenario gets random no-fly circles
             (`hptrack.scenario.random.with_no_fly`).
+        team: UAVs per scenario, all from the start (1: the paper's one UAV).
     """
 
     planners: tuple[str, ...]
@@ -71,6 +72,7 @@ class BenchmarkConfig:
     detection_probability: float = 1.0
     blind: bool = False
     no_fly: bool = False
+    team: int = 1
 
     def __post_init__(self) -> None:
         missing = [p for p in self.planners if p not in self.settings]
@@ -86,6 +88,8 @@ class BenchmarkConfig:
             raise InputError(f"--detection-probability must be in (0, 1], got {p!r}")
         if self.blind and p == 1.0:
             raise InputError("--blind needs a --detection-probability below 1 (nothing to hide)")
+        if isinstance(self.team, bool) or not 1 <= self.team <= MAX_AGENTS:
+            raise InputError(f"--team must be between 1 and {MAX_AGENTS}, got {self.team!r}")
 
     @property
     def setting(self) -> str:
@@ -96,6 +100,7 @@ class BenchmarkConfig:
             self.detection_probability,
             self.blind,
             self.no_fly,
+            self.team,
         )
 
     def keys(self) -> list[EpisodeKey]:
@@ -159,12 +164,13 @@ def setting_name(
     detection_probability: float = 1.0,
     blind: bool = False,
     no_fly: bool = False,
+    team: int = 1,
 ) -> str:
     """The setting part of an episode's identity: ``"homogeneous"`` or ``"heterogeneous"``,
     with ``"+paper_text"`` when ``Q`` is the paper's printed form, ``"+MODEL:VALUE"`` under
     another belief motion (`motion_label`), ``"+pd:P"`` when the sensor detects with
-    probability ``P < 1``, ``"+blind"`` when the planners are told ``Pd = 1`` and ``"+nofly"``
-    with random no-fly circles (`BenchmarkConfig`)."""
+    probability ``P < 1``, ``"+blind"`` when the planners are told ``Pd = 1``, ``"+nofly"``
+    with random no-fly circles and ``"+team:M"`` with ``M > 1`` UAVs (`BenchmarkConfig`)."""
     base = "homogeneous" if homogeneous else "heterogeneous"
     parts = [base] + ([process_noise_form] if process_noise_form != "continuous" else [])
     parts += [motion] if motion_label(motion) is not None else []
@@ -173,6 +179,7 @@ def setting_name(
     )
     parts += [BLIND_PART] if blind else []
     parts += [NO_FLY_PART] if no_fly else []
+    parts += [f"{TEAM_PART}{team}"] if team > 1 else []
     return "+".join(parts)
 
 
@@ -182,6 +189,8 @@ BLIND_PART = "blind"
 """The setting part of planners told the paper's certain sensor (`setting_name`)."""
 NO_FLY_PART = "nofly"
 """The setting part of scenarios with random no-fly circles (`setting_name`)."""
+TEAM_PART = "team:"
+"""The prefix of a setting's team size part (`setting_name`)."""
 
 
 def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
@@ -194,7 +203,7 @@ def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
         motion_label(part)
         for part in rest
         if part not in forms
-        and not part.startswith(DETECTION_PART)
+        and not part.startswith((DETECTION_PART, TEAM_PART))
         and part not in (BLIND_PART, NO_FLY_PART)
     ]
     fields: dict = {"process_noise_form": forms[0] if forms else "continuous"}
@@ -202,6 +211,9 @@ def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
         fields["motion"] = motions[0]
     if pds:
         fields["sensor"] = FootprintSensorSpec(detection_probability=pds[0])
+    teams = [int(part[len(TEAM_PART) :]) for part in rest if part.startswith(TEAM_PART)]
+    if teams:
+        fields["team"] = teams[0]
     return base, fields, pds[0] if pds else 1.0, blind
 
 
@@ -397,6 +409,7 @@ def benchmark(
     detection_probability: float = 1.0,
     blind: bool = False,
     no_fly: bool = False,
+    team: int = 1,
     metric: str = "U",
 ) -> dict:
     """Fly every planner once on each random scenario and summarise ``U`` or another
@@ -419,6 +432,7 @@ def benchmark(
             at each look (1: the paper's).
         blind: the planners are told the paper's certain sensor (`BenchmarkConfig`).
         no_fly: random no-fly circles in every scenario (`BenchmarkConfig`).
+        team: UAVs per scenario (`BenchmarkConfig`).
         metric: what to summarise, one of `hptrack.sim.record.METRICS` (`summarise`).
 
     Returns:
@@ -454,7 +468,9 @@ def benchmark(
         detection_probability=detection_probability,
         blind=blind,
         no_fly=no_fly,
+        team=team,
     )
+    check_team(planners, team)
     store = ResultStore(db)
     try:
         run_benchmark(config, store, workers)

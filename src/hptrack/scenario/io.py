@@ -303,13 +303,26 @@ written file leaves out (so a file of the paper's sensor reads as before)."""
 def file_data(scenario: Scenario) -> dict:
     """The scenario as the data of its file: every field, ``None`` left out; a ``sensor:`` or
     ``vehicle:`` block holds the facts it stands for (the ``agent:`` block then leaves them
-    out, so that each is written once)."""
+    out, so that each is written once). A team's ``agents:`` keep their own speeds, diameters
+    and noise, the blocks holding only what they give for all."""
     data = scenario.model_dump(mode="json", exclude_none=True)
+    team = scenario.agents is not None
+    if team:
+        data.pop("agent")  # the team's agents: stand for it
+    blocks = data["agents"] if team else [data["agent"]]
     if scenario.vehicle is not None:
-        data["vehicle"] = scenario.vehicle_spec().model_dump(mode="json", exclude_none=True)
-        data["agent"].pop("speed")
+        vehicle = scenario.vehicle if team else scenario.vehicle_spec()
+        data["vehicle"] = vehicle.model_dump(mode="json", exclude_none=True)
+        if not team or "speed" in scenario.vehicle.model_fields_set:
+            for block in blocks:
+                block.pop("speed")
+        else:
+            data["vehicle"].pop("speed")
     if scenario.sensor is not None:
-        data["sensor"] = scenario.sensor_spec().model_dump(mode="json", exclude_none=True)
+        given = scenario.sensor.model_fields_set
+        data["sensor"] = (scenario.sensor if team else scenario.sensor_spec()).model_dump(
+            mode="json", exclude_none=True
+        )
         if data["sensor"].get("detection_probability") == 1.0:  # the default, the paper's
             data["sensor"].pop("detection_probability")
         if data["sensor"].get("negative_information") is False:  # the default, the paper's
@@ -317,8 +330,15 @@ def file_data(scenario: Scenario) -> dict:
         for name, default in IDENTITY_DEFAULTS.items():  # the paper's named detections
             if data["sensor"].get(name) == default:
                 data["sensor"].pop(name)
-        for name in ("sensor_diameter", *NOISE_FIELDS):
-            data["agent"].pop(name, None)
+        written = {"diameter"} & given, set(NOISE_FIELDS) & given
+        for name, fields in zip(("diameter", "noise"), written, strict=True):
+            if team and not fields:  # each UAV's own, in agents:
+                for field in ("diameter",) if name == "diameter" else NOISE_FIELDS:
+                    data["sensor"].pop(field, None)
+                continue
+            for block in blocks:
+                for field in ("sensor_diameter",) if name == "diameter" else NOISE_FIELDS:
+                    block.pop(field, None)
     return data
 
 

@@ -48,12 +48,17 @@ def random_scenario(
     seed: int,
     homogeneous: bool = False,
     agent: AgentSpec | None = None,
+    team: int = 1,
     **scenario_fields,
 ) -> Scenario:
-    """The paper's random scenario with ``n_targets`` targets, fully determined by ``seed``.
+    """The paper's random scenario with ``n_targets`` targets, fully determined by ``seed``;
+    ``team > 1`` flies that many UAVs like ``agent``, all from its start (``agents:``; the
+    targets are those of the same seed's scenario of one UAV).
 
     True initial states are left out: the simulator draws them from the prior with the seed.
     """
+    if team < 1:
+        raise ValueError(f"team must be at least 1, got {team}")
     if n_targets < 1:
         raise ValueError(f"n_targets must be at least 1, got {n_targets}")
     rng = np.random.default_rng(np.random.SeedSequence(seed))
@@ -67,7 +72,11 @@ def random_scenario(
                 id=f"t{i + 1}", mean=tuple(mean), covariance=tuple(map(tuple, cov)), process_noise=q
             )
         )
-    return Scenario(seed=seed, agent=agent or AgentSpec(), targets=targets, **scenario_fields)
+    if team > 1:
+        scenario_fields["agents"] = [agent or AgentSpec()] * team
+    else:
+        scenario_fields["agent"] = agent or AgentSpec()
+    return Scenario(seed=seed, targets=targets, **scenario_fields)
 
 
 NO_FLY_CIRCLES = (1, 3)
@@ -109,11 +118,12 @@ def with_no_fly(scenario: Scenario, seed: int) -> Scenario:
         centres = np.array([c.circle[:2] for c in circles])
         radii = np.array([c.circle[2] for c in circles]) + NO_FLY_MARGIN_M
         sight = 0.5 * scenario.sensor_spec().diameter
-        start = np.array(scenario.agent.position)
+        starts = scenario.starts()
         means = scenario.means()[:, :2]
         gaps = np.linalg.norm(means[:, None, :] - centres[None], axis=2)
-        if np.any(np.linalg.norm(centres - start, axis=1) <= radii) or np.any(gaps < radii - sight):
-            continue  # the start in a circle, or a mean out of sight: draw again
+        inside = np.linalg.norm(centres[None] - starts[:, None], axis=2) <= radii
+        if np.any(inside) or np.any(gaps < radii - sight):
+            continue  # a start in a circle, or a mean out of sight: draw again
         fence = FenceBlockSpec(exclusions=circles, margin=NO_FLY_MARGIN_M)
         try:
             return Scenario.model_validate({**data, "fence": fence})

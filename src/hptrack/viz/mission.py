@@ -42,6 +42,27 @@ AGENT_TIME_CMAP: Colormap = LinearSegmentedColormap.from_list("agent_time", ["#c
 """Agent time colours: light grey (mission start) to black (budget's end)."""
 
 
+VEHICLE_COLORS = ("k", "#08306b", "#67000d", "#00441b", "#3f007d", "#7f2704")
+"""The end colour of each UAV's time shading (the first: `AGENT_TIME_CMAP`'s black), in turn."""
+
+
+def vehicle_color(j: int) -> str:
+    """UAV ``j``'s colour (its path's shade at the budget's end)."""
+    return VEHICLE_COLORS[j % len(VEHICLE_COLORS)]
+
+
+def vehicle_cmap(j: int) -> Colormap:
+    """UAV ``j``'s time colours: light to `vehicle_color` (the first UAV's: `AGENT_TIME_CMAP`)."""
+    if j % len(VEHICLE_COLORS) == 0:
+        return AGENT_TIME_CMAP
+    return LinearSegmentedColormap.from_list(f"uav{j}", ["0.88", vehicle_color(j)])
+
+
+def vehicle_label(j: int, team: bool) -> str:
+    """How the legend names UAV ``j`` (``agent`` when it flies alone)."""
+    return f"UAV {j + 1}" if team else "agent"
+
+
 def target_color(i: int) -> tuple[float, float, float]:
     """Colour of target ``i`` (cycles after nine targets)."""
     return TARGET_COLORS[i % len(TARGET_COLORS)]
@@ -141,20 +162,31 @@ def plot_mission(
             the figure should have the constrained layout).
     """
     times = record.times
-    path = record.agent_path
-    segments = np.stack([path[:-1], path[1:]], axis=1)
-    agent = LineCollection(
-        segments,
-        cmap=cmap,
-        norm=norm or Normalize(0.0, times[-1]),
-        linewidths=2.4,
-        zorder=2,
-        label="agent path (shade: time)",
-    )
-    agent.set_array(times[1:])
-    ax.add_collection(agent)
+    paths = record.agent_paths
+    team = paths.shape[1] > 1
+    lines = []
+    for j in range(paths.shape[1]):
+        path = paths[:, j]
+        line = LineCollection(
+            np.stack([path[:-1], path[1:]], axis=1),
+            cmap=cmap if j == 0 else vehicle_cmap(j),
+            norm=norm or Normalize(0.0, times[-1]),
+            linewidths=2.4,
+            zorder=2,
+            label=f"{vehicle_label(j, team)} path (shade: time)",
+        )
+        line.set_array(times[1:])
+        ax.add_collection(line)
+        lines.append(line)
+    agent = lines[0]
     colors = [target_color(i) for i in range(len(record.target_ids))]
-    artists: dict = {"agent": agent, "targets": [], "ellipses": [], "detections": []}
+    artists: dict = {
+        "agent": agent,
+        "vehicles": lines,
+        "targets": [],
+        "ellipses": [],
+        "detections": [],
+    }
     keys: list = []  # the targets' legend entries
     known = np.isfinite(record.true_states[..., :2]).all(axis=-1)  # (K+1, n)
     stored = {int(k): j for j, k in enumerate(record.belief_steps)}
@@ -220,20 +252,41 @@ def plot_mission(
             )
         )
     fence_keys = draw_fence(ax, record.fence) if record.fence is not None else []
-    ax.plot(*path[0], marker="^", color="k", ms=8, ls="none", zorder=5)
-    ax.plot(*path[-1], marker="D", color="k", mfc="none", mew=1.4, ms=8, ls="none", zorder=5)
+    ends = []
+    for j in range(paths.shape[1]):
+        color = vehicle_color(j)
+        ax.plot(*paths[0, j], marker="^", color=color, ms=8, ls="none", zorder=5)
+        ax.plot(
+            *paths[-1, j], marker="D", color=color, mfc="none", mew=1.4, ms=8, ls="none", zorder=5
+        )
+        ends += [
+            Line2D(
+                [],
+                [],
+                color=color,
+                marker="^",
+                ms=7,
+                ls="none",
+                label=f"{vehicle_label(j, team)} start",
+            ),
+            Line2D(
+                [],
+                [],
+                color=color,
+                marker="D",
+                mfc="none",
+                mew=1.4,
+                ms=7,
+                ls="none",
+                label=f"{vehicle_label(j, team)} end",
+            ),
+        ]
     ax.set_aspect("equal")
     ax.autoscale_view()
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     style_axes(ax, mission_title(record))
-    marks = [
-        agent,
-        Line2D([], [], color="k", marker="^", ms=7, ls="none", label="agent start"),
-        Line2D(
-            [], [], color="k", marker="D", mfc="none", mew=1.4, ms=7, ls="none", label="agent end"
-        ),
-    ]
+    marks = [*lines, *ends]
     if artists["targets"]:
         marks += [
             Line2D(
@@ -266,7 +319,7 @@ def plot_mission(
         )
     artists["legend_handles"] = keys + ellipse_keys + marks + fence_keys
     artists["legend_handler_map"] = {
-        agent: _TimeShadedKey(),
+        **{line: _TimeShadedKey() for line in lines},
         Ellipse: HandlerPatch(patch_func=_ellipse_key),
     }
     if legend:

@@ -1,0 +1,61 @@
+"""Team planners: the UAVs never claim the same target on the perfect link; a limited link
+lets them; the references read the truth; a benchmark refuses a planner of one UAV."""
+
+import numpy as np
+import pytest
+
+from hptrack.interface import InputError
+from hptrack.registry import check_team, make_planner
+from hptrack.scenario.random import random_scenario
+from hptrack.sim.episode import run_episode
+from hptrack.sim.step import World
+
+
+def claims_over(scenario, planner, steps):
+    world = World(scenario)
+    planner.reset(world.mission, world.observation(), np.random.default_rng(0))
+    claims = [planner.claims()]
+    for _ in range(steps):
+        if hasattr(planner, "see_truth"):
+            planner.see_truth(world.truth.copy())
+        world.step_team(planner.act(world.observation()))
+        claims.append(planner.claims())
+    return np.array(claims)
+
+
+def distinct(claims):
+    held = claims[claims >= 0]
+    return len(held) == len(set(held.tolist()))
+
+
+@pytest.mark.parametrize(
+    ("name", "options"),
+    [("team-greedy", {}), ("team-clairvoyant", {}), ("team-mcts", {"iterations": 200})],
+)
+def test_no_two_uavs_claim_one_target_on_the_perfect_link(name, options):
+    scenario = random_scenario(5, 2, homogeneous=True, team=3, budget=300.0)
+    claims = claims_over(scenario, make_planner(name, options), 600)
+    assert all(distinct(row) for row in claims)
+    assert (claims[1:] >= 0).all(axis=0).any()  # some UAV holds a target all along
+
+
+def test_a_lossy_link_lets_two_uavs_chase_one_target():
+    scenario = random_scenario(2, 0, homogeneous=True, team=2, budget=100.0)
+    claims = claims_over(
+        scenario, make_planner("team-greedy", {"share_period": 1000.0}), 200
+    )  # no share in the mission: each UAV chases the most uncertain target alone
+    assert not all(distinct(row) for row in claims)
+
+
+def test_a_team_beats_its_one_uav_on_a_spread_mission():
+    one = random_scenario(6, 5, homogeneous=True)
+    team = random_scenario(6, 5, homogeneous=True, team=2)
+    alone = run_episode(one, make_planner("greedy")).uncertainty
+    together = run_episode(team, make_planner("team-greedy")).uncertainty
+    assert together < alone - 10.0
+
+
+def test_a_benchmark_refuses_a_planner_of_one_uav_for_a_team():
+    with pytest.raises(InputError, match="planner 'mcts' flies one UAV; a team of 2"):
+        check_team(["team-mcts", "mcts"], 2)
+    check_team(["mcts"], 1)
