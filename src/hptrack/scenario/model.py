@@ -691,7 +691,7 @@ class Scenario(BaseModel):
             ours, theirs = self.sensor.noise_covariance(), agent_spec.noise_covariance()
             if not np.array_equal(ours, theirs):
                 raise ValueError(
-                    f"the sensor's R {ours.tolist()} m^2 and {where}'s R {theirs.tolist()} "
+                    f"the sensor's R {ours.tolist()} m^2 and the {where}'s R {theirs.tolist()} "
                     "m^2 disagree: give the measurement noise once (sensor.measurement_noise_std "
                     "or sensor.measurement_noise_covariance)"
                 )
