@@ -111,10 +111,13 @@ def test_a_round_limit_stops_before_convergence():
     assert result.paths == ((0,), ())  # after round 1's releases
 
 
+@pytest.mark.parametrize("warp_bids", [True, False])
 @pytest.mark.parametrize("kind", ["additive", "discounted", "coverage"])
-def test_fully_connected_it_is_the_sequential_greedy_assignment(kind):
+def test_fully_connected_it_is_the_sequential_greedy_assignment(kind, warp_bids):
+    """The paper's bids and the warped ones alike (warping changes nothing under diminishing
+    gains)."""
     for path_value in random_instances(kind, 20, seed=1):
-        result = cbba(3, 7, path_value, max_bundle=3)
+        result = cbba(3, 7, path_value, max_bundle=3, warp_bids=warp_bids)
         paths, winners, bids = sequential_greedy(3, 7, path_value, 3)
         assert result.converged
         assert result.paths == paths
@@ -240,3 +243,20 @@ def test_bad_arguments_are_refused():
         cbba(2, 3, path_value, 2, links=np.ones((3, 3), dtype=bool))
     with pytest.raises(ValueError, match="max_bundle"):
         cbba(2, 3, path_value, 0)
+
+
+def test_warped_bids_converge_where_rising_gains_make_the_paper_cycle():
+    """``S_i(p) = sum w_ij + 3 (pairs in p)``, ``w = [[3, 1, 1], [1, 1, 4]]``: a task is worth
+    more in a longer bundle. Agent 0 bids 3, 4, 7 on tasks 0, 1, 2 and agent 1 bids 4, 4, 7 on
+    2, 0, 1: each loses its first task, releases its whole bundle, and so on for ever. Warped,
+    agent 0 bids 3, 3, 3 and agent 1 4, 4, 4: agent 1 wins everything in one round."""
+    weights = np.array([[3.0, 1.0, 1.0], [1.0, 1.0, 4.0]])
+
+    def path_value(i, path):
+        return float(sum(weights[i, j] for j in path) + 3.0 * len(path) * (len(path) - 1) / 2)
+
+    assert not cbba(2, 3, path_value, 3, warp_bids=False, max_rounds=50).converged
+    result = cbba(2, 3, path_value, 3)
+    assert (result.converged, result.rounds) == (True, 2)
+    assert result.paths == ((), (2, 0, 1))
+    np.testing.assert_array_equal(result.bids, [4.0, 4.0, 4.0])

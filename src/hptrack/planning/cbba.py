@@ -27,12 +27,20 @@ agent's choice), so the run is deterministic. It has converged when a round chan
 bid or winner and every agent holds the same bids and winners (then every later round would
 change nothing, whatever the links).
 
+**Bid warping** (Johnson, Choi, Ponda and How, "Allowing Non-Submodular Score Functions in
+Distributed Task Allocation", IEEE CDC 2012; on by default): an agent still chooses by the
+marginal score, but bids ``min(c_ij, y_i,last)``, at most its bundle's last bid, so that its
+bids never rise along its bundle, as diminishing marginal gains would make them. Under
+diminishing gains it changes nothing; otherwise it is what makes the auction converge (without
+it CBBA cycles on scores that reward a longer path, `hptrack.planning.team_value`'s among them).
+
 A committed task (the one a UAV is flying) is first in its agent's bundle and path from the
 start, every agent knows it is that agent's with an infinite bid, and nobody may insert a task
 before it. Under diminishing marginal gains (a task's marginal score never rises as the path
 grows) CBBA converges to the allocation of the sequential greedy assignment, within
 ``n_tasks * D`` rounds of a network of diameter ``D`` (Theorem 1), and is worth at least half the
-optimum (Sec. IV-C); otherwise it may cycle, and `Allocation.converged` says whether it stopped.
+optimum (Sec. IV-C); otherwise the warped bids still converge (Johnson et al., Theorem 1) but
+the bound is lost, and `Allocation.converged` says whether the run stopped by converging.
 """
 
 from __future__ import annotations
@@ -103,26 +111,29 @@ class _Agent:
                 best, where = gain, n
         return best, where
 
-    def build(self, path_value: PathValue, max_bundle: int) -> bool:
-        """Phase 1: add tasks while the bundle has room and a task is won; whether any was."""
+    def build(self, path_value: PathValue, max_bundle: int, warp: bool) -> bool:
+        """Phase 1: add tasks while the bundle has room and a task is won; whether any was.
+        With ``warp``, a bid is at most the bundle's last one (module docstring)."""
         i, added = self.index, False
         while len(self.bundle) < max_bundle:
             base = path_value(i, tuple(self.path))
-            choice: tuple[float, int, int] | None = None
+            cap = self.bids[self.bundle[-1]] if warp and self.bundle else np.inf
+            choice: tuple[float, int, int, float] | None = None
             for j in range(self.bids.shape[0]):
                 if j in self.bundle:
                     continue
                 c, n = self.marginal(path_value, j, base)
-                if _beats(c, i, self.bids[j], self.winners[j]) and (
+                bid = min(c, cap)
+                if _beats(bid, i, self.bids[j], self.winners[j]) and (
                     choice is None or c > choice[0]
                 ):
-                    choice = (c, j, n)
+                    choice = (c, j, n, bid)
             if choice is None:
                 return added
-            c, j, n = choice
+            _, j, n, bid = choice
             self.bundle.append(j)
             self.path.insert(n, j)
-            self.bids[j], self.winners[j] = c, i
+            self.bids[j], self.winners[j] = bid, i
             added = True
         return added
 
@@ -209,6 +220,7 @@ def cbba(
     links: Callable[[int], np.ndarray] | np.ndarray | None = None,
     committed: Sequence[int | None] | None = None,
     max_rounds: int = 1000,
+    warp_bids: bool = True,
 ) -> Allocation:
     """Allocate ``n_tasks`` tasks to ``n_agents`` agents with CBBA (module docstring).
 
@@ -224,6 +236,9 @@ def cbba(
         committed: per agent, the task it already flies (first in its bundle and path, never
             outbid) or ``None``.
         max_rounds: stop after this many rounds, converged or not.
+        warp_bids: bid at most the bundle's last bid (Johnson et al. 2012; a no-op under
+            diminishing marginal gains), so that CBBA converges whatever the scores; ``False``:
+            the 2009 paper's bid, the marginal score itself.
 
     Raises:
         ValueError: counts out of range, committed tasks out of range or shared, a bad links
@@ -258,7 +273,7 @@ def cbba(
         rounds += 1
         changed = False
         for agent in agents:
-            changed |= agent.build(path_value, max_bundle)
+            changed |= agent.build(path_value, max_bundle, warp_bids)
         sent = [(a.bids.copy(), a.winners.copy(), a.stamps.copy()) for a in agents]
         for agent in agents:
             i = agent.index
