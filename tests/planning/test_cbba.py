@@ -132,8 +132,8 @@ def test_on_a_line_it_converges_to_the_same_within_tasks_times_diameter_rounds(k
         result = cbba(n_agents, n_tasks, path_value, 2, links=line_links(n_agents))
         assert result.converged
         assert result.paths == sequential_greedy(n_agents, n_tasks, path_value, 2)[0]
-        # Theorem 1: n_tasks * D rounds to agree, one more to see that nothing changes
-        assert result.rounds <= n_tasks * (n_agents - 1) + 1
+        # Theorem 1: min(n_tasks, L m) D rounds to agree, one more to see that nothing changes
+        assert result.rounds <= min(n_tasks, 2 * n_agents) * (n_agents - 1) + 1
 
 
 def test_dropped_messages_delay_the_same_allocation():

@@ -149,7 +149,8 @@ def test_the_marginal_gains_do_not_always_diminish():
             order = [int(j) for j in rng.permutation(10)]
             path, added, others = tuple(order[:3]), order[3], order[4:]
             longer = max(
-                ((*path[:n], added, *path[n:]) for n in range(len(path) + 1)), key=lambda p: value(0, p)
+                ((*path[:n], added, *path[n:]) for n in range(len(path) + 1)),
+                key=lambda p: value(0, p),
             )
             for task in others:
                 before, after = marginal(value, path, task), marginal(value, longer, task)

@@ -38,9 +38,10 @@ A committed task (the one a UAV is flying) is first in its agent's bundle and pa
 start, every agent knows it is that agent's with an infinite bid, and nobody may insert a task
 before it. Under diminishing marginal gains (a task's marginal score never rises as the path
 grows) CBBA converges to the allocation of the sequential greedy assignment, within
-``n_tasks * D`` rounds of a network of diameter ``D`` (Theorem 1), and is worth at least half the
-optimum (Sec. IV-C); otherwise the warped bids still converge (Johnson et al., Theorem 1) but
-the bound is lost, and `Allocation.converged` says whether the run stopped by converging.
+``min(n_tasks, max_bundle * n_agents) * D`` rounds on a fixed network of diameter ``D`` (the
+paper's Theorem 1; one more round here to see that nothing changes), and so is worth at least
+half the optimum; otherwise the warped bids still converge (Johnson et al.) but the bound is
+lost, and `Allocation.converged` says whether the run stopped by converging.
 """
 
 from __future__ import annotations
@@ -140,9 +141,7 @@ class _Agent:
     def release(self) -> None:
         """Drop the first task no longer won and every later one, resetting the later ones
         still believed won."""
-        lost = next(
-            (n for n, j in enumerate(self.bundle) if self.winners[j] != self.index), None
-        )
+        lost = next((n for n, j in enumerate(self.bundle) if self.winners[j] != self.index), None)
         if lost is None:
             return
         for j in self.bundle[lost + 1 :]:
@@ -249,7 +248,7 @@ def cbba(
             f"need n_agents >= 1, n_tasks >= 0, max_bundle >= 1, max_rounds >= 1; got "
             f"{n_agents}, {n_tasks}, {max_bundle}, {max_rounds}"
         )
-    commitments = [None] * n_agents if committed is None else list(committed)
+    commitments: list[int | None] = [None] * n_agents if committed is None else list(committed)
     held = [c for c in commitments if c is not None]
     if (
         len(commitments) != n_agents

@@ -118,9 +118,9 @@ class TeamPathValue:
             if not 0 <= agent < self.n_agents:
                 raise ValueError(f"agent must be in 0..{self.n_agents - 1}, got {agent}")
             targets = np.array(key[1], dtype=np.int64)
-            if np.any((targets < 0) | (targets >= self.n_targets)) or len(
-                set(key[1])
-            ) != len(key[1]):
+            if np.any((targets < 0) | (targets >= self.n_targets)) or len(set(key[1])) != len(
+                key[1]
+            ):
                 raise ValueError(f"path must be distinct targets in 0..{self.n_targets - 1}")
             value = float(
                 walk_path(
