@@ -67,8 +67,9 @@ class Allocation:
         bundles: per agent, its tasks in the order it added them.
         winners: ``(n_tasks,)`` the agent of each task, ``-1`` unassigned (the agents agree on it
             once converged; otherwise the highest bid among the agents that claim the task).
-        bids: ``(n_tasks,)`` the winner's marginal score when it added the task, 0 unassigned
-            (a committed task: its value alone, ``path_value(i, (j,)) - path_value(i, ())``).
+        bids: ``(n_tasks,)`` the winning bid: the winner's marginal score when it added the
+            task (with ``warp_bids``, at most its bundle's previous bid), 0 unassigned; a
+            committed task's is its value alone, ``path_value(i, (j,)) - path_value(i, ())``.
         rounds: rounds run.
         converged: whether the last round changed nothing and the agents agree; if not, two
             paths may share a task.

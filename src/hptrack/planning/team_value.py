@@ -43,7 +43,6 @@ from hptrack.models.mission import (
 )
 from hptrack.models.sensor import sensor_update_covariance
 from hptrack.planning.subtask_mdp import (
-    I_MASK,
     I_STEP,
     PlanningProblem,
     SubtaskEnv,
@@ -83,7 +82,6 @@ def walk_path(env, root_cov, position, path, work):
         end = t + max(1, int(math.floor(expected + 0.5)))
         x, y = mean_position_on(mission, env.means[a], end * mission.time_step)
         si[I_STEP] = end
-        si[I_MASK] &= ~(np.int64(1) << a)
         sf[0] = x
         sf[1] = y
     return total
