@@ -22,6 +22,7 @@ from hptrack.learning.policy_planner import AdfqPlanner, AdfqSettings, Sb3Planne
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.planning.tour import TourPlanner, TourSettings
 from hptrack.settings import NoSettings, PlannerSettings
+from hptrack.teams.auction import TeamCbbaPlanner, TeamCbbaSettings
 from hptrack.teams.sequential import (
     TeamClairvoyantPlanner,
     TeamGreedyPlanner,
@@ -82,6 +83,12 @@ PLANNERS: dict[str, PlannerEntry] = {
         TeamMctsSettings,
         TeamMctsPlanner,
         "a team: the hierarchical planner on every UAV, planned one UAV at a time",
+        flies_team=True,
+    ),
+    "team-cbba": PlannerEntry(
+        TeamCbbaSettings,
+        TeamCbbaPlanner,
+        "a team: targets allocated by CBBA, then the hierarchical planner per UAV on its bundle",
         flies_team=True,
     ),
     "team-greedy": PlannerEntry(
