@@ -24,7 +24,7 @@ from hptrack.models.beliefs import position_logdet
 from hptrack.sim.record import EpisodeRecord
 from hptrack.subtasks import read_subtasks
 from hptrack.viz.fence import draw_fence
-from hptrack.viz.mission import ellipse_axes, target_color
+from hptrack.viz.mission import ellipse_axes, target_color, vehicle_color
 
 log = logging.getLogger(__name__)
 
@@ -77,12 +77,20 @@ def detection_flash(
 def subtask_at(
     info: dict, target_ids: Sequence[str], steps: np.ndarray
 ) -> tuple[list[str], np.ndarray]:
-    """What the planner was doing at each step, from its sub-task log (``info["subtasks"]``).
+    """What the planner was doing at each step, from its sub-task log (``info["subtasks"]``;
+    a team's, from every UAV's, ``info["members"]``, labelled ``UAV 1: ...; UAV 2: ...``).
 
     Returns a label per step (``"pursuing t2"``, ``"following t1"``, ``"dwelling on t1"``,
     ``"hover"``, or ``""`` without a log) and the index of the target in focus (``-1`` for
-    none).
+    none; a team's: the first UAV's).
     """
+    if "members" in info:
+        each = [subtask_at(member, target_ids, steps) for member in info["members"]]
+        labels = [
+            "; ".join(f"UAV {v + 1}: {m[0][f]}" for v, m in enumerate(each) if m[0][f])
+            for f in range(len(steps))
+        ]
+        return labels, each[0][1]
     entries = read_subtasks(info.get("subtasks") or [], target_ids)
     starts = [e.start_step for e in entries]
     labels, focus = [], np.full(len(steps), -1, dtype=np.int64)
@@ -113,7 +121,7 @@ def _view_limits(record: EpisodeRecord) -> tuple[tuple[float, float], tuple[floa
     """Square view around the agent, the truth and the belief means, with a footprint margin."""
     points = np.concatenate(
         [
-            record.agent_path,
+            record.agent_paths.reshape(-1, 2),
             record.true_states[..., :2].reshape(-1, 2),
             record.belief_means[..., :2].reshape(-1, 2),
         ]
@@ -241,12 +249,20 @@ def animate_mission(
     ax.tick_params(labelsize="small")
     fence_keys = draw_fence(ax, record.fence) if record.fence is not None else []
 
-    (history,) = ax.plot([], [], color="0.82", lw=0.6, zorder=1)
-    (trail,) = ax.plot([], [], color="k", lw=1.4, zorder=4)
-    footprint = ax.add_patch(
-        Circle((0.0, 0.0), radius, facecolor=(0, 0, 0, 0.06), edgecolor="k", lw=0.6, zorder=4)
-    )
-    (agent,) = ax.plot([], [], marker="^", color="k", ms=7, ls="none", zorder=6)
+    paths = record.agent_paths  # (K+1, m, 2): one trail, footprint and marker per UAV
+    histories, trails, footprints, agents = [], [], [], []
+    for v in range(paths.shape[1]):
+        color = vehicle_color(v)
+        histories.append(ax.plot([], [], color="0.82", lw=0.6, zorder=1)[0])
+        trails.append(ax.plot([], [], color=color, lw=1.4, zorder=4)[0])
+        footprints.append(
+            ax.add_patch(
+                Circle(
+                    (0.0, 0.0), radius, facecolor=(0, 0, 0, 0.06), edgecolor=color, lw=0.6, zorder=4
+                )
+            )
+        )
+        agents.append(ax.plot([], [], marker="^", color=color, ms=7, ls="none", zorder=6)[0])
     truth_trails, truths, means, ellipses, rings = [], [], [], [], []
     for color in colors:
         truth_trails.append(ax.plot([], [], color=color, lw=0.8, alpha=0.6, zorder=2)[0])
@@ -266,8 +282,20 @@ def animate_mission(
         Line2D([], [], color=c, marker="o", mec="k", mew=0.5, ms=6, ls="none", label=tid)
         for tid, c in zip(record.target_ids, colors, strict=True)
     ]
+    team = paths.shape[1] > 1
     elements = [
-        Line2D([], [], color="k", marker="^", ms=7, lw=1.4, label=f"agent, last {trail_s:g} s"),
+        *(
+            Line2D(
+                [],
+                [],
+                color=vehicle_color(v),
+                marker="^",
+                ms=7,
+                lw=1.4,
+                label=f"{f'UAV {v + 1}' if team else 'agent'}, last {trail_s:g} s",
+            )
+            for v in range(paths.shape[1])
+        ),
         Line2D([], [], color="0.35", ls="--", lw=1.0, label="95 % belief ellipse"),
         Line2D(
             [],
@@ -316,10 +344,11 @@ def animate_mission(
         k = int(steps[f])
         j = int(belief_at[f])
         first = max(0, k - trail_steps)
-        history.set_data(record.agent_path[: k + 1, 0], record.agent_path[: k + 1, 1])
-        trail.set_data(record.agent_path[first : k + 1, 0], record.agent_path[first : k + 1, 1])
-        agent.set_data([record.agent_path[k, 0]], [record.agent_path[k, 1]])
-        footprint.center = tuple(record.agent_path[k])
+        for v in range(paths.shape[1]):
+            histories[v].set_data(paths[: k + 1, v, 0], paths[: k + 1, v, 1])
+            trails[v].set_data(paths[first : k + 1, v, 0], paths[first : k + 1, v, 1])
+            agents[v].set_data([paths[k, v, 0]], [paths[k, v, 1]])
+            footprints[v].center = tuple(paths[k, v])
         for i in range(n):
             truth = record.true_states[first : k + 1, i, :2]
             truth_trails[i].set_data(truth[:, 0], truth[:, 1])
