@@ -30,7 +30,12 @@ def distinct(claims):
 
 @pytest.mark.parametrize(
     ("name", "options"),
-    [("team-greedy", {}), ("team-clairvoyant", {}), ("team-mcts", {"iterations": 200}), ("team-cbba", {"iterations": 200})],
+    [
+        ("team-greedy", {}),
+        ("team-clairvoyant", {}),
+        ("team-mcts", {"iterations": 200}),
+        ("team-cbba", {"iterations": 200}),
+    ],
 )
 def test_no_two_uavs_claim_one_target_on_the_perfect_link(name, options):
     scenario = random_scenario(5, 2, homogeneous=True, team=3, budget=300.0)
