@@ -64,3 +64,27 @@ def test_a_benchmark_refuses_a_planner_of_one_uav_for_a_team():
     with pytest.raises(InputError, match="planner 'mcts' flies one UAV; a team of 2"):
         check_team(["team-mcts", "mcts"], 2)
     check_team(["mcts"], 1)
+
+
+def test_the_envs_refuse_a_team_in_one_line():
+    from hptrack.envs.tracking import TrackingEnv
+
+    env = TrackingEnv(n_targets=3)
+    with pytest.raises(InputError, match="team of 2 UAVs; this env flies one"):
+        env.reset(options={"scenario": random_scenario(3, 0, team=2)})
+
+
+def test_cbba_reallocates_on_its_period_and_keeps_pursuits():
+    scenario = random_scenario(6, 1, homogeneous=True, team=2, budget=120.0)
+    record = run_episode(
+        scenario, make_planner("team-cbba", {"iterations": 100, "reallocate_period": 30.0})
+    )
+    auctions = record.info["auctions"]
+    assert [a["step"] for a in auctions] == [0, 60, 120, 180]
+    assert all(a["converged"] for a in auctions)
+    for a in auctions:  # conflict-free bundles, each UAV's current target first in its own
+        held = [t for path in a["paths"] for t in path]
+        assert len(held) == len(set(held))
+        for target, path in zip(a["committed"], a["paths"], strict=True):
+            assert target is None or path[0] == target
+    assert any(t is not None for a in auctions[1:] for t in a["committed"])

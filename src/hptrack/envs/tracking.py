@@ -213,6 +213,11 @@ class MissionEnv(gym.Env):
             scenario = self._draw_scenario()
         elif not isinstance(scenario, Scenario):
             raise InputError(f"reset option scenario must be a Scenario, got {type(scenario)}")
+        if scenario.n_vehicles > 1:
+            raise InputError(
+                f"reset option scenario flies a team of {scenario.n_vehicles} UAVs; this env "
+                "flies one (simulate a team with the team planners, docs/teams.md)"
+            )
         n = len(scenario.targets)
         if n > self.layout.n_slots or (not self.layout.masked and n != self.layout.n_slots):
             raise InputError(

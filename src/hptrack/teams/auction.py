@@ -102,6 +102,7 @@ class TeamCbbaPlanner:
         self._auctions.append(
             {
                 "step": observation.step,
+                "committed": committed,
                 "paths": [list(p) for p in allocation.paths],
                 "rounds": allocation.rounds,
                 "converged": allocation.converged,
@@ -109,7 +110,7 @@ class TeamCbbaPlanner:
         )
 
     def act(self, observation: Observation) -> np.ndarray:
-        if observation.step % self._every == 0:
+        if observation.step % self._every == 0 and observation.step != self._auctions[-1]["step"]:
             claims = self.claims()
             self._allocate(observation, [None if c == NO_CLAIM else int(c) for c in claims])
         out = np.empty((len(self._members), 2))
@@ -130,7 +131,8 @@ class TeamCbbaPlanner:
         return [member.current_plan() for member in self._members]
 
     def episode_info(self) -> dict:
-        """The settings, every UAV's own episode info (``members``) and every auction."""
+        """The settings, every UAV's own episode info (``members``) and every auction (its
+        step, each UAV's committed target and path, its rounds, whether it converged)."""
         return {
             "settings": self.settings.as_json(),
             "members": [member.episode_info() for member in self._members],
