@@ -1,14 +1,34 @@
 """The simulated targets shared by the simulated runner and the vehicle stub: the simulator's
 true initial states and one step of true motion per ``tau`` (the scenario's truth motion),
-linearly interpolated between steps so that a sensor may look at any time."""
+linearly interpolated between steps so that a sensor may look at any time; and the scenario's
+detector (`synthetic_detector`), which they and ``targets-sim`` look with."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from hptrack.models.detector import Detector
+from hptrack.models.sensor import draws_detection
 from hptrack.models.truth_motion import sample_truth
 from hptrack.scenario.model import Scenario
-from hptrack.sim.step import initial_true_states
+from hptrack.sim.step import DETECTOR_STREAM, initial_true_states, unlabelled_parts
+
+
+def synthetic_detector(scenario: Scenario, seed: int) -> Detector | None:
+    """The simulator's detector of ``scenario`` for synthetic detections
+    (`hptrack.models.detector.Detector`: misses by ``detection_probability``, false alarms by
+    ``false_alarm_density``), its Generator the simulator's detector stream of ``seed``
+    (`hptrack.sim.step.DETECTOR_STREAM`); ``None`` for the paper's sensor, which measures every
+    target inside the footprint from the simulator's sensor stream as before."""
+    parts = unlabelled_parts(scenario, seed)
+    if parts is not None:
+        return parts[0]
+    sensor = scenario.mission_spec().record.sensor
+    if not draws_detection(sensor):
+        return None
+    spec = scenario.sensor_spec()
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(DETECTOR_STREAM,)))
+    return Detector(sensor, spec.noise_covariance(), spec.false_alarm_density, rng)
 
 
 class TrueTargets:
