@@ -137,11 +137,14 @@ def _live_view(status: dict) -> Group:
     )
     head.add_row("sub-task", escape(_subtask_text(status["plan"], status["target_ids"])))
     last = status.get("last_detection")
+    name = None if not last else last["target"] or "report at ({:.1f}, {:.1f}) m".format(
+        *last["position"]
+    )
     head.add_row(
         "last detection",
         "-"
         if not last
-        else escape(f"{last['target']} at {last['t']:.1f} s ({status['t'] - last['t']:.1f} s ago)"),
+        else escape(f"{name} at {last['t']:.1f} s ({status['t'] - last['t']:.1f} s ago)"),
     )
     head.add_row(
         "from home",
@@ -166,7 +169,49 @@ def _live_view(status: dict) -> Group:
     targets.add_column("log det Σxy", justify="right")
     for tid, value in (status.get("logdet") or {}).items():
         targets.add_row(escape(tid), f"{value:.2f}")
-    return Group(head, targets)
+    tracking = status.get("tracking")
+    if tracking is None:
+        return Group(head, targets)
+    return Group(head, targets, *_tracking_view(tracking))
+
+
+def _tracking_view(tracking: dict) -> list[Table]:
+    """The live view's part without identity: the counts, the last look's associations (each
+    report to a belief with its weight, or to none) and claims, the tentative tracks."""
+    counts = tracking["counts"]
+    head = Table.grid(padding=(0, 2))
+    head.add_column(style="bold")
+    head.add_column()
+    head.add_row(
+        "associations",
+        f"{counts.get('reports', 0)} reports in {counts.get('looks', 0)} looks, "
+        f"{counts.get('taken by a belief', 0)} taken by a belief, "
+        f"{counts.get('claims', 0)} claimed by a tentative track"
+        + (f", {counts['superseded']} superseded" if counts.get("superseded") else ""),
+    )
+    look = tracking["look"]
+    if look is not None:
+        went = [
+            "none" if belief is None else f"{belief} ({weight:.2f})"
+            for belief, weight in zip(look["belief"], look["weight"], strict=True)
+        ]
+        claims = "".join(f"; {tid} claimed by a tentative track" for tid, _ in look["claims"])
+        head.add_row(
+            "last look",
+            escape(
+                f"tick {look['k']} at {look['time']:.1f} s: "
+                + (", ".join(f"report -> {w}" for w in went) or "no report")
+                + claims
+            ),
+        )
+    head.add_row("waiting reports", str(tracking["waiting"]))
+    tracks = Table(show_edge=False)
+    tracks.add_column("tentative track")
+    tracks.add_column("x, y (m)", justify="right")
+    tracks.add_column("hits / looks", justify="right")
+    for number, (x, y, looks, hits) in enumerate(tracking["tentative"], start=1):
+        tracks.add_row(str(number), f"{x:.1f}, {y:.1f}", f"{hits} / {looks}")
+    return [head, tracks] if tracking["tentative"] else [head]
 
 
 def fly(
