@@ -17,8 +17,8 @@ from hptrack.runtime.network import DetectionMessage, Refusal, parse_detection_l
 from hptrack.runtime.replay import replay_log
 from hptrack.runtime.simulated import SimulatedFaults, run_simulated
 from hptrack.runtime.targets import TargetDetector
-from hptrack.runtime.world import TrueTargets, synthetic_detector
 from hptrack.runtime.worker import InlineRunner
+from hptrack.runtime.world import TrueTargets, synthetic_detector
 from hptrack.scenario import load_scenario
 from hptrack.scenario.io import parse_scenario
 from hptrack.sim.episode import run_episode
@@ -67,9 +67,7 @@ def test_a_simulated_flight_without_identity_is_the_simulators_mission(unlabelle
     assert tracking["claims"] == len(want.claims)
 
 
-def test_a_faulty_simulated_flight_without_identity_replays_with_no_mismatch(
-    unlabelled, tmp_path
-):
+def test_a_faulty_simulated_flight_without_identity_replays_with_no_mismatch(unlabelled, tmp_path):
     # frames at 10 Hz (four of five superseded at each look), latency and jitter (some reports
     # arrive after their look and are refused), drops and hostile inputs: the replay makes the
     # same looks, associations and decisions

@@ -137,8 +137,10 @@ def _live_view(status: dict) -> Group:
     )
     head.add_row("sub-task", escape(_subtask_text(status["plan"], status["target_ids"])))
     last = status.get("last_detection")
-    name = None if not last else last["target"] or "report at ({:.1f}, {:.1f}) m".format(
-        *last["position"]
+    name = (
+        None
+        if not last
+        else last["target"] or "report at ({:.1f}, {:.1f}) m".format(*last["position"])
     )
     head.add_row(
         "last detection",

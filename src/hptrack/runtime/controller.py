@@ -16,16 +16,17 @@ Beliefs are predicted in closed form to each event's time whatever the gaps
 (`BeliefTimeline`). With the scenario's ``sensor.negative_information``, each tick is a look
 from the latest odometry: every target with no detection taken since the previous tick gets
 the miss update at the tick's time (`hptrack.models.miss_update`; a detection of that interval
-that arrives later takes the miss out again). Without identity (``sensor.labelled: false``) the beliefs are the
-simulator's tracker's (`hptrack.runtime.looks.TrackedBeliefs`): each tick is one look, which
-associates the reports stamped since the previous tick with the beliefs (gating, GNN or JPDA,
-tentative tracks and their confirmation: `hptrack.models.tracking.Tracker`) and logs which
-report went to which belief (a ``look`` record); a target is ``detected`` when a report went
-to its belief or a tentative track claimed it. The planner runs on its own step clock:
-ticks at ``k tau``. At the first ``setpoint`` call at or after ``k tau`` the controller builds the
-`Observation` of step ``k`` (beliefs at ``k tau`` from the
-measurements taken up to then, the latest odometry) and hands ``act`` to the planner runner (a
-worker thread in flight); the waypoint it returns becomes the setpoint when it arrives. A
+that arrives later takes the miss out again). Without identity (``sensor.labelled: false``)
+the beliefs are the simulator's tracker's (`hptrack.runtime.looks.TrackedBeliefs`): each tick
+is one look, which associates the reports stamped since the previous tick with the beliefs
+(gating, GNN or JPDA, tentative tracks and their confirmation:
+`hptrack.models.tracking.Tracker`) and logs which report went to which belief (a ``look``
+record); a target is ``detected`` when a report went to its belief or a tentative track
+claimed it. The planner runs on its own step clock: ticks at ``k tau``. At the first
+``setpoint`` call at or after ``k tau`` the controller builds the `Observation` of step ``k``
+(beliefs at ``k tau`` from the measurements taken up to then, the latest odometry) and hands
+``act`` to the planner runner (a worker thread in flight); the waypoint it returns becomes the
+setpoint when it arrives. A
 target is ``detected`` in an observation when a measurement of it taken at or before ``k tau``
 was accepted since the last observation the planner received (so a find is never lost while
 the planner is busy, and a measurement that arrives late counts at the next tick). While a call

@@ -3,14 +3,14 @@ before it changes anything, and a refusal names its reason (``"jump"``, ``"outsi
 area"``...) and one line of figures.
 
 Checks: malformed or non-finite values; an unknown target id (a missing one on a mission
-whose sensor names its targets, a given one on a mission whose sensor does not); an event before the start or
-after the end; a detection stamped ahead of the clock by more than the tolerance; odometry older
-than the last one or at the same time, or implying a speed the vehicle cannot fly; a detection
-older than the newest by more than the reorder tolerance, or a duplicate; a detection outside
-the mission's area (`mission_area`); a detection's own covariance that is not a
-covariance or has eigenvalues outside `NOISE_RANGE_M2`. A report without identity
-(`InputChecks.report`) has the same position and time checks; it must not come after its look,
-and its covariance, if given, must be the scenario's ``R``.
+whose sensor names its targets, a given one on a mission whose sensor does not); an event
+before the start or after the end; a detection stamped ahead of the clock by more than the
+tolerance; odometry older than the last one or at the same time, or implying a speed the
+vehicle cannot fly; a detection older than the newest by more than the reorder tolerance, or a
+duplicate; a detection outside the mission's area (`mission_area`); a detection's own
+covariance that is not a covariance or has eigenvalues outside `NOISE_RANGE_M2`. A report
+without identity (`InputChecks.report`) has the same position and time checks; it must not
+come after its look, and its covariance, if given, must be the scenario's ``R``.
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ class ControllerSettings(BaseModel):
 Problem = tuple[str, str]
 """A refusal: its reason and one line of figures."""
 
+MALFORMED_POSITION: Problem = ("malformed", "position is not two numbers")
 NOISE_RANGE_M2 = (1e-12, 1e8)
 """A detection's noise covariance must have its eigenvalues in ``(low, high]`` m^2 (the range
 a scenario's ``R`` may take: beyond it the Kalman update loses its precision)."""
@@ -219,6 +220,8 @@ class InputChecks:
                 -1,
                 noise,
             )
+        if z is None:
+            return DetectionCheck(MALFORMED_POSITION, -1, noise)
         position = self._position(z)
         if position is not None:
             return DetectionCheck(position, -1, noise)
@@ -264,14 +267,17 @@ class InputChecks:
                 "(sensor.labelled: false): send the detection without id"
             )
             return DetectionCheck(("id without identity", detail), -1, noise)
+        if z is None:
+            return DetectionCheck(MALFORMED_POSITION, -1, noise)
         problem = self._position(z)
         if problem is None and covariance is not None:
             problem, own = self._noise(covariance, noise)
             if problem is None and not np.allclose(own, noise, rtol=1e-9, atol=0.0):
-                problem = "not R", (
-                    f"cov {own.tolist()} m^2: the tracker of detections without identity filters "
-                    f"every report with the scenario's R {noise.tolist()} m^2 (send no cov)"
+                detail = (
+                    f"cov {own.tolist()} m^2: the tracker of detections without identity "
+                    f"filters every report with the scenario's R {noise.tolist()} m^2 (send no cov)"
                 )
+                problem = "not R", detail
         if problem is None and confidence is not None:
             c = vector(confidence, ())
             if c is None or not 0.0 <= float(c) <= 1.0:
@@ -279,18 +285,15 @@ class InputChecks:
         if problem is None:
             problem = self.time(t, ahead_s, clock_source=False, ended=ended)
         if problem is None and beliefs.late(t):
-            problem = "late", (
-                f"stamped {t:.3f} s, in the look of {beliefs.looked_s:.3f} s that is done"
-            )
+            detail = f"stamped {t:.3f} s, in the look of {beliefs.looked_s:.3f} s that is done"
+            problem = "late", detail
         if problem is None and beliefs.is_duplicate(t, z):
             problem = "duplicate", f"the same report at {t:.3f} s"
         return DetectionCheck(problem, -1, noise)
 
-    def _position(self, z: np.ndarray | None) -> Problem | None:
-        """The problem with a detection's position ``z`` (2,) m: malformed, non-finite or
-        outside the mission's area."""
-        if z is None:
-            return "malformed", "position is not two numbers"
+    def _position(self, z: np.ndarray) -> Problem | None:
+        """The problem with a detection's position ``z`` (2,) m: non-finite or outside the
+        mission's area."""
         if not np.all(np.isfinite(z)):
             return "non-finite", f"position {z.tolist()}"
         centre, reach = self.area

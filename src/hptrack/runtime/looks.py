@@ -121,9 +121,7 @@ class TrackedBeliefs:
             "belief": [None if b < 0 else ids[b] for b in result.belief_of.tolist()],
             "weight": result.weight,
             "claims": [[ids[c.belief], frame[c.detection].seq] for c in result.claims],
-            "tentative": [
-                [*t.mean[:2].tolist(), t.looks, t.hits] for t in self.tracker.tentative
-            ],
+            "tentative": [[*t.mean[:2].tolist(), t.looks, t.hits] for t in self.tracker.tentative],
         }
         if superseded:
             record["superseded"] = superseded

@@ -916,7 +916,8 @@ class VehicleSim:
                 time.sleep(max(0.0, min(period, end - self._now())))
         finally:
             self.close()
-        detections = {} if self._detector is None else self._detector.stats.detections
+        detector = self._detector
+        detections = {} if detector is None else detector.stats.detections
         summary = self.stats.as_json(self.mode, self.armed, self.position, detections)
-        summary["false_alarms_sent"] = 0 if self._detector is None else self._detector.stats.false_alarms
+        summary["false_alarms_sent"] = 0 if detector is None else detector.stats.false_alarms
         return summary
