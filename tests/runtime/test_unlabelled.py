@@ -20,7 +20,7 @@ from hptrack.runtime.targets import TargetDetector
 from hptrack.runtime.worker import InlineRunner
 from hptrack.runtime.world import TrueTargets, synthetic_detector
 from hptrack.scenario import load_scenario
-from hptrack.scenario.io import parse_scenario
+from hptrack.scenario.io import file_data, parse_scenario
 from hptrack.sim.episode import run_episode
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "unlabelled-flight.yaml"
@@ -36,11 +36,21 @@ def _looks(records):
     return [r for r in records if r["kind"] == "look"]
 
 
-@pytest.mark.parametrize("seed", [1, 3])
-def test_a_simulated_flight_without_identity_is_the_simulators_mission(unlabelled, seed):
+def _with_sensor(**fields):
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["sensor"].update(fields)
+    return parse_scenario(data, "test")
+
+
+@pytest.mark.parametrize(
+    ("seed", "fields"),
+    [(1, {}), (3, {}), (3, {"association": "jpda", "false_alarm_density": 1e-3})],
+)
+def test_a_simulated_flight_without_identity_is_the_simulators_mission(seed, fields):
     # the same detector's reports at every tau and no planner delay: the controller's tracker
     # makes the simulator's associations (each report to the same belief with the same
-    # weight, the same claims) and ends with the same U; seeds 1 and 3 have claims
+    # weight, GNN's or JPDA's, the same claims) and ends with the same U; these seeds have claims
+    unlabelled = _with_sensor(**fields)
     options = {"iterations": 300}
     want = run_episode(unlabelled, make_planner("mcts", options), seed=seed)
     got = run_simulated(unlabelled, make_planner("mcts", options), seed=seed)
@@ -147,9 +157,7 @@ def _received(sock):
 def test_the_synthetic_detector_sends_the_simulators_draws_without_ids(unlabelled):
     # TargetDetector (vehicle-sim, targets-sim) with the seed's detector stream: the same
     # misses, false alarms and noise as the simulator's detector over the same looks, no ids
-    data = yaml.safe_load(EXAMPLE.read_text())
-    data["sensor"]["false_alarm_density"] = 5e-3  # clutter at every look or two
-    scenario = parse_scenario(data, "test")
+    scenario = _with_sensor(false_alarm_density=5e-3)  # clutter at every look or two
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
     sender = TargetDetector(scenario, f"udp://127.0.0.1:{sock.getsockname()[1]}", seed=5)
@@ -169,6 +177,27 @@ def test_the_synthetic_detector_sends_the_simulators_draws_without_ids(unlabelle
     sources = np.concatenate([w.sources for w in want])
     assert sender.stats.false_alarms == np.sum(sources < 0) > 0
     assert sender.stats.detections["p1"] == np.sum(sources == 0) < len(agents)  # misses
+
+
+def test_a_labelled_detector_below_certainty_misses_and_names(flight_scenario):
+    # detection_probability 0.5 with ids: the stub's detector misses about half of the looks
+    # and names what it detects; the paper's sensor detects at every look
+    data = file_data(flight_scenario)
+    data["sensor"] = {"detection_probability": 0.5}
+    counts = []
+    for scenario in (flight_scenario, parse_scenario(data, "test")):
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind(("127.0.0.1", 0))
+        sender = TargetDetector(scenario, f"udp://127.0.0.1:{sock.getsockname()[1]}", seed=2)
+        sender.start(0.0)
+        for k in range(20):
+            sender.sense(0.5 * k, sender._targets.positions_at(0.5 * k)[0])
+        lines = _received(sock)
+        sender.close()
+        sock.close()
+        assert {line["id"] for line in lines} == {"p1"}
+        counts.append(len(lines))
+    assert counts[0] == 20 and 0 < counts[1] < 20
 
 
 def _truth_streams(seed):
