@@ -40,6 +40,7 @@ def test_a_stub_flight_without_identity_ends_by_its_budget_and_replays(tmp_path)
         flood.end_process(run["stub"])
     assert fly.returncode == 0, fly.stdout + fly.stderr
     assert "ended by budget" in fly.stdout
+    assert f"reports in {round(BUDGET_S / 0.5) + 1} looks" in " ".join(fly.stdout.split())
     records = read_log(run["log"]).records
     reports = [r for r in records if r["kind"] == "detection" and r["accepted"]]
     assert reports and all(r["target"] is None for r in reports)

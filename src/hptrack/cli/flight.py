@@ -461,6 +461,7 @@ def fly(
             f"{result.confirmed or 'not confirmed'}; U = {end.get('U', math.nan):.3f} at "
             f"{end.get('time', 0.0):.1f} s; {result.setpoints_sent} setpoints "
             f"({result.setpoint_rate_hz:.1f} Hz, largest gap {result.max_setpoint_gap_s:.2f} s)"
+            + _tracking_text(end.get("tracking"))
             + (f"; logging stopped: {result.log_stopped}" if result.log_stopped else "")
             + (
                 f"; {sum(result.foreign_odometry.values())} odometry messages refused from "
@@ -486,6 +487,17 @@ def fly(
         sys.exit(EXIT_PILOT)
     if result.reason != "budget":
         sys.exit(EXIT_ABORTED)
+
+
+def _tracking_text(tracking: dict | None) -> str:
+    """Without identity, the tracker's counts for a summary line (``""`` with identity)."""
+    if tracking is None:
+        return ""
+    return (
+        f"; {tracking.get('reports', 0)} reports in {tracking.get('looks', 0)} looks, "
+        f"{tracking.get('taken by a belief', 0)} taken by a belief, "
+        f"{tracking.get('claims', 0)} claimed by a tentative track"
+    )
 
 
 def planned_speed(scenario_speed: float, limits: Any, cap: bool) -> float:
@@ -820,6 +832,7 @@ def replay(
             f"{summary['ended_by']} at {summary['time']:.1f} s; logged U "
             f"{'-' if logged is None else format(logged, '.3f')}; "
             f"{summary['mismatches']} mismatches"
+            + _tracking_text(summary.get("tracking"))
             + (
                 "; decisions taken from the log (it names a model file, which a replay never loads)"
                 if summary["decisions"] == "logged"
