@@ -26,11 +26,10 @@ claimed it. The planner runs on its own step clock: ticks at ``k tau``. At the f
 ``setpoint`` call at or after ``k tau`` the controller builds the `Observation` of step ``k``
 (beliefs at ``k tau`` from the measurements taken up to then, the latest odometry) and hands
 ``act`` to the planner runner (a worker thread in flight); the waypoint it returns becomes the
-setpoint when it arrives. A
-target is ``detected`` in an observation when a measurement of it taken at or before ``k tau``
-was accepted since the last observation the planner received (so a find is never lost while
-the planner is busy, and a measurement that arrives late counts at the next tick). While a call
-runs, further ticks are skipped. A call that is not back within the deadline is logged as late
+setpoint when it arrives. A target is ``detected`` in an observation when a measurement of it
+taken at or before ``k tau`` was accepted since the last observation the planner received (so a
+find is never lost while the planner is busy, and a measurement that arrives late counts at the
+next tick). While a call runs, further ticks are skipped. A call that is not back within the deadline is logged as late
 and replaced at once by a fallback decision (greedy on the current beliefs), decided again at
 each tick until the planner answers; the late plan is logged, not flown. A call that fails holds
 the vehicle where it is until a later call succeeds. Each decision is flown as a `Leg`
@@ -272,10 +271,9 @@ class MissionController:
                 record["covariance"] = raw(covariance)
             if confidence is not None:
                 record["confidence"] = raw(confidence)
-            beliefs = self._beliefs if self._tracked is None else self._tracked
             check = self.checks.detection(
-                t, target_id, z, covariance, self.clock.ahead(t), self._ended(), beliefs,
-                confidence,
+                t, target_id, z, covariance, self.clock.ahead(t), self._ended(),
+                self._belief_source(), confidence,
             )  # fmt: skip
             if check.problem is not None:
                 return self.journal.refuse("detection", record, *check.problem)
