@@ -69,6 +69,7 @@ class TrackedBeliefs:
         self.covariances = np.array(scenario.covariances(), dtype=float)
         self.pending: list[Report] = []
         """Accepted reports not yet looked at, in arrival order."""
+        self._keys: set[tuple[float, float, float]] = set()
         self.looked_s = -np.inf
         """The end of the last look's interval (``k tau``), s: a report stamped at or before it
         is late."""
@@ -88,12 +89,13 @@ class TrackedBeliefs:
         return t <= self.looked_s + STEP_TOLERANCE * self._tau
 
     def is_duplicate(self, t: float, z: np.ndarray) -> bool:
-        """Whether a report at ``t`` s and ``z`` is already waiting."""
-        return any(abs(r.t - t) <= 1e-9 and np.array_equal(r.z, z) for r in self.pending)
+        """Whether the same report (time ``t`` s, position ``z``) is already waiting."""
+        return (float(t), float(z[0]), float(z[1])) in self._keys
 
     def add(self, t: float, z: np.ndarray, seq: int) -> None:
         """Hold report ``z`` (2,) m stamped ``t`` s (checked: not `late`) for its look."""
         self.pending.append(Report(float(t), int(seq), np.array(z, dtype=float)))
+        self._keys.add((float(t), float(z[0]), float(z[1])))
         self.newest_s = max(self.newest_s, float(t))
 
     def look(self, k: int, agent: np.ndarray) -> Look:
@@ -102,6 +104,7 @@ class TrackedBeliefs:
         end = k * self._tau
         mine = [r for r in self.pending if r.t <= end + STEP_TOLERANCE * self._tau]
         self.pending = [r for r in self.pending if r.t > end + STEP_TOLERANCE * self._tau]
+        self._keys = {(r.t, float(r.z[0]), float(r.z[1])) for r in self.pending}
         self.looked_s = end
         stamp = max((r.t for r in mine), default=end)
         frame = [r for r in mine if abs(r.t - stamp) <= 1e-9]
