@@ -489,6 +489,11 @@ def fly(
         sys.exit(EXIT_ABORTED)
 
 
+def _false_alarms_text(count: int) -> str:
+    """The false alarms a synthetic detector sent, for its summary line (``""`` for none)."""
+    return f", false alarms {count}" if count else ""
+
+
 def _tracking_text(tracking: dict | None) -> str:
     """Without identity, the tracker's counts for a summary line (``""`` with identity)."""
     if tracking is None:
@@ -706,6 +711,7 @@ def vehicle_sim(
             f"vehicle stub stopped in {summary['final_mode'].upper()}: {summary['setpoints']} "
             f"setpoints ({summary['offboard_setpoint_rate_hz']:.1f} Hz in offboard), "
             f"detections sent {json.dumps(summary['detections_sent'])}"
+            + _false_alarms_text(summary["false_alarms_sent"])
         ),
         highlight=False,
     )
@@ -774,6 +780,7 @@ def targets_sim(
     on_event(
         f"stopped: {summary['heartbeats']} heartbeats, {summary['positions']} positions, "
         f"detections sent {json.dumps(summary['detections_sent'])}"
+        + _false_alarms_text(summary["false_alarms_sent"])
     )
 
 
