@@ -16,6 +16,7 @@ EXPECTED = {
     "fly_simulated.py",
     "paper-flight.yaml",
     "fenced-flight.yaml",
+    "unlabelled-flight.yaml",
     "stonesoup_tracking.py",
 }
 

@@ -137,11 +137,16 @@ def _live_view(status: dict) -> Group:
     )
     head.add_row("sub-task", escape(_subtask_text(status["plan"], status["target_ids"])))
     last = status.get("last_detection")
+    name = (
+        None
+        if not last
+        else last["target"] or "report at ({:.1f}, {:.1f}) m".format(*last["position"])
+    )
     head.add_row(
         "last detection",
         "-"
         if not last
-        else escape(f"{last['target']} at {last['t']:.1f} s ({status['t'] - last['t']:.1f} s ago)"),
+        else escape(f"{name} at {last['t']:.1f} s ({status['t'] - last['t']:.1f} s ago)"),
     )
     head.add_row(
         "from home",
@@ -166,7 +171,49 @@ def _live_view(status: dict) -> Group:
     targets.add_column("log det Σxy", justify="right")
     for tid, value in (status.get("logdet") or {}).items():
         targets.add_row(escape(tid), f"{value:.2f}")
-    return Group(head, targets)
+    tracking = status.get("tracking")
+    if tracking is None:
+        return Group(head, targets)
+    return Group(head, targets, *_tracking_view(tracking))
+
+
+def _tracking_view(tracking: dict) -> list[Table]:
+    """The live view's part without identity: the counts, the last look's associations (each
+    report to a belief with its weight, or to none) and claims, the tentative tracks."""
+    counts = tracking["counts"]
+    head = Table.grid(padding=(0, 2))
+    head.add_column(style="bold")
+    head.add_column()
+    head.add_row(
+        "associations",
+        f"{counts.get('reports', 0)} reports in {counts.get('looks', 0)} looks, "
+        f"{counts.get('taken by a belief', 0)} taken by a belief, "
+        f"{counts.get('claims', 0)} claimed by a tentative track"
+        + (f", {counts['superseded']} superseded" if counts.get("superseded") else ""),
+    )
+    look = tracking["look"]
+    if look is not None:
+        went = [
+            "none" if belief is None else f"{belief} ({weight:.2f})"
+            for belief, weight in zip(look["belief"], look["weight"], strict=True)
+        ]
+        claims = "".join(f"; {tid} claimed by a tentative track" for tid, _ in look["claims"])
+        head.add_row(
+            "last look",
+            escape(
+                f"tick {look['k']} at {look['time']:.1f} s: "
+                + (", ".join(f"report -> {w}" for w in went) or "no report")
+                + claims
+            ),
+        )
+    head.add_row("waiting reports", str(tracking["waiting"]))
+    tracks = Table(show_edge=False)
+    tracks.add_column("tentative track")
+    tracks.add_column("x, y (m)", justify="right")
+    tracks.add_column("hits / looks", justify="right")
+    for number, (x, y, looks, hits) in enumerate(tracking["tentative"], start=1):
+        tracks.add_row(str(number), f"{x:.1f}, {y:.1f}", f"{hits} / {looks}")
+    return [head, tracks] if tracking["tentative"] else [head]
 
 
 def fly(
@@ -414,6 +461,7 @@ def fly(
             f"{result.confirmed or 'not confirmed'}; U = {end.get('U', math.nan):.3f} at "
             f"{end.get('time', 0.0):.1f} s; {result.setpoints_sent} setpoints "
             f"({result.setpoint_rate_hz:.1f} Hz, largest gap {result.max_setpoint_gap_s:.2f} s)"
+            + _tracking_text(end.get("tracking"))
             + (f"; logging stopped: {result.log_stopped}" if result.log_stopped else "")
             + (
                 f"; {sum(result.foreign_odometry.values())} odometry messages refused from "
@@ -439,6 +487,22 @@ def fly(
         sys.exit(EXIT_PILOT)
     if result.reason != "budget":
         sys.exit(EXIT_ABORTED)
+
+
+def _false_alarms_text(count: int) -> str:
+    """The false alarms a synthetic detector sent, for its summary line (``""`` for none)."""
+    return f", false alarms {count}" if count else ""
+
+
+def _tracking_text(tracking: dict | None) -> str:
+    """Without identity, the tracker's counts for a summary line (``""`` with identity)."""
+    if tracking is None:
+        return ""
+    return (
+        f"; {tracking.get('reports', 0)} reports in {tracking.get('looks', 0)} looks, "
+        f"{tracking.get('taken by a belief', 0)} taken by a belief, "
+        f"{tracking.get('claims', 0)} claimed by a tentative track"
+    )
 
 
 def planned_speed(scenario_speed: float, limits: Any, cap: bool) -> float:
@@ -647,6 +711,7 @@ def vehicle_sim(
             f"vehicle stub stopped in {summary['final_mode'].upper()}: {summary['setpoints']} "
             f"setpoints ({summary['offboard_setpoint_rate_hz']:.1f} Hz in offboard), "
             f"detections sent {json.dumps(summary['detections_sent'])}"
+            + _false_alarms_text(summary["false_alarms_sent"])
         ),
         highlight=False,
     )
@@ -715,6 +780,7 @@ def targets_sim(
     on_event(
         f"stopped: {summary['heartbeats']} heartbeats, {summary['positions']} positions, "
         f"detections sent {json.dumps(summary['detections_sent'])}"
+        + _false_alarms_text(summary["false_alarms_sent"])
     )
 
 
@@ -773,6 +839,7 @@ def replay(
             f"{summary['ended_by']} at {summary['time']:.1f} s; logged U "
             f"{'-' if logged is None else format(logged, '.3f')}; "
             f"{summary['mismatches']} mismatches"
+            + _tracking_text(summary.get("tracking"))
             + (
                 "; decisions taken from the log (it names a model file, which a replay never loads)"
                 if summary["decisions"] == "logged"

@@ -6,30 +6,37 @@ the mission start):
 
 * `MissionController.odometry` -- the vehicle's position;
 * `MissionController.detection` -- a position measurement of one target, with its own
-  2x2 noise covariance or the scenario's ``R``;
+  2x2 noise covariance or the scenario's ``R``; with the scenario's ``sensor.labelled: false``,
+  a report without identity (no target id, optionally a confidence), which the tracker
+  associates with the beliefs at its tick (below);
 * `MissionController.setpoint` -- where the vehicle should fly now; it always returns at
   once.
 
-Beliefs are predicted in closed form to each event's time whatever the gaps
-(`BeliefTimeline`). With the scenario's ``sensor.negative_information``, each tick is a look
-from the latest odometry: every target with no detection taken since the previous tick gets
-the miss update at the tick's time (`hptrack.models.miss_update`; a detection of that interval
-that arrives later takes the miss out again). The planner runs on its own step clock:
-ticks at ``k tau``. At the first ``setpoint`` call at or after ``k tau`` the controller builds the
-`Observation` of step ``k`` (beliefs at ``k tau`` from the
-measurements taken up to then, the latest odometry) and hands ``act`` to the planner runner (a
-worker thread in flight); the waypoint it returns becomes the setpoint when it arrives. A
-target is ``detected`` in an observation when a measurement of it taken at or before ``k tau``
-was accepted since the last observation the planner received (so a find is never lost while
-the planner is busy, and a measurement that arrives late counts at the next tick). While a call
-runs, further ticks are skipped. A call that is not back within the deadline is logged as late
-and replaced at once by a fallback decision (greedy on the current beliefs), decided again at
-each tick until the planner answers; the late plan is logged, not flown. A call that fails holds
-the vehicle where it is until a later call succeeds. Each decision is flown as a `Leg`
-from the odometry of the moment it arrives, at the planned speed, shifted by the vehicle's lag
-behind the reference it was flying (``keep_lag``), so that the lag a position loop needs to fly
-the planned speed is not lost at every decision. With a fence, a reference outside its free
-space (the fence shrunk by the margin) is sent projected onto it (`nearest_free`), and logged.
+Beliefs are predicted in closed form to each event's time whatever the gaps (`BeliefTimeline`).
+With the scenario's ``sensor.negative_information``, each tick is a look from the latest
+odometry: every target with no detection taken since the previous tick gets the miss update at
+the tick's time (`hptrack.models.miss_update`; a detection of that interval that arrives later
+takes the miss out again). Without identity (``sensor.labelled: false``) the beliefs are the
+simulator's tracker's (`hptrack.runtime.looks.TrackedBeliefs`): each tick is one look, which
+associates the reports stamped since the previous tick with the beliefs (gating, GNN or JPDA,
+tentative tracks and their confirmation: `hptrack.models.tracking.Tracker`) and logs which
+report went to which belief (a ``look`` record); a target is ``detected`` when a report went to
+its belief or a tentative track claimed it. The planner runs on its own step clock: ticks at
+``k tau``. At the first ``setpoint`` call at or after ``k tau`` the controller builds the
+`Observation` of step ``k`` (beliefs at ``k tau`` from the measurements taken up to then, the
+latest odometry) and hands ``act`` to the planner runner (a worker thread in flight); the
+waypoint it returns becomes the setpoint when it arrives. A target is ``detected`` in an
+observation when a measurement of it taken at or before ``k tau`` was accepted since the last
+observation the planner received (so a find is never lost while the planner is busy, and a
+measurement that arrives late counts at the next tick). While a call runs, further ticks are
+skipped. A call that is not back within the deadline is logged as late and replaced at once by a
+fallback decision (greedy on the current beliefs), decided again at each tick until the planner
+answers; the late plan is logged, not flown. A call that fails holds the vehicle where it is
+until a later call succeeds. Each decision is flown as a `Leg` from the odometry of the moment
+it arrives, at the planned speed, shifted by the vehicle's lag behind the reference it was
+flying (``keep_lag``), so that the lag a position loop needs to fly the planned speed is not
+lost at every decision. With a fence, a reference outside its free space (the fence shrunk by
+the margin) is sent projected onto it (`nearest_free`), and logged.
 
 Bad input changes nothing; it is counted and logged with its reason: non-finite or malformed
 values, an unknown target id, an event before the start or after the end of the mission, a
@@ -71,6 +78,7 @@ from hptrack.runtime.inputs import ControllerSettings, InputChecks, raw, vector
 from hptrack.runtime.journal import Journal
 from hptrack.runtime.legs import Leg, Setpoint
 from hptrack.runtime.log import LOG_VERSION, MissionLog, log_float
+from hptrack.runtime.looks import TrackedBeliefs
 from hptrack.runtime.record import MissionHistory
 from hptrack.runtime.worker import (
     Fallback,
@@ -149,6 +157,16 @@ class MissionController:
             missed=partial(look_missed, sensor) if self._informs else None,
             look_s=self.mission.time_step,
         )
+        self._tracked = (
+            None if scenario.sensor_spec().labelled else TrackedBeliefs(scenario, self.seed)
+        )
+        """The tracker's beliefs without identity (``None``: named detections)."""
+        self._unseen = np.zeros(self.mission.n_targets, dtype=bool)
+        self._seen_for_planner = self._unseen.copy()
+        self._seen_for_record = self._unseen.copy()
+        self.tracking: Counter[str] = Counter()
+        """Without identity: looks, reports looked at, reports a belief took, claims by
+        tentative tracks, superseded reports."""
         self._lock = threading.RLock()
         self._odom: tuple[float, np.ndarray] | None = None
         self._waypoint: np.ndarray | None = None
@@ -227,10 +245,19 @@ class MissionController:
             self.clock.observe(t)
             return self.journal.accept("odometry", record)
 
-    def detection(self, t: float, target_id: Any, position: Any, covariance: Any = None) -> bool:
+    def detection(
+        self,
+        t: float,
+        target_id: Any,
+        position: Any,
+        covariance: Any = None,
+        confidence: Any = None,
+    ) -> bool:
         """Target ``target_id`` was measured at ``position`` (2,) m at mission time ``t`` s,
         with noise ``covariance`` (2, 2) m^2 (default the scenario's ``R``); ``False``
-        (logged with the reason) if refused."""
+        (logged with the reason) if refused. Without identity ``target_id`` is ``None`` and
+        the report waits for its tick's look (numbered ``report`` in its record; a
+        ``confidence`` in ``[0, 1]`` is logged, not used by the association)."""
         with self._lock:
             t = log_float(t)
             z = vector(position, (2,))
@@ -242,12 +269,20 @@ class MissionController:
             }
             if covariance is not None:
                 record["covariance"] = raw(covariance)
+            if confidence is not None:
+                record["confidence"] = raw(confidence)
             check = self.checks.detection(
-                t, target_id, z, covariance, self.clock.ahead(t), self._ended(), self._beliefs
-            )
+                t, target_id, z, covariance, self.clock.ahead(t), self._ended(),
+                self._belief_source(), confidence,
+            )  # fmt: skip
             if check.problem is not None:
                 return self.journal.refuse("detection", record, *check.problem)
             self._det_seq += 1
+            if self._tracked is not None:
+                self._tracked.add(t, z, self._det_seq)
+                self.clock.observe(t)
+                self.last_detection = {"target": None, "t": t, "position": z.tolist()}
+                return self.journal.accept("detection", {**record, "report": self._det_seq})
             self._beliefs.add(check.index, t, z, check.noise, self._det_seq)
             self.clock.observe(t)
             self._for_planner.append((t, check.index))
@@ -277,15 +312,17 @@ class MissionController:
         if due is None:
             return
         k, missed = due
+        if self._tracked is not None:
+            self._look(t, k, missed)
         if k == self.mission.n_steps:
             self._finish(t, "budget", self.mission.n_steps * self.mission.time_step)
             return
         time_k = k * self.mission.time_step
-        recorded = self._take(self._for_record, time_k)
+        recorded = self._recorded(time_k)
         if self._informs and self._odom is not None and time_k >= self._beliefs.horizon_s:
             for i in np.flatnonzero(~recorded):
                 self._beliefs.add_miss(int(i), time_k, self._odom[1])
-        means, covs = self._beliefs.at(time_k)
+        means, covs = self._belief_source().at(time_k)
         agent = None if self._odom is None else self._odom[1]
         record: dict[str, Any] = {
             "kind": "tick",
@@ -306,7 +343,7 @@ class MissionController:
             record.update(submitted=False, reason=f"planner busy with tick {busy}")
             fall_back = self.fallback.active
         else:
-            detected = self._take(self._for_planner, time_k)
+            detected = self._detected(time_k)
             record.update(
                 submitted=True,
                 detected=[self.mission.target_ids[i] for i in np.flatnonzero(detected)],
@@ -318,6 +355,41 @@ class MissionController:
         self.journal.write(record)
         if fall_back:
             self._fall_back(t, f"planner late with tick {self.worker.in_flight[0]}")
+
+    def _belief_source(self) -> BeliefTimeline | TrackedBeliefs:
+        """Where the beliefs at a time come from: the tracker's without identity."""
+        return self._beliefs if self._tracked is None else self._tracked
+
+    def _look(self, t: float, k: int, missed: int) -> None:
+        """The tracker's looks of ticks ``k - missed .. k`` (one each) from the latest
+        odometry (the start before any), logged as ``look`` records."""
+        assert self._tracked is not None
+        agent = self._hold_at if self._odom is None else self._odom[1]
+        for j in range(k - missed, k + 1):
+            look = self._tracked.look(j, agent)
+            self._seen_for_planner |= look.seen
+            self._seen_for_record |= look.seen
+            record = look.record
+            self.tracking["looks"] += 1
+            self.tracking["reports"] += len(record["reports"])
+            self.tracking["taken by a belief"] += sum(b is not None for b in record["belief"])
+            self.tracking["claims"] += len(record["claims"])
+            self.tracking["superseded"] += len(record.get("superseded", ()))
+            self.journal.write({**record, "t": t})
+
+    def _detected(self, time_s: float) -> np.ndarray:
+        """The targets detected since the planner's last observation, up to ``time_s``."""
+        if self._tracked is None:
+            return self._take(self._for_planner, time_s)
+        flags, self._seen_for_planner = self._seen_for_planner, self._unseen.copy()
+        return flags
+
+    def _recorded(self, time_s: float) -> np.ndarray:
+        """The targets detected since the history's last row, up to ``time_s``."""
+        if self._tracked is None:
+            return self._take(self._for_record, time_s)
+        flags, self._seen_for_record = self._seen_for_record, self._unseen.copy()
+        return flags
 
     def _take(self, pending: list[tuple[float, int]], time_s: float) -> np.ndarray:
         """Flags of the targets measured at or before ``time_s`` in ``pending`` (removed)."""
@@ -452,7 +524,7 @@ class MissionController:
     def _fall_back(self, t: float, why: str) -> None:
         """The fallback's decision on the beliefs at ``t`` from the latest odometry, flown at
         once while the planner is late (logged as ``fallback``)."""
-        means, covs = self._beliefs.at(t)
+        means, covs = self._belief_source().at(t)
         no_detections = np.zeros(self.mission.n_targets, dtype=bool)
         step = max(self.clock.tick, 0)
         obs = observation(step, t, self.mission.budget, self._odom[1], means, covs, no_detections)
@@ -502,25 +574,24 @@ class MissionController:
             self._apply(outcome, t, late=False, after_end=True)
         info = self.worker.info()
         self.finished = True
-        means, covs = self._beliefs.at(time_s)
+        means, covs = self._belief_source().at(time_s)
         logdet = position_logdet(covs)
         agent = None if self._odom is None else self._odom[1].copy()
-        self.history.end(time_s, agent, means, covs, self._take(self._for_record, time_s))
-        self.end = self.journal.write(
-            {
-                "kind": "end",
-                "t": t,
-                "time": time_s,
-                "reason": reason,
-                "U": float(logdet.sum()),
-                "per_target_logdet": dict(
-                    zip(self.mission.target_ids, logdet.tolist(), strict=True)
-                ),
-                "accepted": dict(self.accepted),
-                "rejected": dict(self.rejected),
-                "planner_info": info,
-            }
-        )
+        self.history.end(time_s, agent, means, covs, self._recorded(time_s))
+        end = {
+            "kind": "end",
+            "t": t,
+            "time": time_s,
+            "reason": reason,
+            "U": float(logdet.sum()),
+            "per_target_logdet": dict(zip(self.mission.target_ids, logdet.tolist(), strict=True)),
+            "accepted": dict(self.accepted),
+            "rejected": dict(self.rejected),
+            "planner_info": info,
+        }
+        if self._tracked is not None:
+            end["tracking"] = dict(self.tracking)
+        self.end = self.journal.write(end)
         self.worker.close()
 
     def close(self) -> None:
@@ -541,7 +612,7 @@ class MissionController:
     @property
     def newest_detection_s(self) -> float:
         """Time of the newest accepted detection (0 before any), s."""
-        return self._beliefs.newest_s
+        return self._belief_source().newest_s
 
     def status(self) -> dict[str, Any]:
         """A snapshot for a live view: time, mode, sub-task, each target's log det at the last
@@ -567,6 +638,7 @@ class MissionController:
                 "rejected": dict(self.rejected),
                 "finished": self.finished,
                 "end": self.end,
+                "tracking": None if self._tracked is None else self._tracking_status(),
                 "fence": None
                 if self._fence is None
                 else {
@@ -577,6 +649,25 @@ class MissionController:
                     "projections": self.fence_projections,
                 },
             }
+
+    def _tracking_status(self) -> dict[str, Any]:
+        """Without identity, for a live view: the last look's associations (each report's
+        position, the belief it went to, its weight), the claims, the tentative tracks and the
+        counts so far."""
+        assert self._tracked is not None
+        look = self._tracked.last_look
+        return {
+            "counts": dict(self.tracking),
+            "look": None if look is None else {
+                "k": look["k"],
+                "time": look["time"],
+                "belief": look["belief"],
+                "weight": np.asarray(look["weight"]).tolist(),
+                "claims": look["claims"],
+            },
+            "tentative": [] if look is None else look["tentative"],
+            "waiting": len(self._tracked.pending),
+        }  # fmt: skip
 
     def episode_record(self, truth: np.ndarray | None = None) -> EpisodeRecord:
         """The mission as an `EpisodeRecord` (for the mission

@@ -2,12 +2,15 @@
 before it changes anything, and a refusal names its reason (``"jump"``, ``"outside the
 area"``...) and one line of figures.
 
-Checks: malformed or non-finite values; an unknown target id; an event before the start or
-after the end; a detection stamped ahead of the clock by more than the tolerance; odometry older
-than the last one or at the same time, or implying a speed the vehicle cannot fly; a detection
-older than the newest by more than the reorder tolerance, or a duplicate; a detection outside
-the mission's area (`mission_area`); a detection's own covariance that is not a
-covariance or has eigenvalues outside `NOISE_RANGE_M2`.
+Checks: malformed or non-finite values; an unknown target id (a missing one on a mission
+whose sensor names its targets, a given one on a mission whose sensor does not); an event
+before the start or after the end; a detection stamped ahead of the clock by more than the
+tolerance; odometry older than the last one or at the same time, or implying a speed the
+vehicle cannot fly; a detection older than the newest by more than the reorder tolerance, or a
+duplicate; a detection outside the mission's area (`mission_area`); a detection's own
+covariance that is not a covariance or has eigenvalues outside `NOISE_RANGE_M2`. A report
+without identity (`InputChecks.report`) has the same position and time checks; it must not
+come after its look, and its covariance, if given, must be the scenario's ``R``.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from hptrack.models.measurement import check_noise_covariance
 from hptrack.models.mission import STEP_TOLERANCE
 from hptrack.runtime.beliefs import BeliefTimeline
+from hptrack.runtime.looks import TrackedBeliefs
 from hptrack.scenario.model import Scenario
 
 
@@ -59,6 +63,7 @@ class ControllerSettings(BaseModel):
 Problem = tuple[str, str]
 """A refusal: its reason and one line of figures."""
 
+MALFORMED_POSITION: Problem = ("malformed", "position is not two numbers")
 NOISE_RANGE_M2 = (1e-12, 1e8)
 """A detection's noise covariance must have its eigenvalues in ``(low, high]`` m^2 (the range
 a scenario's ``R`` may take: beyond it the Kalman update loses its precision)."""
@@ -189,12 +194,22 @@ class InputChecks:
         covariance: Any,
         ahead_s: float,
         ended: str | None,
-        beliefs: BeliefTimeline,
+        beliefs: BeliefTimeline | TrackedBeliefs,
+        confidence: Any = None,
     ) -> DetectionCheck:
         """The check of a measurement ``z`` (2,) m of ``target_id`` at ``t`` s (``ahead_s``
         ahead of the clock) with its own ``covariance`` or ``None``, against the ``beliefs``
-        so far."""
+        so far. Without identity (``beliefs`` a `TrackedBeliefs`) ``target_id`` must be
+        ``None`` and the report is checked by `report`."""
         noise = self.mission.measurement_noise
+        if isinstance(beliefs, TrackedBeliefs):
+            return self.report(t, target_id, z, covariance, ahead_s, ended, beliefs, confidence)
+        if target_id is None:
+            detail = (
+                "a detection without id: the mission's sensor is labelled (sensor.labelled: "
+                "true), so each detection names its target in its id field"
+            )
+            return DetectionCheck(("no id", detail), -1, noise)
         if not isinstance(target_id, str) or target_id not in self._ids:
             return DetectionCheck(
                 (
@@ -206,14 +221,10 @@ class InputChecks:
                 noise,
             )
         if z is None:
-            return DetectionCheck(("malformed", "position is not two numbers"), -1, noise)
-        if not np.all(np.isfinite(z)):
-            return DetectionCheck(("non-finite", f"position {z.tolist()}"), -1, noise)
-        centre, reach = self.area
-        distance = float(np.hypot(*(z - centre)))
-        if not distance <= reach:
-            detail = f"{distance:.3g} m from the start, beyond the mission's {reach:.0f} m"
-            return DetectionCheck(("outside the area", detail), -1, noise)
+            return DetectionCheck(MALFORMED_POSITION, -1, noise)
+        position = self._position(z)
+        if position is not None:
+            return DetectionCheck(position, -1, noise)
         if covariance is not None:
             problem, noise = self._noise(covariance, noise)
             if problem is not None:
@@ -233,6 +244,65 @@ class InputChecks:
             detail = f"the same measurement of {target_id} at {t:.3f} s"
             return DetectionCheck(("duplicate", detail), index, noise)
         return DetectionCheck(None, index, noise)
+
+    def report(
+        self,
+        t: float,
+        target_id: Any,
+        z: np.ndarray | None,
+        covariance: Any,
+        ahead_s: float,
+        ended: str | None,
+        beliefs: TrackedBeliefs,
+        confidence: Any,
+    ) -> DetectionCheck:
+        """The check of a report without identity (``sensor.labelled: false``): no id; a
+        position as for a measurement; a covariance, if given, the scenario's ``R`` (the tracker
+        filters every report with it); a ``confidence``, if given, in ``[0, 1]``; not in a look
+        already done (`TrackedBeliefs.late`) and not waiting twice."""
+        noise = self.mission.measurement_noise
+        if target_id is not None:
+            detail = (
+                f"id {raw(target_id)!r} on a mission whose sensor reports no identity "
+                "(sensor.labelled: false): send the detection without id"
+            )
+            return DetectionCheck(("id without identity", detail), -1, noise)
+        if z is None:
+            return DetectionCheck(MALFORMED_POSITION, -1, noise)
+        problem = self._position(z)
+        if problem is None and covariance is not None:
+            problem, own = self._noise(covariance, noise)
+            if problem is None and not np.allclose(own, noise, rtol=1e-9, atol=0.0):
+                detail = (
+                    f"cov {own.tolist()} m^2: the tracker of detections without identity "
+                    f"filters every report with the scenario's R {noise.tolist()} m^2 (send no cov)"
+                )
+                problem = "not R", detail
+        if problem is None and confidence is not None:
+            c = vector(confidence, ())
+            if c is None or not 0.0 <= float(c) <= 1.0:
+                problem = "bad confidence", f"confidence {raw(confidence)!r} is not in [0, 1]"
+        if problem is None:
+            problem = self.time(t, ahead_s, clock_source=False, ended=ended)
+        if problem is None and beliefs.late(t):
+            detail = f"stamped {t:.3f} s, in the look of {beliefs.looked_s:.3f} s that is done"
+            problem = "late", detail
+        if problem is None and beliefs.is_duplicate(t, z):
+            problem = "duplicate", f"the same report at {t:.3f} s"
+        return DetectionCheck(problem, -1, noise)
+
+    def _position(self, z: np.ndarray) -> Problem | None:
+        """The problem with a detection's position ``z`` (2,) m: non-finite or outside the
+        mission's area."""
+        if not np.all(np.isfinite(z)):
+            return "non-finite", f"position {z.tolist()}"
+        centre, reach = self.area
+        distance = float(np.hypot(*(z - centre)))
+        if not distance <= reach:
+            return "outside the area", (
+                f"{distance:.3g} m from the start, beyond the mission's {reach:.0f} m"
+            )
+        return None
 
     @staticmethod
     def _noise(covariance: Any, default: np.ndarray) -> tuple[Problem | None, np.ndarray]:

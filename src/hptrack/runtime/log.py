@@ -1,7 +1,8 @@
 """The mission log: JSON lines, one record per event or decision, flushed as each is written.
 
 Every record is a JSON object with ``kind`` (``header`` first, then ``odometry``,
-``detection``, ``tick``, ``plan``, ``late``, ``mode``, ``end``, and the adapters' ``status``,
+``detection``, ``tick``, ``look`` (without identity: a tick's associations), ``plan``, ``late``,
+``mode``, ``end``, and the adapters' ``status``,
 ``safety``, ``vehicle`` (a change of the vehicle's flight mode or arming), ``foreign`` (the first
 odometry from another MAVLink source) and ``abort`` (why a mission never started)), ``t`` the
 mission time in s where it has one, ``wall`` the wall-clock time (Unix s) when it was written,
@@ -262,6 +263,7 @@ _SCHEMAS: dict[str, type[BaseModel]] = {
     "plan": _Step,
     "tick": _Step,
     "late": _Step,
+    "look": _Step,
     "truth": _Truth,
     "end": _End,
 }

@@ -553,7 +553,9 @@ class _Flight:
             controller.bad_input("detection", parsed.reason, parsed.detail, text[:200])
             return
         t = received if parsed.stamp is None else parsed.stamp - self.unix0
-        controller.detection(t, parsed.target, parsed.position, parsed.covariance)
+        controller.detection(
+            t, parsed.target, parsed.position, parsed.covariance, parsed.confidence
+        )
 
     # --- the mission ----------------------------------------------------------------------
     async def wait_for(

@@ -55,13 +55,16 @@ MAX_NUMBER_CHARS = 40
 
 @dataclass(frozen=True)
 class DetectionMessage:
-    """One detection line, well formed: ``target`` id, ``position`` (x east, y north) m,
-    ``covariance`` 2x2 m^2 or ``None``, ``stamp`` Unix time s or ``None`` (time of arrival)."""
+    """One detection line, well formed: ``target`` id (``None``: a detection without
+    identity), ``position`` (x east, y north) m, ``covariance`` 2x2 m^2 or ``None``, ``stamp``
+    Unix time s or ``None`` (time of arrival), ``confidence`` in ``[0, 1]`` or ``None`` (the
+    detector's score, logged)."""
 
-    target: str
+    target: str | None
     position: tuple[float, float]
     covariance: tuple[tuple[float, float], tuple[float, float]] | None
     stamp: float | None
+    confidence: float | None = None
 
 
 @dataclass(frozen=True)
@@ -78,11 +81,12 @@ _Number = Annotated[float, Strict()]
 class _DetectionFields(BaseModel):
     model_config = ConfigDict(extra="ignore", allow_inf_nan=False, frozen=True)
 
-    id: Annotated[str, Strict(), Field(min_length=1, max_length=200)]
+    id: Annotated[str, Strict(), Field(min_length=1, max_length=200)] | None = None
     x: _Number
     y: _Number
     t: _Number | None = None
     cov: tuple[tuple[_Number, _Number], tuple[_Number, _Number]] | None = None
+    confidence: Annotated[_Number, Field(ge=0.0, le=1.0)] | None = None
 
 
 def _number_token(text: str) -> float:
@@ -93,7 +97,9 @@ def _number_token(text: str) -> float:
 
 def parse_detection_line(line: str) -> DetectionMessage | Refusal:
     """Parse one JSON detection line (``{"id": "t1", "x": east_m, "y": north_m}`` with optional
-    ``"t"`` Unix time s and ``"cov"`` 2x2 m^2) without ever raising: anything else is a
+    ``"t"`` Unix time s, ``"cov"`` 2x2 m^2 and ``"confidence"`` in ``[0, 1]``; without ``"id"``
+    a detection without identity, which the controller takes only on a mission whose sensor
+    has ``labelled: false``) without ever raising: anything else is a
     `Refusal` (too long, not JSON, nested, a number too long to be one, a field missing
     or of the wrong type, a non-finite number)."""
     if len(line) > MAX_DETECTION_LINE_CHARS:
@@ -108,7 +114,7 @@ def parse_detection_line(line: str) -> DetectionMessage | Refusal:
     except (ValueError, RecursionError, OverflowError) as err:
         return Refusal("malformed", f"not a JSON detection ({one_line(str(err), 120)})")
     if not isinstance(message, dict):
-        return Refusal("malformed", 'expected {"id": ..., "x": ..., "y": ...}')
+        return Refusal("malformed", 'expected {"id": ..., "x": ..., "y": ...} (id optional)')
     try:
         fields = _DetectionFields.model_validate(message)
     except ValidationError as err:
@@ -116,7 +122,9 @@ def parse_detection_line(line: str) -> DetectionMessage | Refusal:
         where = ".".join(str(p) for p in first["loc"])
         reason = "non-finite" if first["type"] == "finite_number" else "malformed"
         return Refusal(reason, one_line(f"{where}: {first['msg']} ({shown(first['input'])})"))
-    return DetectionMessage(fields.id, (fields.x, fields.y), fields.cov, fields.t)
+    return DetectionMessage(
+        fields.id, (fields.x, fields.y), fields.cov, fields.t, fields.confidence
+    )
 
 
 RECEIVE_BUFFER_BYTES = 4 * 2**20

@@ -1,7 +1,9 @@
 """Replay a mission log: the same events, in the same order, through a fresh controller.
 
 The controller is rebuilt from the log's header (scenario, planner and its settings, seed,
-controller settings). Each odometry and detection record is fed again, accepted or not; the
+controller settings). Each odometry and detection record is fed again, accepted or not (a
+detection without identity waits for its tick's look, whose associations are compared with the
+logged ``look`` record: the same reports to the same beliefs, the same weights and claims); the
 records a ``setpoint`` call made are grouped by their call number and the call is made again at
 the same mission time. The planner runs in the caller's thread, and only when the log says its
 outcome was delivered (`ReplayRunner`), so no wall clock is
@@ -96,6 +98,7 @@ def _differences(logged: list[dict], replayed: list[dict]) -> list[str]:
             "odometry": ("accepted", "reason"),
             "detection": ("accepted", "reason"),
             "tick": ("k", "submitted", "detected"),
+            "look": ("k", "reports", "belief", "claims", "superseded"),
             "plan": ("k", "status"),
             "late": ("k",),
             "mode": ("mode",),
@@ -107,6 +110,7 @@ def _differences(logged: list[dict], replayed: list[dict]) -> list[str]:
                 out.append(f"{kind} {key}: {old.get(key)!r} became {new.get(key)!r}")
         numbers = {
             "tick": ("logdet", "means", "agent"),
+            "look": ("time", "agent", "weight", "tentative"),
             "plan": ("waypoint",),
             "mode": ("position",),
             "fence": ("reference", "projected"),
@@ -227,11 +231,13 @@ def replay_log(path: str | Path) -> ReplayResult:
                 controller.odometry(log_float(record["t"]), log_array(record["position"]))
             elif kind == "detection":
                 covariance = record.get("covariance")
+                confidence = record.get("confidence")
                 controller.detection(
                     log_float(record["t"]),
                     record.get("target"),
                     log_array(record["position"]),
                     None if covariance is None else log_array(covariance),
+                    None if confidence is None else log_float(confidence),
                 )
             elif kind == "plan":
                 runner.release(record["k"])
@@ -284,6 +290,7 @@ def replay_log(path: str | Path) -> ReplayResult:
         ),
         "accepted": controller.end["accepted"],
         "rejected": controller.end["rejected"],
+        "tracking": controller.end.get("tracking"),
         "adapter": [
             {k: v for k, v in r.items() if k not in ("seq",)}
             for r in adapter

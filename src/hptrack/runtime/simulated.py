@@ -5,7 +5,9 @@ jitter and drops, planner compute times beyond the deadline, and malformed or ho
 The world is the simulator's (`hptrack.sim.step`): true initial states from
 `initial_true_states`, one step of true motion per ``tau`` from the
 scenario's motion model (linearly interpolated between steps for sensing at other rates), the
-sensor's footprint and noise, and the agent moving straight towards the controller's setpoint at
+sensor's footprint and noise (without identity, ``sensor.labelled: false``: the simulator's
+detector, `hptrack.runtime.world.synthetic_detector`, whose reports carry no id), and the agent
+moving straight towards the controller's setpoint at
 ``v_a`` (`move_towards`). The clock advances in physics steps of
 ``1 / setpoint_rate_hz``; at each step the world senses, due events are delivered in delivery
 order, then ``setpoint`` is called and the agent moves.
@@ -35,7 +37,7 @@ from hptrack.runtime.controller import MissionController
 from hptrack.runtime.inputs import ControllerSettings
 from hptrack.runtime.log import MissionLog
 from hptrack.runtime.worker import InlineRunner
-from hptrack.runtime.world import TrueTargets
+from hptrack.runtime.world import TrueTargets, synthetic_detector
 from hptrack.scenario.model import Scenario
 from hptrack.sim.record import EpisodeRecord
 
@@ -172,6 +174,8 @@ def run_simulated(
         header={"source": "simulated", "faults": faults.model_dump(mode="json")},
     )
     sensor = mission.sensor
+    unlabelled = not scenario.sensor_spec().labelled
+    detector = synthetic_detector(scenario, seed) if unlabelled else None
     targets = TrueTargets(scenario, np.random.default_rng(truth_seq), motion_rng)
     agent = np.asarray(scenario.agent.position, dtype=float)
     detection_rate = faults.detection_rate_hz or 1.0 / tau
@@ -197,8 +201,14 @@ def run_simulated(
             log.write({"kind": "truth", "t": t, "k": k, "states": targets.state(k)})
         positions = targets.positions(k, m / per_tau)
         if _due(j, detection_rate, clock):
-            seen = np.flatnonzero(sensor.in_footprint(agent, positions))
-            for i, z in zip(seen, sensor.sample(positions[seen], sensor_rng), strict=True):
+            if detector is not None:
+                measured = detector.look(agent, positions).positions
+                names: list[str | None] = [None] * len(measured)
+            else:
+                seen = np.flatnonzero(sensor.in_footprint(agent, positions))
+                measured = sensor.sample(positions[seen], sensor_rng)
+                names = [mission.target_ids[i] for i in seen]
+            for name, z in zip(names, measured, strict=True):
                 if (
                     faults.detection_drop_probability > 0
                     and fault_rng.random() < faults.detection_drop_probability
@@ -207,7 +217,7 @@ def run_simulated(
                 delay = faults.detection_latency_s
                 if faults.detection_jitter_s > 0:
                     delay += fault_rng.uniform(0.0, faults.detection_jitter_s)
-                schedule(t + delay, "detection", (t, mission.target_ids[i], z))
+                schedule(t + delay, "detection", (t, name, z))
         if _due(j, faults.odometry_rate_hz, clock) and not in_outage(t):
             if not (
                 faults.odometry_drop_probability > 0

@@ -1,14 +1,18 @@
 """Synthetic targets and a footprint detector for flights without real targets: the scenario's
 true targets move from the mission's start (the vehicle's first switch to offboard), and every
 target within the sensor footprint of the vehicle is measured with the scenario's ``R`` and sent
-as a detection datagram to ``hptrack fly``.
+as a detection datagram to ``hptrack fly``. A sensor other than the paper's looks with the
+simulator's detector (`hptrack.runtime.world.synthetic_detector`): a target inside is detected
+with ``detection_probability``, false alarms come by ``false_alarm_density``, and with
+``labelled: false`` the detections carry no id.
 
 One component, two uses: the vehicle stub (`hptrack.runtime.vehicle_sim`) feeds it its own
 position, and ``hptrack targets-sim`` (`run_targets_sim`) feeds it the position an
 autopilot reports on its MAVLink telemetry (a second link, such as PX4's ground-station port
 14550), so that any SITL flies with synthetic targets.
 
-Detection datagram: JSON lines ``{"t": unix_s, "id": ..., "x": east_m, "y": north_m}``.
+Detection datagram: JSON lines ``{"t": unix_s, "id": ..., "x": east_m, "y": north_m}`` (no
+``"id"`` without identity), one datagram per look.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ import numpy as np
 from hptrack.interface import InputError
 from hptrack.runtime.frames import ned_to_enu
 from hptrack.runtime.network import udp_address
-from hptrack.runtime.world import TrueTargets
+from hptrack.runtime.world import TrueTargets, synthetic_detector
 from hptrack.scenario.model import Scenario
 
 logger = logging.getLogger(__name__)
@@ -35,11 +39,16 @@ PX4_OFFBOARD_MAIN_MODE = 6
 """PX4's main mode number of offboard (``custom_mode`` bits 16-23)."""
 
 
-def detection_datagram(stamp_unix_s: float, detections: list[tuple[str, np.ndarray]]) -> bytes:
+def detection_datagram(
+    stamp_unix_s: float, detections: list[tuple[str | None, np.ndarray]]
+) -> bytes:
     """The detection datagram of measurements ``(id, (x east, y north) m)`` taken at
-    ``stamp_unix_s`` (module docstring)."""
+    ``stamp_unix_s`` (module docstring; an id ``None``: a line without ``"id"``)."""
     lines = [
-        json.dumps({"t": stamp_unix_s, "id": tid, "x": float(z[0]), "y": float(z[1])})
+        json.dumps(
+            {"t": stamp_unix_s, **({} if tid is None else {"id": tid})}
+            | {"x": float(z[0]), "y": float(z[1])}
+        )
         for tid, z in detections
     ]
     return "\n".join(lines).encode()
@@ -47,10 +56,12 @@ def detection_datagram(stamp_unix_s: float, detections: list[tuple[str, np.ndarr
 
 @dataclass
 class DetectorStats:
-    """What the detector sent: datagrams and detections per target."""
+    """What the detector sent: datagrams, detections per target (by their true source, also
+    without identity) and false alarms."""
 
     datagrams: int = 0
     detections: dict[str, int] = field(default_factory=dict)
+    false_alarms: int = 0
     started_at_unix_s: float | None = None
 
 
@@ -83,6 +94,8 @@ class TargetDetector:
             scenario, np.random.default_rng(truth_seq), np.random.default_rng(motion_seq)
         )
         self._sensor_rng = np.random.default_rng(sensor_seq)
+        self._detector = synthetic_detector(scenario, seed)
+        self._labelled = scenario.sensor_spec().labelled
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.stats = DetectorStats()
 
@@ -103,14 +116,21 @@ class TargetDetector:
         if start is None:
             return 0
         truth = self._targets.positions_at(unix_s - start)
-        sensor = self.mission.sensor
-        seen = np.flatnonzero(sensor.in_footprint(np.asarray(position_enu, float), truth))
+        agent = np.asarray(position_enu, float)
+        if self._detector is None:
+            sensor = self.mission.sensor
+            seen = np.flatnonzero(sensor.in_footprint(agent, truth))
+            measured = sensor.sample(truth[seen], self._sensor_rng) if len(seen) else truth[:0]
+        else:
+            measured, seen = self._detector.look(agent, truth)
         if not len(seen):
             return 0
-        measured = sensor.sample(truth[seen], self._sensor_rng)
-        ids = [self.mission.target_ids[i] for i in seen]
-        for tid in ids:
+        target_ids = self.mission.target_ids
+        for i in seen[seen >= 0]:
+            tid = target_ids[i]
             self.stats.detections[tid] = self.stats.detections.get(tid, 0) + 1
+        self.stats.false_alarms += int(np.sum(seen < 0))
+        ids = [target_ids[i] if self._labelled else None for i in seen]
         try:
             self._sock.sendto(
                 detection_datagram(unix_s, list(zip(ids, measured, strict=True))), self._address
@@ -198,4 +218,5 @@ def run_targets_sim(
         "mission_started": detector.started,
         "datagrams": detector.stats.datagrams,
         "detections_sent": detector.stats.detections,
+        "false_alarms_sent": detector.stats.false_alarms,
     }

@@ -42,7 +42,8 @@ or fail its take-off (disarm, lose its sensors, or be switched out of TAKEOFF).
 
 Every mode change is reported through ``on_event`` (the CLI prints it). The scenario's targets
 are simulated and detected by `TargetDetector`, the component
-``hptrack targets-sim`` uses against a real SITL, fed here with the stub's own position.
+``hptrack targets-sim`` uses against a real SITL, fed here with the stub's own position (with the
+scenario's detector: misses, false alarms, no ids with ``labelled: false``).
 The vehicle starts on the ground at the scenario's agent position.
 
 Loopback addresses only; every loop is bounded by the run's duration.
@@ -915,5 +916,8 @@ class VehicleSim:
                 time.sleep(max(0.0, min(period, end - self._now())))
         finally:
             self.close()
-        detections = {} if self._detector is None else self._detector.stats.detections
-        return self.stats.as_json(self.mode, self.armed, self.position, detections)
+        detector = self._detector
+        detections = {} if detector is None else detector.stats.detections
+        summary = self.stats.as_json(self.mode, self.armed, self.position, detections)
+        summary["false_alarms_sent"] = 0 if detector is None else detector.stats.false_alarms
+        return summary

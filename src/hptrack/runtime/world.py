@@ -1,14 +1,41 @@
 """The simulated targets shared by the simulated runner and the vehicle stub: the simulator's
 true initial states and one step of true motion per ``tau`` (the scenario's truth motion),
-linearly interpolated between steps so that a sensor may look at any time."""
+linearly interpolated between steps so that a sensor may look at any time; and the scenario's
+detector (`synthetic_detector`), which they and ``targets-sim`` look with."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from hptrack.models.detector import Detector
+from hptrack.models.sensor import detected_mask, draws_detection, measured_mask
 from hptrack.models.truth_motion import sample_truth
 from hptrack.scenario.model import Scenario
-from hptrack.sim.step import initial_true_states
+from hptrack.sim.step import DETECTOR_STREAM, initial_true_states, unlabelled_parts
+
+
+def synthetic_detector(scenario: Scenario, seed: int) -> Detector | None:
+    """The simulator's detector of ``scenario`` for synthetic detections
+    (`hptrack.models.detector.Detector`: misses by ``detection_probability``, false alarms by
+    ``false_alarm_density``), its Generator the simulator's detector stream of ``seed``
+    (`hptrack.sim.step.DETECTOR_STREAM`); ``None`` for the paper's sensor, which measures every
+    target inside the footprint from the simulator's sensor stream as before. Its kernels load
+    (or compile) here, before any flight, without a draw."""
+    parts = unlabelled_parts(scenario, seed)
+    sensor = scenario.mission_spec().record.sensor
+    if parts is not None:
+        detector = parts[0]
+    elif draws_detection(sensor):
+        spec = scenario.sensor_spec()
+        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(DETECTOR_STREAM,)))
+        detector = Detector(sensor, spec.noise_covariance(), spec.false_alarm_density, rng)
+    else:
+        return None
+    here, nowhere = np.zeros(2), np.zeros((1, 2))
+    measured_mask(sensor, here, nowhere)
+    if draws_detection(sensor):
+        detected_mask(sensor, here, nowhere, np.zeros(1))
+    return detector
 
 
 class TrueTargets:
