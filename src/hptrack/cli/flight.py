@@ -35,7 +35,7 @@ from hptrack.cli.common import (
 )
 from hptrack.interface import CurrentPlan, InputError
 from hptrack.registry import PLANNERS, make_planner, planner_entry
-from hptrack.scenario import load_scenario
+from hptrack.scenario import Scenario, load_scenario
 from hptrack.scenario.io import file_data, format_validation_error, parse_scenario
 
 FLY_ITERATIONS = 2000
@@ -216,6 +216,17 @@ def _tracking_view(tracking: dict) -> list[Table]:
     return [head, tracks] if tracking["tentative"] else [head]
 
 
+def load_flight_scenario(path: Path) -> Scenario:
+    """The scenario of a flight command: a team is refused in one line (flight flies one UAV)."""
+    scenario = load_scenario(path)
+    if scenario.n_vehicles > 1:
+        raise InputError(
+            f"{path}: agents: lists {scenario.n_vehicles} UAVs; flight flies one (agent:), "
+            "a team is simulated (docs/teams.md)"
+        )
+    return scenario
+
+
 def fly(
     scenario_path: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario YAML file.")],
     connection: Annotated[
@@ -338,7 +349,7 @@ def fly(
             f"--planner {planner}: it reads the true target states, which no flight has; "
             "it runs in hptrack simulate and benchmark only"
         )
-    scenario = load_scenario(scenario_path)
+    scenario = load_flight_scenario(scenario_path)
     planner_settings = flight_planner_settings(planner, option, iterations, time_limit)
     if log_path is None:
         log_path = Path(f"hptrack-flight-{time.strftime('%Y%m%d-%H%M%S')}.jsonl")
@@ -644,7 +655,7 @@ def vehicle_sim(
     geofence and GF_ACTION) and sends detections of the scenario's simulated targets; it
     prints its mode changes."""
     check_seed(seed)
-    scenario = load_scenario(scenario_path)
+    scenario = load_flight_scenario(scenario_path)
     duration = scenario.budget + 300.0 if duration is None else duration
     _positive(duration, "--duration", 0.0, 86400.0)
     if detection_rate is not None:
@@ -746,7 +757,7 @@ def targets_sim(
     reads the vehicle's position from its MAVLink telemetry, starts the targets when it enters
     offboard, and sends detections to hptrack fly."""
     check_seed(seed)
-    scenario = load_scenario(scenario_path)
+    scenario = load_flight_scenario(scenario_path)
     duration = scenario.budget + 600.0 if duration is None else duration
     _positive(duration, "--duration", 0.0, 86400.0)
     rate = 1.0 / scenario.time_step if detection_rate is None else detection_rate
