@@ -23,9 +23,11 @@ class Decision:
     """A planner's decision at one observation.
 
     Attributes:
-        waypoint: ``(2,)`` position to fly towards now, m.
+        waypoint: ``(2,)`` position to fly towards now, m (a team planner's: ``(m, 2)``, one
+            row per UAV, `hptrack.teams`).
         target: id of the target the planner pursues (the hierarchical planner's sub-task), or
-            ``None`` for planners without sub-tasks (or one that follows or hovers).
+            ``None`` for planners without sub-tasks (or one that follows or hovers, or a
+            team's: each UAV's plan is in ``info["members"]``).
         subtask: the planned sub-task (`hptrack.subtasks.Subtask.to_json`, targets named by
             id: ``kind``, ``target``, intercept time, ``t_cutoff``, ``p_find``, expected time
             in s, the actions planned after a find and a miss) or ``None``.
