@@ -88,3 +88,14 @@ def test_cbba_reallocates_on_its_period_and_keeps_pursuits():
         for target, path in zip(a["committed"], a["paths"], strict=True):
             assert target is None or path[0] == target
     assert any(t is not None for a in auctions[1:] for t in a["committed"])
+
+
+def test_a_uav_follows_the_target_it_found_though_another_claims_it():
+    """Over a lossy link two UAVs may find one target; each may still follow or dwell on it."""
+    for seed in (0, 8, 9):  # scenarios where both UAVs found one target
+        scenario = random_scenario(4, seed, homogeneous=True, team=2, budget=300.0)
+        planner = make_planner(
+            "team-mcts", {"iterations": 100, "share_period": 20.0, "drop_rate": 0.5}
+        )
+        record = run_episode(scenario, planner)
+        assert record.info["link"]["lost"] > 0

@@ -278,9 +278,16 @@ class HierarchicalPlanner:
         """``(n,)`` bool: targets another UAV of a team has claimed, out of this planner's
         action list while they are (set by a team planner, `hptrack.teams`); ``None``: none."""
 
-    def _action_list(self) -> np.ndarray:
-        """The targets this planner may pursue: available and not claimed by another UAV."""
-        return self._available if self.claimed is None else self._available & ~self.claimed
+    def _action_list(self, last_found: int | None = None) -> np.ndarray:
+        """The targets this planner may pursue: available and not claimed by another UAV, but
+        for the target it just found (followed, or dwelt on, even if another UAV claims it
+        over a limited link)."""
+        if self.claimed is None:
+            return self._available
+        mask = self._available & ~self.claimed
+        if last_found is not None:
+            mask[last_found] = self._available[last_found]
+        return mask
 
     # --- planning -------------------------------------------------------------------------
     def _search(
@@ -292,7 +299,7 @@ class HierarchicalPlanner:
         problem = PlanningProblem.from_observation(
             self._record,
             observation,
-            available=self._action_list(),
+            available=self._action_list(last_found),
             last_found=last_found,
             current_action=current_action,
             follow=self._follow_tables,
@@ -340,7 +347,7 @@ class HierarchicalPlanner:
 
     def _search_afresh(self, observation: Observation, last_found: int | None) -> int | None:
         """The best action of a new search, or ``None`` if no target is left or no time."""
-        if self._action_list().any() and observation.remaining_budget > 0:
+        if self._action_list(last_found).any() and observation.remaining_budget > 0:
             return self._search(observation, last_found=last_found).best_action
         return None
 
@@ -370,7 +377,12 @@ class HierarchicalPlanner:
         """Carry on after a sub-task: follow, dwell, start the planned target, or plan
         afresh."""
         if planned is None or not feasible(
-            self._table, planned, self._mission, observation, self._action_list(), last_found
+            self._table,
+            planned,
+            self._mission,
+            observation,
+            self._action_list(last_found),
+            last_found,
         ):
             planned = self._search_afresh(observation, last_found)
             if planned is None and last_found is None and self._readmit(observation.step):
