@@ -82,8 +82,8 @@ def report(by_team: dict[int, dict[str, dict]], out: Path, command: str) -> None
         "```",
         "",
         "Mean U +- standard error (episodes), share of the gap from the greedy team to the",
-        "clairvoyant team of the same size closed, on the mean U of the scenarios all three flew,",
-        "and targets never detected per episode.",
+        "clairvoyant team of the same size closed, on the mean U of the scenarios all three flew",
+        "(their number), and targets never detected per episode.",
         "",
         "| n | UAVs | planner | episodes | mean U | gap closed, % | never detected |",
         "|---|---|---|---|---|---|---|",
@@ -100,12 +100,12 @@ def report(by_team: dict[int, dict[str, dict]], out: Path, command: str) -> None
                 common = [s for s in seeds if (n, s) in greedy and (n, s) in clair]
                 ends = [np.mean([ref[n, s].uncertainty for s in common]) for ref in (greedy, clair)]
                 mine = np.mean([rows[n, s].uncertainty for s in common])
-                gap = 100.0 * (ends[0] - mine) / (ends[0] - ends[1])
+                gap = 100.0 * (ends[0] - mine) / (ends[0] - ends[1]) if common else float("nan")
                 never = np.mean([rows[n, s].info["targets_never_detected"] for s in seeds])
                 mean, se = mean_se(u)
                 lines.append(
                     f"| {n} | {m} | {variant} | {len(seeds)} | {mean:.2f} +- {se:.2f} | "
-                    f"{gap:.0f} | {never:.2f} |"
+                    f"{gap:.0f} ({len(common)}) | {never:.2f} |"
                 )
                 summary["rows"].append(
                     {
@@ -116,6 +116,7 @@ def report(by_team: dict[int, dict[str, dict]], out: Path, command: str) -> None
                         "mean_U": mean,
                         "se_U": se,
                         "gap_closed_percent": gap,
+                        "gap_scenarios": len(common),
                         "never_detected": float(never),
                     }
                 )
