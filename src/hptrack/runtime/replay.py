@@ -304,7 +304,10 @@ def replay_log(path: str | Path) -> ReplayResult:
             {
                 key: controller.end[key]
                 for key in (
-                    "separation_m", "min_separation_m", "min_reference_separation_m", "yields"
+                    "separation_m",
+                    "min_separation_m",
+                    "min_reference_separation_m",
+                    "yields",
                 )
             }
             if team

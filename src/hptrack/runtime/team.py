@@ -56,7 +56,9 @@ def team_flight_problem(scenario: Scenario) -> str | None:
         return "a team flies without sensor.negative_information (no miss updates in flight)"
     if scenario.fence is not None:
         return "a team flies without a fence: block (the fence is flown by one vehicle)"
-    noises = {scenario.sensor_spec(j).noise_covariance().tobytes() for j in range(scenario.n_vehicles)}
+    noises = {
+        scenario.sensor_spec(j).noise_covariance().tobytes() for j in range(scenario.n_vehicles)
+    }
     if len(noises) > 1:
         return (
             "a team flies with one measurement noise for every UAV of agents (a detection "
