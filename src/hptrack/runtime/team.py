@@ -34,7 +34,7 @@ from hptrack.runtime.inputs import ControllerSettings, raw, vector
 from hptrack.runtime.legs import Leg, Setpoint
 from hptrack.runtime.log import MissionLog, log_float
 from hptrack.runtime.record import MissionHistory
-from hptrack.runtime.worker import PlannerRunner
+from hptrack.runtime.worker import Fallback, PlannerRunner
 from hptrack.scenario.model import Scenario
 from hptrack.teams.sequential import TeamGreedyPlanner
 
@@ -168,7 +168,7 @@ class TeamController(MissionController):
         starts = scenario.starts()
         self.history = MissionHistory(self.mission, starts)
         self._hold_at = starts.copy()
-        self.fallback.planner = TeamGreedyPlanner()
+        self.fallback = Fallback(self.mission, self.seed, TeamGreedyPlanner())
         self._vehicle_checks = []
         for j in range(self.n_vehicles):
             checks = copy.copy(self.checks)
@@ -206,6 +206,7 @@ class TeamController(MissionController):
             problem = checks.odometry(t, p, self._odoms[vehicle], self._ended())
             if problem is not None:
                 return self.journal.refuse("odometry", record, *problem)
+            assert p is not None  # checked
             self._odoms[vehicle] = (t, p)
             if all(o is not None for o in self._odoms):
                 known = [o for o in self._odoms if o is not None]

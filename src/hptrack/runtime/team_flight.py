@@ -129,11 +129,11 @@ async def _take_off_all(members: list[_Member], systems: list[Any]) -> None:
 
 async def _start_offboard_all(
     members: list[_Member], systems: list[Any], altitude_m: float
-) -> list:
+) -> list[OffboardAsync]:
     """Start offboard on each vehicle in turn at its position (the mission altitude); one that
     never enters OFFBOARD stops offboard on those started and raises. Returns each vehicle's
     `OffboardAsync`."""
-    offboards = []
+    offboards: list[OffboardAsync] = []
     for member, system in zip(members, systems, strict=True):
         offboard = OffboardAsync(system)
         home = member.home = member.position_enu()

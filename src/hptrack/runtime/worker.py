@@ -17,7 +17,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -332,11 +332,12 @@ class Fallback:
     Args:
         mission: the mission's facts.
         seed: the generator handed to ``greedy``'s reset (it draws nothing).
+        planner: the planner that decides instead of ``greedy`` (a team's ``team-greedy``).
     """
 
-    def __init__(self, mission: MissionSpec, seed: int) -> None:
+    def __init__(self, mission: MissionSpec, seed: int, planner: Any = None) -> None:
         self.mission, self.seed = mission, seed
-        self.planner = GreedyPlanner()
+        self.planner: Any = GreedyPlanner() if planner is None else planner
         self.active = False
 
     def decide(self, obs: Observation) -> np.ndarray:
