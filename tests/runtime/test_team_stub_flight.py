@@ -82,6 +82,8 @@ def test_a_team_of_two_stubs_flies_to_its_budget_apart_and_replays(tmp_path):
     assert header["planner"] == "team-mcts" and header["separation_m"] == SEPARATION_M
     systems = [r["system_id"] for r in records if "system_id" in r and r["kind"] == "status"]
     assert systems == [1, 2]  # one autopilot per connection
+    frames = [(r["vehicle"], r["offset"]) for r in records if r["kind"] == "frame"]
+    assert frames == [(0, [0.0, 0.0]), (1, [0.0, 0.0])]  # the stubs share one origin
     odometry = [r for r in records if r["kind"] == "odometry" and r["accepted"]]
     assert {r["vehicle"] for r in odometry} == {0, 1}
     ticks = [r for r in records if r["kind"] == "tick" and r["agent"] is not None]

@@ -15,8 +15,9 @@ records carry its index (``vehicle j: ...``, ``"vehicle": j``).
 The safe ends are the single vehicle's, for the team: the budget, Ctrl-C, a vehicle's lost
 link, a vehicle's setpoint beyond ``max_distance_m`` from its home, or a controller error hold
 every vehicle; a vehicle that leaves OFFBOARD (a pilot or a failsafe) is left to its pilot and
-the others hold. The vehicles' local frames must be one frame (the stubs of ``vehicle-sim
---instances`` share one; PX4 SITL instances each have their own origin: docs/teams.md).
+the others hold. The scenario is written in the first vehicle's local frame, and every other
+vehicle's positions and setpoints are moved between its own local frame and that one by the
+offset of its GPS origin from the first's (`_frame_offsets`).
 """
 
 from __future__ import annotations
@@ -42,10 +43,10 @@ from mavsdk.asyncio.plugins.offboard import (
     PositionNedYaw,
     VelocityNedYaw,
 )
-from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
+from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync, TelemetryError
 
 from hptrack.interface import InputError
-from hptrack.runtime.frames import enu_to_ned
+from hptrack.runtime.frames import enu_to_ned, geodetic_to_local
 from hptrack.runtime.intake import DetectionIntake
 from hptrack.runtime.links import connection_problem
 from hptrack.runtime.log import ABORT, MISSION_START_MESSAGE, MissionLog
@@ -80,6 +81,13 @@ class _Member(_Flight):
         super().__init__(*args, **kwargs)
         self.index = index
         self.team_controller: TeamController | None = None
+        self.offset = np.zeros(2)
+        """Where this vehicle's local origin is in the team's frame (the first vehicle's
+        local frame), east-north m (`_frame_offsets`)."""
+
+    def position_enu(self) -> np.ndarray:
+        """The vehicle's position in the team's frame, m."""
+        return super().position_enu() + self.offset
 
     def say(self, message: str, *, show: bool = True, kind: str = "status", **fields: Any) -> None:
         """`_Flight.say` with the vehicle's index in the record (its console lines start
@@ -88,7 +96,7 @@ class _Member(_Flight):
 
     def feed_odometry(self, t: float, position: tuple[float, float]) -> None:
         assert self.team_controller is not None
-        self.team_controller.odometry(t, position, self.index)
+        self.team_controller.odometry(t, np.asarray(position) + self.offset, self.index)
 
 
 async def _connect(member: _Member, mavsdk: Mavsdk, tasks: list[asyncio.Task]) -> Any:
@@ -137,7 +145,8 @@ async def _start_offboard_all(
     for member, system in zip(members, systems, strict=True):
         offboard = OffboardAsync(system)
         home = member.home = member.position_enu()
-        n, e, d = enu_to_ned(home[0], home[1], altitude_m)
+        east, north = home - member.offset
+        n, e, d = enu_to_ned(east, north, altitude_m)
         first = (PositionNedYaw(n, e, d, 0.0), VelocityNedYaw(0.0, 0.0, 0.0, 0.0))
         try:
             await offboard.set_position_velocity_ned(*first)
@@ -151,10 +160,39 @@ async def _start_offboard_all(
     return offboards
 
 
+async def _frame_offsets(members: list[_Member], systems: list[Any]) -> None:
+    """Put every vehicle's local frame into the first's: each vehicle's ``GPS_GLOBAL_ORIGIN``
+    (the origin of its local frame) as east-north metres from the first's
+    (`hptrack.runtime.frames.geodetic_to_local`); a vehicle that gives none is taken to share
+    the first's frame, and said so. PX4 SITL instances each set their origin where they start;
+    the stubs of ``vehicle-sim --instances`` share one."""
+    origins: list[tuple[float, float] | None] = []
+    for member, system in zip(members, systems, strict=True):
+        try:
+            origin = await TelemetryAsync(system).get_gps_global_origin()
+            origins.append((float(origin.latitude_deg), float(origin.longitude_deg)))
+        except TelemetryError as err:
+            origins.append(None)
+            member.say(f"no GPS_GLOBAL_ORIGIN ({err}): its local frame is taken to be vehicle 0's")
+    first = origins[0]
+    for member, origin in zip(members, origins, strict=True):
+        if first is not None and origin is not None:
+            north, east = geodetic_to_local(*first, *origin)
+            member.offset = np.array([east, north])
+        member.say(
+            f"local frame origin at ({member.offset[0]:.1f}, {member.offset[1]:.1f}) m in "
+            "vehicle 0's",
+            show=member.index > 0,
+            kind="frame",
+            offset=member.offset,
+            origin=origin,
+        )
+
+
 def _team_status(members: list[_Member], controller: TeamController, t: float) -> dict:
     """The live view's snapshot of the team: the first vehicle's, with every vehicle's mode
     and the farthest from its home."""
-    statuses = [m.status(t, m.home) for m in members if m.home is not None]
+    statuses = [m.status(t, m.home - m.offset) for m in members if m.home is not None]
     status = statuses[0] if statuses else {**controller.status(), "t": t}
     status["flight_mode"] = ", ".join(str(s.get("flight_mode")) for s in statuses)
     status["distance_from_home_m"] = max((s["distance_from_home_m"] for s in statuses), default=0)
@@ -236,7 +274,7 @@ async def _fly_team(
                 )
         for member, offboard, setpoint in zip(members, offboards, setpoints, strict=True):
             member.check_following(t, setpoint.reference)
-            x, y = setpoint.reference
+            x, y = setpoint.reference - member.offset
             n, e, d = enu_to_ned(x, y, options.altitude_m)
             v_n, v_e, _ = enu_to_ned(setpoint.velocity[0], setpoint.velocity[1], 0.0)
             try:
@@ -343,6 +381,7 @@ async def fly_team_mission(
                 )
             for member in members:
                 member.say("vehicle found; local position received")
+            await _frame_offsets(members, systems)
             limits = [await read_limits(system) for system in systems]
             controller = build(limits)
             for member in members:
