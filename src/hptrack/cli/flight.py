@@ -145,6 +145,15 @@ def _live_view(status: dict) -> Group:
         ),
     )
     head.add_row("sub-task", escape(_subtask_text(status["plan"], status["target_ids"])))
+    if "min_separation_m" in status:
+        yielding = [
+            f"{j} to {i}" for j, i in enumerate(status.get("yielding") or []) if i is not None
+        ]
+        head.add_row(
+            "separation",
+            f"smallest {status['min_separation_m']:.1f} m at the ticks; yielding: "
+            + (", ".join(yielding) or "none"),
+        )
     last = status.get("last_detection")
     name = (
         None
@@ -604,6 +613,18 @@ def _tracking_text(tracking: dict | None) -> str:
     )
 
 
+def _separation_text(summary: dict) -> str:
+    """A team's separation for a summary line (``""`` for one UAV)."""
+    if "separation_m" not in summary:
+        return ""
+    return (
+        f"; separation {summary['separation_m']:g} m: smallest "
+        f"{summary['min_separation_m']:.1f} m between vehicles at the ticks, "
+        f"{summary['min_reference_separation_m']:.1f} m between references, "
+        f"{summary['yields']} yields"
+    )
+
+
 def planned_speed(scenario_speed: float, limits: Any, cap: bool) -> float:
     """The speed to plan with: the scenario's, unless the vehicle's limit (``limits``, a
     `VehicleLimits`) is lower, m/s.
@@ -1014,6 +1035,7 @@ def replay(
             f"{'-' if logged is None else format(logged, '.3f')}; "
             f"{summary['mismatches']} mismatches"
             + _tracking_text(summary.get("tracking"))
+            + _separation_text(summary)
             + (
                 "; decisions taken from the log (it names a model file, which a replay never loads)"
                 if summary["decisions"] == "logged"

@@ -73,6 +73,20 @@ def _prefixed(on_message: Callable[[str], None], prefix: str, text: str) -> None
     on_message(prefix + text)
 
 
+class _VehicleLog:
+    """The mission log as one vehicle of the team writes to it: every record with the
+    vehicle's index (``"vehicle": j``)."""
+
+    def __init__(self, log: MissionLog, index: int) -> None:
+        self._log, self._index = log, index
+
+    def write(self, record: dict) -> dict:
+        return self._log.write({**record, "vehicle": self._index})
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._log, name)
+
+
 class _Member(_Flight):
     """One vehicle of the team: the single vehicle's flight with its index on every message,
     record and odometry."""
@@ -91,8 +105,15 @@ class _Member(_Flight):
 
     def say(self, message: str, *, show: bool = True, kind: str = "status", **fields: Any) -> None:
         """`_Flight.say` with the vehicle's index in the record (its console lines start
-        with it: the member's ``on_message``)."""
+        with it: the member's ``on_message``; the records it writes later carry it too,
+        `_VehicleLog`)."""
         super().say(message, show=show, kind=kind, vehicle=self.index, **fields)
+
+    def attach(self, controller: Any) -> None:
+        """`_Flight.attach`, then every record this vehicle writes carries its index."""
+        super().attach(controller)
+        self.log = _VehicleLog(self.log, self.index)  # type: ignore[assignment]
+        self.team_controller = controller
 
     def feed_odometry(self, t: float, position: tuple[float, float]) -> None:
         assert self.team_controller is not None
@@ -386,7 +407,6 @@ async def fly_team_mission(
             controller = build(limits)
             for member in members:
                 member.attach(controller)
-                member.team_controller = controller
             if lead.log_failed():
                 raise FlightError(
                     f"the mission log cannot be written ({log.stopped}); nothing was flown"
