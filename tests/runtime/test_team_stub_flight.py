@@ -50,18 +50,28 @@ def _end(process: subprocess.Popen) -> None:
         process.communicate()
 
 
-def test_a_team_of_two_stubs_flies_to_its_budget_apart_and_replays(tmp_path):
+@pytest.mark.parametrize("targets", ["stubs", "targets-sim"])
+def test_a_team_of_two_stubs_flies_to_its_budget_apart_and_replays(tmp_path, targets):
     data = yaml.safe_load(EXAMPLE.read_text())
     data["budget"] = BUDGET_S
     scenario = tmp_path / "team.yaml"
     scenario.write_text(yaml.safe_dump(data))
-    mav, det = _free_port_pair(), _free_port_pair()
+    mav, det, gcs = _free_port_pair(), _free_port_pair(), _free_port_pair()
+    own = ["--no-targets", "--gcs", f"udpout://127.0.0.1:{gcs}"] if targets != "stubs" else []
     stub = subprocess.Popen(
         [*CLI, "vehicle-sim", str(scenario), "--instances", "2", "--mavlink",
          f"udpout://127.0.0.1:{mav}", "--detections", f"udp://127.0.0.1:{det}",
-         "--duration", str(BUDGET_S + 150)],
+         "--duration", str(BUDGET_S + 150), *own],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
+    sim = None
+    if targets != "stubs":  # both stubs' telemetry on one port, as PX4 SITL's instances
+        sim = subprocess.Popen(
+            [*CLI, "targets-sim", str(scenario), "--mavlink", f"udpin://127.0.0.1:{gcs}",
+             "--detections", f"udp://127.0.0.1:{det}", "--duration", str(BUDGET_S + 150),
+             "--stats", str(tmp_path / "targets.json")],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
     log = tmp_path / "team.jsonl"
     try:
         fly = subprocess.run(
@@ -74,6 +84,8 @@ def test_a_team_of_two_stubs_flies_to_its_budget_apart_and_replays(tmp_path):
         )  # fmt: skip
     finally:
         _end(stub)
+        if sim is not None:
+            _end(sim)
     assert fly.returncode == 0, fly.stdout + fly.stderr
     out = " ".join(fly.stdout.split())
     assert "ended by budget" in out and "vehicles 0 hold, 1 hold: 0 HOLD, 1 HOLD" in out
@@ -92,7 +104,13 @@ def test_a_team_of_two_stubs_flies_to_its_budget_apart_and_replays(tmp_path):
     assert all(len(r["agent"]) == 2 for r in ticks)
     end = next(r for r in records if r["kind"] == "end")
     assert end["reason"] == "budget" and end["min_reference_separation_m"] >= SEPARATION_M - 1e-9
-    assert any(r["kind"] == "detection" and r["accepted"] for r in records)
+    detections = [r for r in records if r["kind"] == "detection" and r["accepted"]]
+    assert detections
+    if sim is not None:  # targets-sim read both vehicles; what fly took, it sent
+        seen = json.loads((tmp_path / "targets.json").read_text())
+        assert seen["mission_started"] and seen["other_positions"] == 0
+        assert min(seen["positions_by_vehicle"]) > 10 * BUDGET_S  # both at 30 Hz
+        assert set(seen["detections_sent"]) >= {r["target"] for r in detections}
     safety = [r for r in records if r["kind"] == "safety"]
     assert [r["confirmed"] for r in safety] == ["HOLD", "HOLD"]
 

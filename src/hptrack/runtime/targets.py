@@ -176,8 +176,9 @@ def run_targets_sim(
     A team (``team_system_ids``: the MAVLink system id of each UAV, in the order of
     ``agents:``; PX4's multi-vehicle SITL numbers instance ``i`` ``MAV_SYS_ID = i + 1`` and
     sends every instance's telemetry to the one ground-station port) is sensed from every
-    UAV's position with its own footprint; the positions of other systems are ignored
-    (counted in ``other_positions``), and the first UAV in offboard starts the targets.
+    UAV's position with its own footprint (``positions_by_vehicle`` counts them); the
+    positions of other systems are ignored (counted in ``other_positions``), and the first UAV
+    in offboard starts the targets.
 
     Raises:
         InputError: an address that cannot be opened (malformed, in use, not on this machine).
@@ -195,6 +196,7 @@ def run_targets_sim(
     ids = (0,) if team_system_ids is None else team_system_ids
     seen = {system: _Telemetry() for system in ids}
     counts = {"heartbeats": 0, "positions": 0}
+    by_vehicle = [0] * len(ids)
     if team_system_ids is not None:
         counts["other_positions"] = 0
 
@@ -230,6 +232,7 @@ def run_targets_sim(
                     telemetry.offboard = offboard
                 elif kind == "LOCAL_POSITION_NED":
                     counts["positions"] += 1
+                    by_vehicle[j] += 1
                     seen[ids[j]].position_ned = np.array([msg.x, msg.y, msg.z], dtype=float)
                 msg = link.recv_match(blocking=False)
             now = time.monotonic()
@@ -245,6 +248,7 @@ def run_targets_sim(
         detector.close()
     return {
         **counts,
+        **({} if team_system_ids is None else {"positions_by_vehicle": by_vehicle}),
         "mission_started": detector.started,
         "datagrams": detector.stats.datagrams,
         "detections_sent": detector.stats.detections,
