@@ -12,7 +12,7 @@ from hptrack.interface import CurrentPlan, InputError
 from hptrack.registry import make_planner
 from hptrack.runtime.log import MissionLog
 from hptrack.runtime.replay import replay_log
-from hptrack.runtime.simulated import run_simulated
+from hptrack.runtime.simulated import SimulatedFaults, run_simulated
 from hptrack.runtime.team import TeamController, pairwise_minimum, separate
 from hptrack.scenario import load_scenario
 from hptrack.scenario.io import file_data, parse_scenario
@@ -146,3 +146,27 @@ def test_flight_commands_refuse_a_team_they_cannot_fly_in_one_line(flight_cli, t
     unlabelled = tmp_path / "unlabelled.yaml"
     unlabelled.write_text(EXAMPLE.read_text() + "sensor:\n  labelled: false\n")
     flight_cli("targets-sim", str(unlabelled)).refused("agents: lists 2 UAVs", "labelled")
+
+
+def test_a_late_team_planner_is_replaced_by_team_greedy_and_replays(tmp_path):
+    scenario = load_scenario(EXAMPLE).model_copy(update={"budget": 10.0})
+    path = tmp_path / "late.jsonl"
+    faults = SimulatedFaults(planner_slow_probability=0.5, planner_slow_delay_s=1.5)
+    with MissionLog(path) as log:
+        run = run_simulated(scenario, make_planner("team-greedy"), seed=3, faults=faults, log=log)
+    fallbacks = [r for r in run.controller.log.records if r["kind"] == "fallback"]
+    assert fallbacks and {r["planner"] for r in fallbacks} == {"team-greedy"}
+    assert all(np.shape(r["waypoint"]) == (2, 2) for r in fallbacks)
+    replayed = replay_log(path)
+    assert replayed.summary["mismatches"] == 0, replayed.summary["first_mismatches"]
+    assert replayed.summary["U"] == run.controller.end["U"]
+
+
+def test_fly_searches_every_uav_as_it_searches_one():
+    from hptrack.cli.flight import FLY_ITERATIONS, flight_planner_settings
+
+    for planner in ("team-mcts", "team-cbba"):
+        settings = flight_planner_settings(planner, None, None, None)
+        assert settings.iterations == FLY_ITERATIONS and settings.readmit is True
+    given = flight_planner_settings("team-mcts", ["readmit=false"], 50, None)
+    assert given.iterations == 50 and given.readmit is False
