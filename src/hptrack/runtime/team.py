@@ -10,12 +10,15 @@ current beliefs. The setpoint mode is the team's: every vehicle holds when any v
 odometry is stale, before the first plan, or after a planner error.
 
 Separation (`separate`): at every ``setpoint`` call the vehicles' references are kept at least
-``separation_m`` apart by a fixed rule, the lower index first: vehicle ``j``'s reference, when
-it comes within ``separation_m`` of the final reference of a vehicle ``i < j``, is moved
-straight away from it to that distance (it yields, with no feed-forward); the first vehicle
-never yields. A vehicle that starts or stops yielding is logged (a ``yield`` record), and
-every tick records the smallest pairwise distance between the vehicles' latest odometry
-(``separation_m``), which a replay derives again and checks.
+``separation_m`` apart by a fixed rule, the lower index first: vehicle ``j`` yields when its
+straight way from its odometry to its reference comes within ``separation_m`` of the final
+reference of a vehicle ``i < j``; its reference becomes the point ``separation_m`` from ``i``'s
+on ``j``'s own side, with no feed-forward (it holds there, or is pushed back). The first vehicle
+never yields. A vehicle that starts or stops yielding is logged (a ``yield`` record); every tick
+records the smallest pairwise distance between the vehicles' latest odometry
+(``separation_m``), and the ``end`` record the smallest over the ticks, the smallest between
+the references of any ``setpoint`` call and the yields, which a replay derives again and
+checks.
 
 Team flights take detections that name their target (``sensor.labelled``, the default) without
 ``negative_information`` or a fence (`team_flight_problem`).
