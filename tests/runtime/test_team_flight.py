@@ -170,3 +170,14 @@ def test_fly_searches_every_uav_as_it_searches_one():
         assert settings.iterations == FLY_ITERATIONS and settings.readmit is True
     given = flight_planner_settings("team-mcts", ["readmit=false"], 50, None)
     assert given.iterations == 50 and given.readmit is False
+
+
+def test_targets_sim_puts_another_vehicle_in_the_first_ones_frame_by_their_gps():
+    from hptrack.runtime.frames import local_to_geodetic
+    from hptrack.runtime.targets import _Telemetry, team_position
+
+    origin = (47.397742, 8.545594)
+    first = _Telemetry(np.array([5.0, 10.0, -20.0]), geodetic=local_to_geodetic(*origin, 5, 10))
+    other = _Telemetry(geodetic=local_to_geodetic(*first.geodetic, 20.0, -30.0))
+    assert np.allclose(team_position(first, other), [-20.0, 25.0], rtol=0.0, atol=1e-6)
+    assert team_position(first, _Telemetry()) is None

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hptrack.interface import InputError
-from hptrack.runtime.frames import ned_to_enu
+from hptrack.runtime.frames import geodetic_to_local, ned_to_enu
 from hptrack.runtime.network import udp_address
 from hptrack.runtime.world import TrueTargets, synthetic_detector
 from hptrack.scenario.model import Scenario
@@ -155,6 +155,19 @@ class _Telemetry:
     position_ned: np.ndarray | None = None
     offboard: bool = False
     armed: bool = False
+    geodetic: tuple[float, float] | None = None
+    """The last ``GLOBAL_POSITION_INT`` (latitude, longitude), degrees."""
+
+
+def team_position(first: _Telemetry, other: _Telemetry) -> np.ndarray | None:
+    """Where ``other`` is in the first UAV's local frame, east-north m: the first's local
+    position plus the tangent-plane offset of ``other``'s geodetic position from the first's
+    (`geodetic_to_local`); ``None`` until both have sent both."""
+    if first.position_ned is None or first.geodetic is None or other.geodetic is None:
+        return None
+    north, east = geodetic_to_local(*first.geodetic, *other.geodetic)
+    east0, north0, _ = ned_to_enu(*first.position_ned)
+    return np.array([east0 + east, north0 + north])
 
 
 def run_targets_sim(
@@ -178,7 +191,10 @@ def run_targets_sim(
     sends every instance's telemetry to the one ground-station port) is sensed from every
     UAV's position with its own footprint (``positions_by_vehicle`` counts them); the
     positions of other systems are ignored (counted in ``other_positions``), and the first UAV
-    in offboard starts the targets.
+    in offboard starts the targets. The team's frame is the first UAV's local frame (each
+    autopilot's local origin is its own): another UAV is where its ``GLOBAL_POSITION_INT``
+    lies from the first's, east-north m (`team_position`), added to the first's local
+    position.
 
     Raises:
         InputError: an address that cannot be opened (malformed, in use, not on this machine).
@@ -230,6 +246,8 @@ def run_targets_sim(
                     elif telemetry.offboard and not offboard:
                         say(f"{name} left OFFBOARD")
                     telemetry.offboard = offboard
+                elif kind == "GLOBAL_POSITION_INT":
+                    seen[ids[j]].geodetic = (msg.lat * 1e-7, msg.lon * 1e-7)
                 elif kind == "LOCAL_POSITION_NED":
                     counts["positions"] += 1
                     by_vehicle[j] += 1
@@ -241,8 +259,13 @@ def run_targets_sim(
                 for j, system in enumerate(ids):
                     ned = seen[system].position_ned
                     if ned is not None and math.isfinite(ned.sum()) and -ned[2] > min_altitude_m:
-                        east, north, _ = ned_to_enu(*ned)
-                        detector.sense(time.time(), np.array([east, north]), j)
+                        if j == 0:
+                            east, north, _ = ned_to_enu(*ned)
+                            here: np.ndarray | None = np.array([east, north])
+                        else:
+                            here = team_position(seen[ids[0]], seen[system])
+                        if here is not None:
+                            detector.sense(time.time(), here, j)
     finally:
         link.close()
         detector.close()
