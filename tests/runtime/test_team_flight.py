@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from hptrack.interface import CurrentPlan, InputError
 from hptrack.registry import make_planner
@@ -146,6 +147,12 @@ def test_flight_commands_refuse_a_team_they_cannot_fly_in_one_line(flight_cli, t
     unlabelled = tmp_path / "unlabelled.yaml"
     unlabelled.write_text(EXAMPLE.read_text() + "sensor:\n  labelled: false\n")
     flight_cli("targets-sim", str(unlabelled)).refused("agents: lists 2 UAVs", "labelled")
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["agents"][1]["sensor_diameter"] = 30.0
+    data["sensor"] = {"detection_probability": 0.8}
+    misses = tmp_path / "misses.yaml"
+    misses.write_text(yaml.safe_dump(data))
+    flight_cli("vehicle-sim", str(misses)).refused("one footprint", "sensor_diameter")
 
 
 def test_a_late_team_planner_is_replaced_by_team_greedy_and_replays(tmp_path):

@@ -234,14 +234,18 @@ def _tracking_view(tracking: dict) -> list[Table]:
     return [head, tracks] if tracking["tentative"] else [head]
 
 
-def load_flight_scenario(path: Path) -> Scenario:
+def load_flight_scenario(path: Path, synthetic: bool = False) -> Scenario:
     """The scenario of a flight command: a team that flight cannot fly is refused in one line
-    (`hptrack.runtime.team.team_flight_problem`)."""
+    (`hptrack.runtime.team.team_flight_problem`), and, for the synthetic targets
+    (``synthetic``), one whose UAVs they cannot look with
+    (`hptrack.runtime.team.synthetic_team_problem`)."""
     scenario = load_scenario(path)
     if scenario.n_vehicles > 1:
-        from hptrack.runtime.team import team_flight_problem
+        from hptrack.runtime.team import synthetic_team_problem, team_flight_problem
 
         problem = team_flight_problem(scenario)
+        if problem is None and synthetic:
+            problem = synthetic_team_problem(scenario)
         if problem is not None:
             raise InputError(f"{path}: agents: lists {scenario.n_vehicles} UAVs; {problem}")
     return scenario
@@ -773,7 +777,7 @@ def vehicle_sim(
     geofence and GF_ACTION) and sends detections of the scenario's simulated targets; it
     prints its mode changes."""
     check_seed(seed)
-    scenario = load_flight_scenario(scenario_path)
+    scenario = load_flight_scenario(scenario_path, synthetic=True)
     duration = scenario.budget + 300.0 if duration is None else duration
     _positive(duration, "--duration", 0.0, 86400.0)
     if detection_rate is not None:
@@ -933,7 +937,7 @@ def targets_sim(
     reads the vehicle's position from its MAVLink telemetry, starts the targets when it enters
     offboard, and sends detections to hptrack fly."""
     check_seed(seed)
-    scenario = load_flight_scenario(scenario_path)
+    scenario = load_flight_scenario(scenario_path, synthetic=True)
     duration = scenario.budget + 600.0 if duration is None else duration
     _positive(duration, "--duration", 0.0, 86400.0)
     rate = 1.0 / scenario.time_step if detection_rate is None else detection_rate

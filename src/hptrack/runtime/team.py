@@ -70,6 +70,22 @@ def team_flight_problem(scenario: Scenario) -> str | None:
     return None
 
 
+def synthetic_team_problem(scenario: Scenario) -> str | None:
+    """Why the synthetic targets (``vehicle-sim``, ``targets-sim``) cannot look with every UAV
+    of ``scenario``'s team (one line), or ``None``: a detector with misses or false alarms
+    (`hptrack.runtime.world.synthetic_detector`) looks with one footprint."""
+    sensor = scenario.sensor_spec()
+    diameters = {scenario.sensor_spec(j).diameter for j in range(scenario.n_vehicles)}
+    if len(diameters) > 1 and (
+        sensor.detection_probability != 1.0 or sensor.false_alarm_density > 0.0
+    ):
+        return (
+            "the synthetic detector with misses or false alarms looks with one footprint: give "
+            "every UAV of agents the same sensor_diameter"
+        )
+    return None
+
+
 def pairwise_minimum(positions: np.ndarray) -> float:
     """The smallest distance between two of ``positions`` ``(m, 2)``, m (``inf`` for one)."""
     p = np.asarray(positions, dtype=float)
