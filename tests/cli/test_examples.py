@@ -17,6 +17,7 @@ EXPECTED = {
     "paper-flight.yaml",
     "fenced-flight.yaml",
     "unlabelled-flight.yaml",
+    "team-flight.yaml",
     "stonesoup_tracking.py",
 }
 

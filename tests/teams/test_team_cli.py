@@ -1,5 +1,6 @@
 """A team from the command line: simulate and benchmark fly it with the team planners; a
-planner of one UAV, flight and a bad team size are refused in one line, exit 2."""
+planner of one UAV, a flight without one connection per UAV and a bad team size are refused in
+one line, exit 2."""
 
 import json
 
@@ -27,10 +28,10 @@ def test_a_planner_of_one_uav_and_a_bad_team_size_are_refused(cli):
     )
 
 
-def test_scenario_random_writes_a_team_that_flight_refuses(cli, tmp_path):
+def test_scenario_random_writes_a_team_that_flight_wants_one_connection_per_uav_for(cli, tmp_path):
     path = tmp_path / "team.yaml"
     assert cli("scenario", "random", "--targets", "3", "--team", "3", "-o", str(path)).code == 0
     assert load_scenario(path).n_vehicles == 3
     cli("fly", str(path), "--connection", "udpin://0.0.0.0:14540").refused(
-        "agents: lists 3 UAVs; flight flies one"
+        "--connection given 1 times; the scenario flies 3 UAVs"
     )

@@ -34,7 +34,7 @@ from hptrack.cli.common import (
     write_json,
 )
 from hptrack.interface import CurrentPlan, InputError
-from hptrack.registry import PLANNERS, make_planner, planner_entry
+from hptrack.registry import PLANNERS, check_team, make_planner, planner_entry
 from hptrack.scenario import Scenario, load_scenario
 from hptrack.scenario.io import file_data, format_validation_error, parse_scenario
 
@@ -54,20 +54,29 @@ took over)."""
 FLIGHT_MCTS_OPTIONS = {"readmit": True}
 """``mcts`` options that ``fly`` sets unless given (or ``preset=paper`` is): a vehicle never
 idles while targets are unmeasured."""
+SEARCH_PLANNERS = ("mcts", "team-mcts", "team-cbba")
+"""The planners that ``fly`` flies with `FLY_ITERATIONS` and `FLIGHT_MCTS_OPTIONS` (each
+UAV's search, for a team)."""
+TEAM_PORT = 14540
+"""``fly``'s default connection of a team's UAV ``j``: ``udpin://127.0.0.1:(TEAM_PORT + j)``
+(PX4's multi-vehicle SITL sends instance ``j``'s API link to port 14540 + j, as
+``vehicle-sim --instances`` does)."""
 
 
 def flight_planner_settings(
     planner: str, pairs: list[str] | None, iterations: int | None, time_limit: float | None
 ) -> Any:
     """The settings ``fly`` flies ``planner`` with: the ``-o`` options and effort flags, with
-    `FLY_ITERATIONS` and `FLIGHT_MCTS_OPTIONS` for ``mcts`` where they are not given."""
-    if planner == "mcts":
+    `FLY_ITERATIONS` and `FLIGHT_MCTS_OPTIONS` for ``mcts`` (and the team planners that
+    search, `SEARCH_PLANNERS`) where they are not given."""
+    if planner in SEARCH_PLANNERS:
         if iterations is None and time_limit is None:
             iterations = FLY_ITERATIONS
         given = planner_options(pairs, (planner,))[planner]
         if given.get("preset") != "paper":
             options = FLIGHT_MCTS_OPTIONS.items()
-            extra = [f"mcts.{k}={json.dumps(v)}" for k, v in options if k not in given]
+            prefix = "mcts." if planner == "mcts" else ""  # one planner runs: a bare key
+            extra = [f"{prefix}{k}={json.dumps(v)}" for k, v in options if k not in given]
             pairs = [*extra, *(pairs or [])]
     return planner_settings_for((planner,), pairs, iterations, time_limit)[planner]
 
@@ -136,6 +145,15 @@ def _live_view(status: dict) -> Group:
         ),
     )
     head.add_row("sub-task", escape(_subtask_text(status["plan"], status["target_ids"])))
+    if "min_separation_m" in status:
+        yielding = [
+            f"{j} to {i}" for j, i in enumerate(status.get("yielding") or []) if i is not None
+        ]
+        head.add_row(
+            "separation",
+            f"smallest {status['min_separation_m']:.1f} m at the ticks; yielding: "
+            + (", ".join(yielding) or "none"),
+        )
     last = status.get("last_detection")
     name = (
         None
@@ -216,26 +234,54 @@ def _tracking_view(tracking: dict) -> list[Table]:
     return [head, tracks] if tracking["tentative"] else [head]
 
 
-def load_flight_scenario(path: Path) -> Scenario:
-    """The scenario of a flight command: a team is refused in one line (flight flies one UAV)."""
+def load_flight_scenario(path: Path, synthetic: bool = False) -> Scenario:
+    """The scenario of a flight command: a team that flight cannot fly is refused in one line
+    (`hptrack.runtime.team.team_flight_problem`), and, for the synthetic targets
+    (``synthetic``), one whose UAVs they cannot look with
+    (`hptrack.runtime.team.synthetic_team_problem`)."""
     scenario = load_scenario(path)
     if scenario.n_vehicles > 1:
-        raise InputError(
-            f"{path}: agents: lists {scenario.n_vehicles} UAVs; flight flies one (agent:), "
-            "a team is simulated (docs/teams.md)"
-        )
+        from hptrack.runtime.team import synthetic_team_problem, team_flight_problem
+
+        problem = team_flight_problem(scenario)
+        if problem is None and synthetic:
+            problem = synthetic_team_problem(scenario)
+        if problem is not None:
+            raise InputError(f"{path}: agents: lists {scenario.n_vehicles} UAVs; {problem}")
     return scenario
+
+
+def team_connections(connections: list[str] | None, n_vehicles: int) -> list[str]:
+    """One connection URL per UAV: those given (one per UAV, in the order of ``agents:``), or
+    the defaults (`TEAM_PORT`; ``udpin://127.0.0.1:14540`` for one UAV).
+
+    Raises:
+        InputError: not one ``--connection`` per UAV.
+    """
+    if not connections:
+        return [f"udpin://127.0.0.1:{TEAM_PORT + j}" for j in range(n_vehicles)]
+    if len(connections) != n_vehicles:
+        raise InputError(
+            f"--connection given {len(connections)} times; the scenario flies {n_vehicles} "
+            f"UAV{'s' if n_vehicles > 1 else ''}: give one --connection per UAV, in the order "
+            "of agents:"
+        )
+    for j, url in enumerate(connections):
+        if url in connections[:j]:
+            raise InputError(f"--connection {url[:80]!r} is given twice: one per UAV")
+    return list(connections)
 
 
 def fly(
     scenario_path: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario YAML file.")],
     connection: Annotated[
-        str,
+        list[str] | None,
         typer.Option(
             help="MAVSDK connection URL of the vehicle (the default listens on loopback; "
-            "udpin://0.0.0.0:14540 listens on every interface)."
+            "udpin://0.0.0.0:14540 listens on every interface); for a team, one per UAV in the "
+            "order of agents: (default udpin://127.0.0.1:14540, 14541, ...)."
         ),
-    ] = "udpin://127.0.0.1:14540",
+    ] = None,
     detections: Annotated[
         str, typer.Option(help="UDP address where detections arrive as JSON lines.")
     ] = "udp://127.0.0.1:5005",
@@ -272,13 +318,20 @@ def fly(
         float, typer.Option(help="A setpoint farther than this from home ends the mission, m.")
     ] = 1000.0,
     planner: Annotated[
-        str,
+        str | None,
         typer.Option(
             help="One of: "
             + ", ".join(name for name, entry in PLANNERS.items() if not entry.reads_truth)
-            + "."
+            + " (default mcts; team-mcts for a team)."
         ),
-    ] = "mcts",
+    ] = None,
+    separation: Annotated[
+        float | None,
+        typer.Option(
+            help="A team's minimum horizontal distance between two vehicles' references, m "
+            "(default 10)."
+        ),
+    ] = None,
     iterations: Annotated[
         int | None,
         typer.Option(help=f"Tree-search iterations per decision (default {FLY_ITERATIONS})."),
@@ -344,12 +397,19 @@ def fly(
     check_seed(seed)
     _positive(log_max_mb, "--log-max-mb", 0.01, 1e7)
     settings = _controller_settings(deadline, stale_after, keep_lag)
+    scenario = load_flight_scenario(scenario_path)
+    team = scenario.n_vehicles > 1
+    if planner is None:
+        planner = "team-mcts" if team else "mcts"
     if planner_entry(planner).reads_truth:
         raise InputError(
             f"--planner {planner}: it reads the true target states, which no flight has; "
             "it runs in hptrack simulate and benchmark only"
         )
-    scenario = load_flight_scenario(scenario_path)
+    check_team([planner], scenario.n_vehicles)
+    connections = team_connections(connection, scenario.n_vehicles)
+    if separation is not None and not team:
+        raise InputError(f"--separation {separation:g}: the scenario flies one UAV (agent:)")
     planner_settings = flight_planner_settings(planner, option, iterations, time_limit)
     if log_path is None:
         log_path = Path(f"hptrack-flight-{time.strftime('%Y%m%d-%H%M%S')}.jsonl")
@@ -368,10 +428,13 @@ def fly(
         run_flight,
     )
     from hptrack.runtime.network import udp_address
+    from hptrack.runtime.team import DEFAULT_SEPARATION_M, TeamController
 
+    if team:
+        from hptrack.runtime.team_flight import run_team_flight
     try:
         options = FlightOptions(
-            connection=connection,
+            connection=connections[0],
             detections=detections,
             altitude_m=altitude,
             max_distance_m=max_distance,
@@ -387,7 +450,8 @@ def fly(
         )
     except ValueError as err:
         raise InputError(_flag_names(str(err))) from None
-    check_connection(connection)
+    for url in connections:
+        check_connection(url)
     bind_check(*udp_address(detections, "--detections"), "--detections", detections)
     use_live = console.is_terminal if live is None else live
     view = Live(console=console, refresh_per_second=4, transient=False) if use_live else None
@@ -431,6 +495,39 @@ def fly(
             },
         )
 
+    def build_team(limits: list[VehicleLimits]) -> TeamController:
+        data = file_data(scenario)
+        details = []
+        for j, (vehicle_limits, agent) in enumerate(zip(limits, data["agents"], strict=True)):
+            scenario_speed = scenario.vehicle_spec(j).speed
+            speed = planned_speed(scenario_speed, vehicle_limits, cap_speed)
+            details.append(f"vehicle {j}: {vehicle_limits.detail}; planning with {speed:g} m/s")
+            agent["speed"] = speed
+        if "vehicle" in data:
+            data["vehicle"].pop("speed", None)
+        for line in details:
+            on_message(line)
+        flown = parse_scenario(data, f"{scenario_path} with the vehicles' speeds")
+        on_message(f"mission log: {log_path}")
+        return TeamController(
+            flown,
+            make_planner(planner, planner_settings),
+            separation_m=DEFAULT_SEPARATION_M if separation is None else separation,
+            seed=seed,
+            settings=settings,
+            log=log,
+            header={
+                "source": "fly",
+                "flight": options.as_json(),
+                "connections": connections,
+                "vehicle_limits": [vehicle_limits.__dict__ for vehicle_limits in limits],
+                "scenario_agent_speed": [
+                    scenario.vehicle_spec(j).speed for j in range(scenario.n_vehicles)
+                ],
+                "warm_up_s": warm_up_s,
+            },
+        )
+
     from hptrack.runtime.warm_up import warm_up_flight
 
     on_message(
@@ -448,14 +545,17 @@ def fly(
     try:
         if view is not None:
             view.start()
-        result = run_flight(
-            build,
-            log,
-            options,
-            on_status,
-            on_message,
-            fence=scenario_fence,
-        )
+        if team:
+            result = run_team_flight(build_team, log, options, connections, on_status, on_message)
+        else:
+            result = run_flight(
+                build,
+                log,
+                options,
+                on_status,
+                on_message,
+                fence=scenario_fence,
+            )
     except FlightError as err:
         error_console.print(
             f"[bold red]error:[/] {escape(str(err))}", highlight=False, soft_wrap=True
@@ -468,7 +568,8 @@ def fly(
     end = result.end
     console.print(
         escape(
-            f"ended by {result.reason} ({result.detail}); vehicle {result.action}: "
+            f"ended by {result.reason} ({result.detail}); "
+            f"{'' if team else 'vehicle '}{result.action}: "
             f"{result.confirmed or 'not confirmed'}; U = {end.get('U', math.nan):.3f} at "
             f"{end.get('time', 0.0):.1f} s; {result.setpoints_sent} setpoints "
             f"({result.setpoint_rate_hz:.1f} Hz, largest gap {result.max_setpoint_gap_s:.2f} s)"
@@ -513,6 +614,18 @@ def _tracking_text(tracking: dict | None) -> str:
         f"; {tracking.get('reports', 0)} reports in {tracking.get('looks', 0)} looks, "
         f"{tracking.get('taken by a belief', 0)} taken by a belief, "
         f"{tracking.get('claims', 0)} claimed by a tentative track"
+    )
+
+
+def _separation_text(summary: dict) -> str:
+    """A team's separation for a summary line (``""`` for one UAV)."""
+    if "separation_m" not in summary:
+        return ""
+    return (
+        f"; separation {summary['separation_m']:g} m: smallest "
+        f"{summary['min_separation_m']:.1f} m between vehicles at the ticks, "
+        f"{summary['min_reference_separation_m']:.1f} m between references, "
+        f"{summary['yields']} yields"
     )
 
 
@@ -603,6 +716,15 @@ def vehicle_sim(
         ),
     ] = None,
     system_id: Annotated[int, typer.Option(help="Its MAVLink system id (PX4's MAV_SYS_ID).")] = 1,
+    instances: Annotated[
+        int | None,
+        typer.Option(
+            help="How many vehicles (default the scenario's UAVs): instance i is UAV i of "
+            "agents:, at its position, on the --mavlink port + i with system id --system-id "
+            "+ i (PX4's multi-vehicle SITL convention); all send detections to one port and "
+            "telemetry to one --gcs port."
+        ),
+    ] = None,
     refuse_offboard: Annotated[
         str | None,
         typer.Option(
@@ -655,16 +777,28 @@ def vehicle_sim(
     geofence and GF_ACTION) and sends detections of the scenario's simulated targets; it
     prints its mode changes."""
     check_seed(seed)
-    scenario = load_flight_scenario(scenario_path)
+    scenario = load_flight_scenario(scenario_path, synthetic=True)
     duration = scenario.budget + 300.0 if duration is None else duration
     _positive(duration, "--duration", 0.0, 86400.0)
     if detection_rate is not None:
         _positive(detection_rate, "--detection-rate", 0.0, 1000.0)
     parameters = _parameters(param)
     check_output_path(stats, "--stats")
-    if not 1 <= system_id <= 255:
-        raise InputError(f"--system-id must be an integer in [1, 255], got {system_id}")
+    m = scenario.n_vehicles if instances is None else instances
+    if m != scenario.n_vehicles:
+        raise InputError(
+            f"--instances {instances}: the scenario flies {scenario.n_vehicles} "
+            f"UAV{'s' if scenario.n_vehicles > 1 else ''} (one stub per UAV)"
+        )
+    if not 1 <= system_id <= 256 - m:
+        raise InputError(f"--system-id must be an integer in [1, {256 - m}], got {system_id}")
+    from hptrack.runtime.network import udp_address
+    from hptrack.runtime.targets import TargetDetector
     from hptrack.runtime.vehicle_sim import PX4_VELOCITY_TRACKING, Misbehaviour, VehicleSim
+
+    mav_host, mav_port = udp_address(mavlink, "--mavlink", loopback_only=True)
+    if mav_port + m - 1 > 65535:
+        raise InputError(f"--mavlink {mavlink!r}: no room for {m} consecutive ports")
 
     try:
         misbehaviour = Misbehaviour(
@@ -680,52 +814,91 @@ def vehicle_sim(
     if hold_fence and scenario.fence is None:
         raise InputError(f"--hold-fence: {scenario_path} has no fence: block")
 
-    def on_event(text: str) -> None:
-        console.print(escape(f"vehicle stub {text}"), highlight=False)
+    def on_event_of(j: int) -> Any:
+        name = "vehicle stub" if m == 1 else f"vehicle stub {j}"
 
-    vehicle = VehicleSim(
-        scenario,
-        mavlink,
-        detections if targets else None,
-        seed=seed,
-        detection_rate_hz=detection_rate,
-        gcs_url=gcs,
-        parameters=parameters,
-        on_event=on_event,
-        system_id=system_id,
-        misbehaviour=misbehaviour,
-        velocity_tracking=PX4_VELOCITY_TRACKING if velocity_tracking is None else velocity_tracking,
-    )
+        def on_event(text: str) -> None:
+            console.print(escape(f"{name} {text}"), highlight=False)
+
+        return on_event
+
+    shared = TargetDetector(scenario, detections, seed) if targets and m > 1 else None
+    urls = [mavlink] if m == 1 else [f"udpout://{mav_host}:{mav_port + j}" for j in range(m)]
+    vehicles = [
+        VehicleSim(
+            scenario,
+            url,
+            detections if targets else None,
+            seed=seed,
+            detection_rate_hz=detection_rate,
+            gcs_url=gcs,
+            parameters=parameters,
+            on_event=on_event_of(j),
+            system_id=system_id + j,
+            misbehaviour=misbehaviour,
+            velocity_tracking=(
+                PX4_VELOCITY_TRACKING if velocity_tracking is None else velocity_tracking
+            ),
+            instance=j,
+            detector=shared,
+        )
+        for j, url in enumerate(urls)
+    ]
     if hold_fence and scenario.fence is not None:
-        vehicle.hold_fence(scenario.fence.spec())
+        for vehicle in vehicles:
+            vehicle.hold_fence(scenario.fence.spec())
     stop = threading.Event()
     previous = {
         sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)
     }
+    links = (
+        mavlink if m == 1 else f"{urls[0]} .. {urls[-1]} (systems {system_id}..{system_id + m - 1})"
+    )
     console.print(
         escape(
-            f"vehicle stub: MAVLink to {mavlink}{f' and {gcs}' if gcs else ''}, "
+            f"vehicle stub{'s' if m > 1 else ''}: MAVLink to {links}"
+            f"{f' and {gcs}' if gcs else ''}, "
             f"{f'detections to {detections}' if targets else 'no targets'}; "
             f"running for at most {duration:g} s (Ctrl-C stops)"
         ),
         highlight=False,
     )
+    summaries: list[dict] = [{} for _ in vehicles]
+
+    def run(j: int) -> None:
+        summaries[j] = vehicles[j].run(duration, stop)
+
     try:
-        summary = vehicle.run(duration, stop)
+        if m == 1:
+            run(0)
+        else:
+            threads = [threading.Thread(target=run, args=(j,), daemon=True) for j in range(m)]
+            for thread in threads:
+                thread.start()
+            while any(thread.is_alive() for thread in threads):
+                for thread in threads:
+                    thread.join(0.2)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+        if shared is not None:
+            shared.close()
     if stats is not None:
-        write_json(stats, summary)
-    console.print(
-        escape(
-            f"vehicle stub stopped in {summary['final_mode'].upper()}: {summary['setpoints']} "
-            f"setpoints ({summary['offboard_setpoint_rate_hz']:.1f} Hz in offboard), "
-            f"detections sent {json.dumps(summary['detections_sent'])}"
-            + _false_alarms_text(summary["false_alarms_sent"])
-        ),
-        highlight=False,
-    )
+        write_json(stats, summaries[0] if m == 1 else {"instances": summaries})
+    for j, summary in enumerate(summaries):
+        detections_sent = summary["detections_sent"]
+        if shared is not None:  # the team's detector: its counts are the team's
+            detections_sent = shared.stats.detections if j == 0 else {}
+        console.print(
+            escape(
+                f"vehicle stub{'' if m == 1 else f' {j}'} stopped in "
+                f"{summary['final_mode'].upper()}: {summary['setpoints']} "
+                f"setpoints ({summary['offboard_setpoint_rate_hz']:.1f} Hz in offboard), "
+                f"detections sent {json.dumps(detections_sent)}"
+                + _false_alarms_text(summary["false_alarms_sent"])
+            ),
+            highlight=False,
+        )
 
 
 def targets_sim(
@@ -752,17 +925,28 @@ def targets_sim(
     stats: Annotated[
         Path | None, typer.Option(help="Write what was seen and sent as JSON at exit.")
     ] = None,
+    system_id: Annotated[
+        int,
+        typer.Option(
+            help="A team's first MAVLink system id: UAV i of agents: is system --system-id + i "
+            "(PX4's multi-vehicle SITL numbers instance i MAV_SYS_ID i + 1)."
+        ),
+    ] = 1,
 ) -> None:
     """Simulated targets and a footprint detector for any autopilot in software-in-the-loop:
     reads the vehicle's position from its MAVLink telemetry, starts the targets when it enters
     offboard, and sends detections to hptrack fly."""
     check_seed(seed)
-    scenario = load_flight_scenario(scenario_path)
+    scenario = load_flight_scenario(scenario_path, synthetic=True)
     duration = scenario.budget + 600.0 if duration is None else duration
     _positive(duration, "--duration", 0.0, 86400.0)
     rate = 1.0 / scenario.time_step if detection_rate is None else detection_rate
     _positive(rate, "--detection-rate", 0.0, 1000.0)
     check_output_path(stats, "--stats")
+    m = scenario.n_vehicles
+    if not 1 <= system_id <= 256 - m:
+        raise InputError(f"--system-id must be an integer in [1, {256 - m}], got {system_id}")
+    team_ids = None if m == 1 else tuple(range(system_id, system_id + m))
     from hptrack.runtime.links import bind_check
     from hptrack.runtime.network import udp_address
     from hptrack.runtime.targets import TargetDetector, run_targets_sim
@@ -778,11 +962,15 @@ def targets_sim(
         console.print(escape(f"targets-sim: {text}"), highlight=False)
 
     on_event(
-        f"listening to {mavlink}, detections to {detections}, {rate:g} per second; "
+        f"listening to {mavlink}"
+        + ("" if team_ids is None else f" for systems {team_ids[0]}..{team_ids[-1]}")
+        + f", detections to {detections}, {rate:g} per second; "
         f"at most {duration:g} s (Ctrl-C stops)"
     )
     try:
-        summary = run_targets_sim(detector, mavlink, duration, rate, stop, on_event=on_event)
+        summary = run_targets_sim(
+            detector, mavlink, duration, rate, stop, on_event=on_event, team_system_ids=team_ids
+        )
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
@@ -851,6 +1039,7 @@ def replay(
             f"{'-' if logged is None else format(logged, '.3f')}; "
             f"{summary['mismatches']} mismatches"
             + _tracking_text(summary.get("tracking"))
+            + _separation_text(summary)
             + (
                 "; decisions taken from the log (it names a model file, which a replay never loads)"
                 if summary["decisions"] == "logged"

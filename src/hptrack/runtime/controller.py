@@ -143,6 +143,7 @@ class MissionController:
             np.random.default_rng(np.random.SeedSequence(self.seed).spawn(4)[3]),
             runner if runner is not None else ThreadedRunner(),
             self.settings.planner_deadline_s,
+            self.mission.n_vehicles,
         )
         self.fallback = Fallback(self.mission, self.seed)
         self.history = MissionHistory(self.mission, np.asarray(scenario.agent.position, float))
@@ -335,6 +336,7 @@ class MissionController:
         }
         if missed:
             record["missed"] = missed
+        record.update(self._tick_fields(agent))
         fall_back = False
         if self._odom is None:
             record.update(submitted=False, reason="no odometry yet")
@@ -355,6 +357,15 @@ class MissionController:
         self.journal.write(record)
         if fall_back:
             self._fall_back(t, f"planner late with tick {self.worker.in_flight[0]}")
+
+    def _tick_fields(self, agent: np.ndarray | None) -> dict[str, Any]:
+        """Fields a tick record adds for the vehicles at ``agent`` (none for one UAV; a team's
+        controller adds its separation)."""
+        return {}
+
+    def _end_fields(self) -> dict[str, Any]:
+        """Fields the ``end`` record adds (none for one UAV; a team's separation)."""
+        return {}
 
     def _belief_source(self) -> BeliefTimeline | TrackedBeliefs:
         """Where the beliefs at a time come from: the tracker's without identity."""
@@ -454,6 +465,16 @@ class MissionController:
         self.journal.write(record)
 
     def _output(self, t: float) -> Setpoint:
+        mode, detail, hold = self._update_mode(t)
+        if hold:
+            reference, velocity = self._inside(t, self._hold_at.copy(), np.zeros(2))
+            return Setpoint(self._hold_at.copy(), True, mode, detail, reference, velocity)
+        reference, velocity = self._inside(t, *self._leg.at(t))
+        return Setpoint(self._waypoint.copy(), False, mode, detail, reference, velocity)
+
+    def _update_mode(self, t: float) -> tuple[str, str, bool]:
+        """The setpoint mode at ``t`` s, its detail and whether it holds; a change of mode is
+        logged (a ``mode`` record) and a hold starts where the vehicle is."""
         if self.finished:
             mode, detail = "mission over", f"the mission ended ({self.end['reason']})"
         elif self._odom is None:
@@ -488,11 +509,7 @@ class MissionController:
                     "detail": detail,
                 }
             )
-        if hold:
-            reference, velocity = self._inside(t, self._hold_at.copy(), np.zeros(2))
-            return Setpoint(self._hold_at.copy(), True, mode, detail, reference, velocity)
-        reference, velocity = self._inside(t, *self._leg.at(t))
-        return Setpoint(self._waypoint.copy(), False, mode, detail, reference, velocity)
+        return mode, detail, hold
 
     def _inside(
         self, t: float, reference: np.ndarray, velocity: np.ndarray
@@ -591,6 +608,7 @@ class MissionController:
         }
         if self._tracked is not None:
             end["tracking"] = dict(self.tracking)
+        end.update(self._end_fields())
         self.end = self.journal.write(end)
         self.worker.close()
 

@@ -470,7 +470,12 @@ class _Flight:
             if self.mono0 is not None:
                 east, north, _ = ned_to_enu(*ned)
                 t = now - self.mono0
-                self._guard(lambda t=t, p=(east, north): self.controller.odometry(t, p))
+                self._guard(lambda t=t, p=(east, north): self.feed_odometry(t, p))
+
+    def feed_odometry(self, t: float, position: tuple[float, float]) -> None:
+        """The vehicle's position (east, north) m at mission time ``t`` s into the
+        controller."""
+        self.controller.odometry(t, position)
 
     async def watch_other_systems(self, mavsdk: Mavsdk) -> None:
         """Count the position messages of every other system on the connection (checked

@@ -17,7 +17,8 @@ class MissionHistory:
 
     Args:
         mission: the mission's facts.
-        start: the agent's start ``(2,)`` m (its position until the first odometry).
+        start: the agent's start ``(2,)`` m (its position until the first odometry); a
+            team's ``(m, 2)``, each row one UAV's.
     """
 
     def __init__(self, mission: MissionSpec, start: np.ndarray) -> None:
@@ -76,7 +77,7 @@ class MissionHistory:
             raise RuntimeError("episode_record() needs a finished mission")
         tau, n = self.mission.time_step, self.mission.n_targets
         last = step_of(self.final["time"], tau)
-        agent_path = np.empty((last + 1, 2))
+        agent_path = np.empty((last + 1, *self.start.shape))
         detections = np.zeros((last + 1, n), dtype=bool)
         position = self.start
         rows = {row["k"]: row for row in self.rows if row["k"] <= last}

@@ -41,6 +41,7 @@ from hptrack.runtime.log import (
     log_float,
     read_log,
 )
+from hptrack.runtime.team import TeamController
 from hptrack.runtime.worker import ReplayRunner
 from hptrack.scenario.io import format_validation_error, parse_scenario
 from hptrack.sim.record import EpisodeRecord
@@ -102,19 +103,21 @@ def _differences(logged: list[dict], replayed: list[dict]) -> list[str]:
             "plan": ("k", "status"),
             "late": ("k",),
             "mode": ("mode",),
-            "end": ("reason",),
+            "end": ("reason", "yields"),
             "setpoint": ("reason",),
+            "yield": ("vehicle", "to"),
         }.get(kind, ())
         for key in keys:
             if old.get(key) != new.get(key):
                 out.append(f"{kind} {key}: {old.get(key)!r} became {new.get(key)!r}")
         numbers = {
-            "tick": ("logdet", "means", "agent"),
+            "tick": ("logdet", "means", "agent", "separation_m"),
             "look": ("time", "agent", "weight", "tentative"),
             "plan": ("waypoint",),
             "mode": ("position",),
+            "yield": ("reference",),
             "fence": ("reference", "projected"),
-            "end": ("U",),
+            "end": ("U", "min_separation_m", "min_reference_separation_m"),
         }.get(kind, ())
         for key in numbers:
             if not _close(old.get(key), new.get(key)):
@@ -188,7 +191,8 @@ def replay_log(path: str | Path) -> ReplayResult:
         )
     runner = ReplayRunner()
     log = MissionLog()
-    controller = MissionController(
+    team = scenario.n_vehicles > 1
+    controller = (TeamController if team else MissionController)(
         scenario,
         planner,
         seed=seed,
@@ -196,6 +200,7 @@ def replay_log(path: str | Path) -> ReplayResult:
         log=log,
         runner=runner,
         header={"source": "replay", "replay_of": str(path)},
+        **({"separation_m": log_float(header.get("separation_m"))} if team else {}),
     )
     records = contents.records
     mismatches: list[str] = []
@@ -226,6 +231,10 @@ def replay_log(path: str | Path) -> ReplayResult:
             if kind in ("odometry", "detection") and "raw" in record:
                 controller.bad_input(
                     kind, record.get("reason", ""), record.get("detail", ""), record.get("raw")
+                )
+            elif kind == "odometry" and isinstance(controller, TeamController):
+                controller.odometry(
+                    log_float(record["t"]), log_array(record["position"]), record.get("vehicle")
                 )
             elif kind == "odometry":
                 controller.odometry(log_float(record["t"]), log_array(record["position"]))
@@ -291,6 +300,19 @@ def replay_log(path: str | Path) -> ReplayResult:
         "accepted": controller.end["accepted"],
         "rejected": controller.end["rejected"],
         "tracking": controller.end.get("tracking"),
+        **(
+            {
+                key: controller.end[key]
+                for key in (
+                    "separation_m",
+                    "min_separation_m",
+                    "min_reference_separation_m",
+                    "yields",
+                )
+            }
+            if team
+            else {}
+        ),
         "adapter": [
             {k: v for k, v in r.items() if k not in ("seq",)}
             for r in adapter

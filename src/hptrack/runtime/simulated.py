@@ -36,6 +36,7 @@ from hptrack.models.vehicle import move_towards
 from hptrack.runtime.controller import MissionController
 from hptrack.runtime.inputs import ControllerSettings
 from hptrack.runtime.log import MissionLog
+from hptrack.runtime.team import DEFAULT_SEPARATION_M, TeamController
 from hptrack.runtime.worker import InlineRunner
 from hptrack.runtime.world import TrueTargets, synthetic_detector
 from hptrack.scenario.model import Scenario
@@ -130,9 +131,12 @@ def run_simulated(
     settings: ControllerSettings | None = None,
     log: MissionLog | None = None,
     on_step: Callable[[float], None] | None = None,
+    separation_m: float = DEFAULT_SEPARATION_M,
 ) -> SimulatedRun:
     """Fly ``planner`` through ``scenario`` with a `MissionController` on a simulated
-    clock (module docstring).
+    clock (module docstring); a team (``agents:``) with a
+    `hptrack.runtime.team.TeamController` keeping ``separation_m`` (m), each vehicle moving
+    towards its reference (so that the separation rule is what it flies).
 
     Raises:
         InputError: ``tau`` is not a whole number of physics steps.
@@ -164,7 +168,8 @@ def run_simulated(
         return delay
 
     log = log if log is not None else MissionLog()
-    controller = MissionController(
+    team = scenario.n_vehicles > 1
+    controller = (TeamController if team else MissionController)(
         scenario,
         planner,
         seed=seed,
@@ -172,12 +177,13 @@ def run_simulated(
         log=log,
         runner=InlineRunner(planner_delay),
         header={"source": "simulated", "faults": faults.model_dump(mode="json")},
+        **({"separation_m": separation_m} if team else {}),
     )
-    sensor = mission.sensor
+    vehicles = [mission.vehicle_mission(j) for j in range(scenario.n_vehicles)]
     unlabelled = not scenario.sensor_spec().labelled
     detector = synthetic_detector(scenario, seed) if unlabelled else None
     targets = TrueTargets(scenario, np.random.default_rng(truth_seq), motion_rng)
-    agent = np.asarray(scenario.agent.position, dtype=float)
+    agents = scenario.starts()
     detection_rate = faults.detection_rate_hz or 1.0 / tau
     events: list[tuple[float, int, str, tuple]] = []
     fed: Counter = Counter()
@@ -201,14 +207,18 @@ def run_simulated(
             log.write({"kind": "truth", "t": t, "k": k, "states": targets.state(k)})
         positions = targets.positions(k, m / per_tau)
         if _due(j, detection_rate, clock):
-            if detector is not None:
-                measured = detector.look(agent, positions).positions
-                names: list[str | None] = [None] * len(measured)
-            else:
-                seen = np.flatnonzero(sensor.in_footprint(agent, positions))
-                measured = sensor.sample(positions[seen], sensor_rng)
-                names = [mission.target_ids[i] for i in seen]
-            for name, z in zip(names, measured, strict=True):
+            looks = []
+            for agent, vehicle in zip(agents, vehicles, strict=True):
+                if detector is not None:
+                    measured = detector.look(agent, positions).positions
+                    names: list[str | None] = [None] * len(measured)
+                else:
+                    sensor = vehicle.sensor
+                    seen = np.flatnonzero(sensor.in_footprint(agent, positions))
+                    measured = sensor.sample(positions[seen], sensor_rng)
+                    names = [mission.target_ids[i] for i in seen]
+                looks.extend(zip(names, measured, strict=True))
+            for name, z in looks:
                 if (
                     faults.detection_drop_probability > 0
                     and fault_rng.random() < faults.detection_drop_probability
@@ -219,11 +229,12 @@ def run_simulated(
                     delay += fault_rng.uniform(0.0, faults.detection_jitter_s)
                 schedule(t + delay, "detection", (t, name, z))
         if _due(j, faults.odometry_rate_hz, clock) and not in_outage(t):
-            if not (
-                faults.odometry_drop_probability > 0
-                and fault_rng.random() < faults.odometry_drop_probability
-            ):
-                schedule(t, "odometry", (t, agent.copy()))
+            for v, agent in enumerate(agents):
+                if not (
+                    faults.odometry_drop_probability > 0
+                    and fault_rng.random() < faults.odometry_drop_probability
+                ):
+                    schedule(t, "odometry", (t, agent.copy(), v) if team else (t, agent.copy()))
         if faults.bad_input_rate_hz > 0 and fault_rng.random() < faults.bad_input_rate_hz * dt:
             schedule(t, "bad", (t, int(fault_rng.integers(9))))
         while events and events[0][0] <= t + 1e-12:
@@ -235,9 +246,15 @@ def run_simulated(
                 controller.detection(*args)
                 last_detection = args
             else:
-                _feed_bad(controller, args[0], args[1], dt, agent, last_detection)
-        setpoint = controller.setpoint(t)
-        agent = move_towards(agent, setpoint.position, mission.agent_speed * dt)
+                _feed_bad(controller, args[0], args[1], dt, agents[0], last_detection)
+        if isinstance(controller, TeamController):
+            for v, (setpoint, vehicle) in enumerate(
+                zip(controller.setpoints(t), vehicles, strict=True)
+            ):
+                agents[v] = move_towards(agents[v], setpoint.reference, vehicle.agent_speed * dt)
+        else:
+            setpoint = controller.setpoint(t)
+            agents[0] = move_towards(agents[0], setpoint.position, mission.agent_speed * dt)
         if on_step is not None:
             on_step(t)
         j += 1

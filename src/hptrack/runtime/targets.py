@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hptrack.interface import InputError
-from hptrack.runtime.frames import ned_to_enu
+from hptrack.runtime.frames import geodetic_to_local, ned_to_enu
 from hptrack.runtime.network import udp_address
 from hptrack.runtime.world import TrueTargets, synthetic_detector
 from hptrack.scenario.model import Scenario
@@ -97,6 +97,7 @@ class TargetDetector:
         self._detector = synthetic_detector(scenario, seed)
         self._labelled = scenario.sensor_spec().labelled
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._lock = threading.Lock()  # a team's stubs sense from their own threads
         self.stats = DetectorStats()
 
     @property
@@ -109,16 +110,21 @@ class TargetDetector:
         if self.stats.started_at_unix_s is None:
             self.stats.started_at_unix_s = float(unix_s)
 
-    def sense(self, unix_s: float, position_enu: np.ndarray) -> int:
-        """Measure the targets in the footprint of a vehicle at ``position_enu`` (2,) m at
-        ``unix_s`` and send them; returns how many were sent (0 before the start)."""
+    def sense(self, unix_s: float, position_enu: np.ndarray, vehicle: int = 0) -> int:
+        """Measure the targets in the footprint of UAV ``vehicle`` of the team (the first by
+        default) at ``position_enu`` (2,) m at ``unix_s`` and send them; returns how many
+        were sent (0 before the start)."""
+        with self._lock:
+            return self._sense(unix_s, position_enu, vehicle)
+
+    def _sense(self, unix_s: float, position_enu: np.ndarray, vehicle: int) -> int:
         start = self.stats.started_at_unix_s
         if start is None:
             return 0
         truth = self._targets.positions_at(unix_s - start)
         agent = np.asarray(position_enu, float)
         if self._detector is None:
-            sensor = self.mission.sensor
+            sensor = self.mission.vehicle_mission(vehicle).sensor
             seen = np.flatnonzero(sensor.in_footprint(agent, truth))
             measured = sensor.sample(truth[seen], self._sensor_rng) if len(seen) else truth[:0]
         else:
@@ -149,6 +155,19 @@ class _Telemetry:
     position_ned: np.ndarray | None = None
     offboard: bool = False
     armed: bool = False
+    geodetic: tuple[float, float] | None = None
+    """The last ``GLOBAL_POSITION_INT`` (latitude, longitude), degrees."""
+
+
+def team_position(first: _Telemetry, other: _Telemetry) -> np.ndarray | None:
+    """Where ``other`` is in the first UAV's local frame, east-north m: the first's local
+    position plus the tangent-plane offset of ``other``'s geodetic position from the first's
+    (`geodetic_to_local`); ``None`` until both have sent both."""
+    if first.position_ned is None or first.geodetic is None or other.geodetic is None:
+        return None
+    north, east = geodetic_to_local(*first.geodetic, *other.geodetic)
+    east0, north0, _ = ned_to_enu(*first.position_ned)
+    return np.array([east0 + east, north0 + north])
 
 
 def run_targets_sim(
@@ -159,12 +178,23 @@ def run_targets_sim(
     stop: threading.Event | None = None,
     min_altitude_m: float = 0.5,
     on_event=None,
+    team_system_ids: tuple[int, ...] | None = None,
 ) -> dict:
     """Listen to an autopilot's MAVLink telemetry at ``mavlink_url`` (``udpin://HOST:PORT``,
     pymavlink) and sense at ``rate_hz`` for at most ``duration_s`` s: the mission starts at the
     first heartbeat in offboard mode; the vehicle's position is its ``LOCAL_POSITION_NED`` (the
     local frame of the mission); it senses while higher than ``min_altitude_m`` above the
     local origin. Returns a summary (heartbeats seen, positions, detections sent).
+
+    A team (``team_system_ids``: the MAVLink system id of each UAV, in the order of
+    ``agents:``; PX4's multi-vehicle SITL numbers instance ``i`` ``MAV_SYS_ID = i + 1`` and
+    sends every instance's telemetry to the one ground-station port) is sensed from every
+    UAV's position with its own footprint (``positions_by_vehicle`` counts them); the
+    positions of other systems are ignored (counted in ``other_positions``), and the first UAV
+    in offboard starts the targets. The team's frame is the first UAV's local frame (each
+    autopilot's local origin is its own): another UAV is where its ``GLOBAL_POSITION_INT``
+    lies from the first's, east-north m (`team_position`), added to the first's local
+    position.
 
     Raises:
         InputError: an address that cannot be opened (malformed, in use, not on this machine).
@@ -179,8 +209,20 @@ def run_targets_sim(
             f"--mavlink {mavlink_url!r}: cannot listen there ({err.strerror})"
         ) from None
     say = on_event or (lambda text: None)
-    seen = _Telemetry()
+    ids = (0,) if team_system_ids is None else team_system_ids
+    seen = {system: _Telemetry() for system in ids}
     counts = {"heartbeats": 0, "positions": 0}
+    by_vehicle = [0] * len(ids)
+    if team_system_ids is not None:
+        counts["other_positions"] = 0
+
+    def vehicle_of(msg) -> int | None:
+        """The UAV a message is from (any system for one UAV)."""
+        if team_system_ids is None:
+            return 0
+        system = msg.get_srcSystem()
+        return team_system_ids.index(system) if system in team_system_ids else None
+
     end = time.monotonic() + duration_s
     next_sense = time.monotonic()
     try:
@@ -188,33 +230,48 @@ def run_targets_sim(
             msg = link.recv_match(blocking=True, timeout=min(0.02, 1.0 / rate_hz))
             while msg is not None:
                 kind = msg.get_type()
-                if kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
+                j = vehicle_of(msg)
+                name = "vehicle" if team_system_ids is None else f"vehicle {j}"
+                if j is None:
+                    counts["other_positions"] += kind == "LOCAL_POSITION_NED"
+                elif kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
                     counts["heartbeats"] += 1
                     offboard = (msg.custom_mode >> 16) & 0xFF == PX4_OFFBOARD_MAIN_MODE
-                    if offboard and not seen.offboard:
-                        say("vehicle in OFFBOARD")
+                    telemetry = seen[ids[j]]
+                    if offboard and not telemetry.offboard:
+                        say(f"{name} in OFFBOARD")
                         if not detector.started:
                             detector.start(time.time())
                             say("mission started: targets moving")
-                    elif seen.offboard and not offboard:
-                        say("vehicle left OFFBOARD")
-                    seen.offboard = offboard
+                    elif telemetry.offboard and not offboard:
+                        say(f"{name} left OFFBOARD")
+                    telemetry.offboard = offboard
+                elif kind == "GLOBAL_POSITION_INT":
+                    seen[ids[j]].geodetic = (msg.lat * 1e-7, msg.lon * 1e-7)
                 elif kind == "LOCAL_POSITION_NED":
                     counts["positions"] += 1
-                    seen.position_ned = np.array([msg.x, msg.y, msg.z], dtype=float)
+                    by_vehicle[j] += 1
+                    seen[ids[j]].position_ned = np.array([msg.x, msg.y, msg.z], dtype=float)
                 msg = link.recv_match(blocking=False)
             now = time.monotonic()
             if now >= next_sense:
                 next_sense = now + 1.0 / rate_hz
-                ned = seen.position_ned
-                if ned is not None and math.isfinite(ned.sum()) and -ned[2] > min_altitude_m:
-                    east, north, _ = ned_to_enu(*ned)
-                    detector.sense(time.time(), np.array([east, north]))
+                for j, system in enumerate(ids):
+                    ned = seen[system].position_ned
+                    if ned is not None and math.isfinite(ned.sum()) and -ned[2] > min_altitude_m:
+                        if j == 0:
+                            east, north, _ = ned_to_enu(*ned)
+                            here: np.ndarray | None = np.array([east, north])
+                        else:
+                            here = team_position(seen[ids[0]], seen[system])
+                        if here is not None:
+                            detector.sense(time.time(), here, j)
     finally:
         link.close()
         detector.close()
     return {
         **counts,
+        **({} if team_system_ids is None else {"positions_by_vehicle": by_vehicle}),
         "mission_started": detector.started,
         "datagrams": detector.stats.datagrams,
         "detections_sent": detector.stats.detections,

@@ -325,6 +325,10 @@ class VehicleSim:
         system_id: its MAVLink system id (PX4's ``MAV_SYS_ID``, 1 by default).
         component_id: its MAVLink component id (1, the autopilot's, by default).
         misbehaviour: how it misbehaves (`Misbehaviour`; default not at all).
+        instance: which UAV of the scenario's team it is (it starts at that UAV's position
+            and looks with its footprint); 0, the first, by default.
+        detector: the targets and detector shared by a team's stubs (`TargetDetector`; its
+            owner closes it), instead of one of its own at ``detections_url``.
 
     Raises:
         InputError: a malformed or non-loopback address.
@@ -345,6 +349,8 @@ class VehicleSim:
         system_id: int = 1,
         component_id: int = mavlink.MAV_COMP_ID_AUTOPILOT1,
         misbehaviour: Misbehaviour | None = None,
+        instance: int = 0,
+        detector: TargetDetector | None = None,
     ) -> None:
         if not 0.0 < velocity_tracking <= 1.0:
             raise InputError(
@@ -356,15 +362,17 @@ class VehicleSim:
         self._links = [udp_address(mavlink_url, "--mavlink", loopback_only=True)]
         if gcs_url is not None:
             self._links.append(udp_address(gcs_url, "--gcs", loopback_only=True))
-        self._detector = None
-        if detections_url is not None:
+        self._detector = detector
+        self._own_detector = detector is None
+        self.instance = instance
+        if detector is None and detections_url is not None:
             udp_address(detections_url, "--detections", loopback_only=True)
             self._detector = TargetDetector(scenario, detections_url, seed)
         self._rate = detection_rate_hz or 1.0 / self.mission.time_step
         self._airframe_speed = float(airframe_speed_m_s)
         self._tracking = float(velocity_tracking)
         self._on_event = on_event or (lambda text: None)
-        x, y = scenario.agent.position
+        x, y = scenario.team[instance].position
         self.home = np.array(enu_to_ned(x, y, 0.0))
         self.position = self.home.copy()
         self.velocity = np.zeros(3)
@@ -876,7 +884,7 @@ class VehicleSim:
     def close(self) -> None:
         """Close the stub's sockets."""
         self._sock.close()
-        if self._detector is not None:
+        if self._detector is not None and self._own_detector:
             self._detector.close()
 
     # --- main loop --------------------------------------------------------------------------
@@ -908,7 +916,7 @@ class VehicleSim:
                 if now >= next_sense:
                     if self._detector is not None and self._airborne():
                         east, north, _ = ned_to_enu(*self.position)
-                        self._detector.sense(time.time(), np.array([east, north]))
+                        self._detector.sense(time.time(), np.array([east, north]), self.instance)
                     next_sense = now + 1.0 / self._rate
                 if now >= next_track and self.mode == "offboard":
                     self.stats.track.append((now, *self.position[:2], *self.velocity[:2]))

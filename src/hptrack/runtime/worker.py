@@ -17,7 +17,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -233,6 +233,7 @@ class PlannerWorker:
         rng: the planner's generator.
         runner: where the calls run.
         deadline_s: a call not back within this is late, mission s.
+        n_vehicles: ``m``; a call returns ``(2,)`` for one vehicle, ``(m, 2)`` for a team.
     """
 
     def __init__(
@@ -242,8 +243,11 @@ class PlannerWorker:
         rng: np.random.Generator,
         runner: PlannerRunner,
         deadline_s: float,
+        n_vehicles: int = 1,
     ) -> None:
         self.planner, self.mission, self._rng = planner, mission, rng
+        self.shape = (2,) if n_vehicles == 1 else (n_vehicles, 2)
+        """The shape of a waypoint, m."""
         self.runner, self.deadline_s = runner, deadline_s
         self.in_flight: tuple[int, float] | None = None
         """Tick and mission time of the running call."""
@@ -255,7 +259,7 @@ class PlannerWorker:
         """Call the planner on ``obs`` (the first call resets it) at mission time ``now_s``."""
         first = not self.started
         self.started = True
-        planner, mission, rng = self.planner, self.mission, self._rng
+        planner, mission, rng, shape = self.planner, self.mission, self._rng, self.shape
 
         def call() -> np.ndarray:
             if first:
@@ -264,10 +268,10 @@ class PlannerWorker:
 
         def job() -> PlanOutcome:
             waypoint, error, elapsed = timed(call)
-            if waypoint is not None and np.shape(waypoint) == (1, 2):
+            if shape == (2,) and waypoint is not None and np.shape(waypoint) == (1, 2):
                 waypoint = np.asarray(waypoint)[0]  # the one vehicle's, as (m, 2)
             if waypoint is not None and (
-                waypoint.shape != (2,) or not np.all(np.isfinite(waypoint))
+                waypoint.shape != shape or not np.all(np.isfinite(waypoint))
             ):
                 error, waypoint = f"invalid waypoint {waypoint.tolist()}", None
             return PlanOutcome(
@@ -328,11 +332,12 @@ class Fallback:
     Args:
         mission: the mission's facts.
         seed: the generator handed to ``greedy``'s reset (it draws nothing).
+        planner: the planner that decides instead of ``greedy`` (a team's ``team-greedy``).
     """
 
-    def __init__(self, mission: MissionSpec, seed: int) -> None:
+    def __init__(self, mission: MissionSpec, seed: int, planner: Any = None) -> None:
         self.mission, self.seed = mission, seed
-        self.planner = GreedyPlanner()
+        self.planner: Any = GreedyPlanner() if planner is None else planner
         self.active = False
 
     def decide(self, obs: Observation) -> np.ndarray:

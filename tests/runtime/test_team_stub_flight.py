@@ -1,0 +1,127 @@
+"""``hptrack fly`` flies a team: the team-flight example on two vehicle stubs (``vehicle-sim
+--instances 2``, one MAVSDK connection each) ends by its budget, keeps the separation in every
+logged step and replays with 0 mismatches (issue 31's stub flight of two vehicles)."""
+
+import json
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+pytest.importorskip("mavsdk")
+pytest.importorskip("pymavlink")
+
+from hptrack.runtime.log import read_log  # noqa: E402
+
+# one stub flight at a time on one test worker, as the other stub flights
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("stub-flights")]
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "team-flight.yaml"
+CLI = [sys.executable, "-m", "hptrack"]
+BUDGET_S = 15.0
+SEPARATION_M = 10.0
+
+
+def _free_port_pair() -> int:
+    """A UDP port ``p`` on loopback with ``p + 1`` free too."""
+    for _ in range(50):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as first:
+            first.bind(("127.0.0.1", 0))
+            port = first.getsockname()[1]
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as second:
+                try:
+                    second.bind(("127.0.0.1", port + 1))
+                except OSError:
+                    continue
+                return port
+    raise AssertionError("no two consecutive free UDP ports")
+
+
+def _end(process: subprocess.Popen) -> None:
+    if process.poll() is None:
+        process.terminate()
+    try:
+        process.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.communicate()
+
+
+@pytest.mark.parametrize("targets", ["stubs", "targets-sim"])
+def test_a_team_of_two_stubs_flies_to_its_budget_apart_and_replays(tmp_path, targets):
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["budget"] = BUDGET_S
+    scenario = tmp_path / "team.yaml"
+    scenario.write_text(yaml.safe_dump(data))
+    mav, det, gcs = _free_port_pair(), _free_port_pair(), _free_port_pair()
+    own = ["--no-targets", "--gcs", f"udpout://127.0.0.1:{gcs}"] if targets != "stubs" else []
+    stub = subprocess.Popen(
+        [*CLI, "vehicle-sim", str(scenario), "--instances", "2", "--mavlink",
+         f"udpout://127.0.0.1:{mav}", "--detections", f"udp://127.0.0.1:{det}",
+         "--duration", str(BUDGET_S + 150), *own],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    sim = None
+    if targets != "stubs":  # both stubs' telemetry on one port, as PX4 SITL's instances
+        sim = subprocess.Popen(
+            [*CLI, "targets-sim", str(scenario), "--mavlink", f"udpin://127.0.0.1:{gcs}",
+             "--detections", f"udp://127.0.0.1:{det}", "--duration", str(BUDGET_S + 150),
+             "--stats", str(tmp_path / "targets.json")],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+    log = tmp_path / "team.jsonl"
+    try:
+        fly = subprocess.run(
+            [*CLI, "fly", str(scenario), "--connection", f"udpin://127.0.0.1:{mav}",
+             "--connection", f"udpin://127.0.0.1:{mav + 1}", "--detections",
+             f"udp://127.0.0.1:{det}", "--altitude", "5", "--takeoff", "--no-live",
+             "--connect-timeout", "20", "--iterations", "300", "--separation",
+             str(SEPARATION_M), "--log", str(log)],
+            capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+    finally:
+        _end(stub)
+        if sim is not None:
+            _end(sim)
+    assert fly.returncode == 0, fly.stdout + fly.stderr
+    out = " ".join(fly.stdout.split())
+    assert "ended by budget" in out and "vehicles 0 hold, 1 hold: 0 HOLD, 1 HOLD" in out
+    records = read_log(log).records
+    header = read_log(log).header
+    assert header["planner"] == "team-mcts" and header["separation_m"] == SEPARATION_M
+    systems = [r["system_id"] for r in records if "system_id" in r and r["kind"] == "status"]
+    assert systems == [1, 2]  # one autopilot per connection
+    frames = [(r["vehicle"], r["offset"]) for r in records if r["kind"] == "frame"]
+    assert frames == [(0, [0.0, 0.0]), (1, [0.0, 0.0])]  # the stubs share one origin
+    odometry = [r for r in records if r["kind"] == "odometry" and r["accepted"]]
+    assert {r["vehicle"] for r in odometry} == {0, 1}
+    ticks = [r for r in records if r["kind"] == "tick" and r["agent"] is not None]
+    assert len(ticks) == BUDGET_S / 0.5
+    assert all(r["separation_m"] >= SEPARATION_M for r in ticks)
+    assert all(len(r["agent"]) == 2 for r in ticks)
+    end = next(r for r in records if r["kind"] == "end")
+    assert end["reason"] == "budget" and end["min_reference_separation_m"] >= SEPARATION_M - 1e-9
+    detections = [r for r in records if r["kind"] == "detection" and r["accepted"]]
+    assert detections
+    if sim is not None:  # targets-sim read both vehicles; what fly took, it sent
+        seen = json.loads((tmp_path / "targets.json").read_text())
+        assert seen["mission_started"] and seen["other_positions"] == 0
+        assert min(seen["positions_by_vehicle"]) > 10 * BUDGET_S  # both at 30 Hz
+        assert set(seen["detections_sent"]) >= {r["target"] for r in detections}
+    safety = [r for r in records if r["kind"] == "safety"]
+    assert [r["confirmed"] for r in safety] == ["HOLD", "HOLD"]
+
+    summary = tmp_path / "replay.json"
+    replay = subprocess.run(
+        [*CLI, "replay", str(log), "--json", str(summary), "--plot", str(tmp_path / "r.png")],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert replay.returncode == 0, replay.stderr
+    replayed = json.loads(summary.read_text())
+    assert replayed["mismatches"] == 0, replayed["first_mismatches"]
+    assert replayed["ended_by"] == "budget" and replayed["U"] == end["U"]
+    assert replayed["min_separation_m"] == end["min_separation_m"]
+    assert (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG"
