@@ -35,3 +35,14 @@ def test_scenario_random_writes_a_team_that_flight_wants_one_connection_per_uav_
     cli("fly", str(path), "--connection", "udpin://0.0.0.0:14540").refused(
         "--connection given 1 times; the scenario flies 3 UAVs"
     )
+
+
+def test_a_team_planners_option_keeps_its_hyphenated_name(cli, tmp_path):
+    out = cli(
+        "simulate", "--random", "--targets", "2", "--team", "2", "--seed", "1",
+        "--planner", "team-greedy", "-o", "team-greedy.share-period=30",
+        "--json", str(tmp_path / "team.json"),
+    )  # fmt: skip
+    assert out.code == 0, out.err
+    settings = json.loads((tmp_path / "team.json").read_text())["info"]["settings"]
+    assert settings["share_period"] == 30.0

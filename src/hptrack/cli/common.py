@@ -122,7 +122,7 @@ def parse_value(text: str) -> Any:
 
 def planner_options(pairs: list[str] | None, planners: tuple[str, ...]) -> dict[str, dict]:
     """``-o`` options per planner: ``PLANNER.KEY=VALUE``, or ``KEY=VALUE`` when only one planner
-    runs. Keys may use ``-`` for ``_``.
+    runs. Keys may use ``-`` for ``_`` (planner names keep theirs: ``team-mcts.share-period``).
 
     Raises:
         InputError: a malformed option, a planner that is not running, or a bare key with
@@ -131,10 +131,12 @@ def planner_options(pairs: list[str] | None, planners: tuple[str, ...]) -> dict[
     out: dict[str, dict] = {p: {} for p in planners}
     for pair in pairs or []:
         key, sep, value = pair.partition("=")
-        key = key.strip().replace("-", "_")
+        prefix, dot, name = key.strip().partition(".")
+        if not dot:
+            prefix, name = "", prefix
+        key = name = name.replace("-", "_")
         if not sep or not key:
             raise InputError(f"--option expects KEY=VALUE or PLANNER.KEY=VALUE, got {pair!r}")
-        prefix, dot, name = key.partition(".")
         if dot:
             if prefix not in PLANNERS:
                 raise InputError(
