@@ -4,10 +4,10 @@ the targets' square, margin 10 m).
 
 Planners (``--planners``, default all): greedy, the default ``mcts`` and its paper preset
 (``--iterations`` simulations per decision, so the rows are reproducible), the clairvoyant
-reference, and the ARVI and A* baselines at their default (deterministic) settings. Episodes are stored in
-``--db`` as they finish (a re-run resumes); the report is per ``n`` and planner the mean ``U``
-open and fenced with standard errors, the paired cost fenced - open with its standard error,
-and the targets never detected::
+reference, and the ARVI and A* baselines at their default (deterministic) settings. Episodes
+are stored in ``--db`` as they finish (a re-run resumes); the report is per ``n`` and planner
+the mean ``U`` open and fenced with standard errors, the paired cost fenced - open with its
+standard error, and the targets never detected::
 
     python3 benchmarks/fence_cost.py --targets 6,12 --seeds 30 --workers 2 \\
         --planners greedy,mcts,"mcts paper",clairvoyant \\

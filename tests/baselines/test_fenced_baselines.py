@@ -24,7 +24,8 @@ from hptrack.sim.episode import run_episode
 EAST, HOVER = 1, 0
 SQUARE = ((130.0, -40.0), (230.0, -40.0), (230.0, 40.0), (130.0, 40.0))
 """A no-fly square on the x axis: the first eastward primitive (150 m) ends inside it."""
-FENCE = FenceSpec(polygons=(SQUARE,), margin=5.0)
+MARGIN = 5.0
+FENCE = FenceSpec(polygons=(SQUARE,), margin=MARGIN)
 TARGET = [450.0, 0.0, 0.0, 0.0]
 HORIZON = 3
 
@@ -111,11 +112,11 @@ def test_a_fenced_episode_is_flown_as_planned_and_never_inside(planner):
         seed=1,
         targets=[target],
         budget=60.0,
-        fence={"exclusions": [{"polygon": [list(c) for c in SQUARE]}], "margin": FENCE.margin},
+        fence={"exclusions": [{"polygon": [list(c) for c in SQUARE]}], "margin": MARGIN},
     )
     record = run_episode(scenario, make_planner(planner), seed=0)
     path = record.agent_path
-    (x0, y0), (x1, y1) = np.min(SQUARE, axis=0) - FENCE.margin, np.max(SQUARE, axis=0) + FENCE.margin
+    (x0, y0), (x1, y1) = np.min(SQUARE, axis=0) - MARGIN, np.max(SQUARE, axis=0) + MARGIN
     inside = (path[:, 0] > x0) & (path[:, 0] < x1) & (path[:, 1] > y0) & (path[:, 1] < y1)
     assert not inside.any()
     steps = np.linalg.norm(np.diff(path, axis=0), axis=1)

@@ -90,7 +90,7 @@ def rollout_children(
     Writes each child's total ``log det Sigma^xy`` to ``out_uncertainty`` and, if ``store``, its
     covariances to ``out_covariances`` (same order as ``children``). A child whose primitive the
     vehicle may not fly straight (into a no-fly zone or out of the operating area, by the
-    fence's margin) is not a candidate: its uncertainty is ``inf`` and its covariances are the node's.
+    fence's margin) is not a candidate: its uncertainty is ``inf``, its covariances the node's.
     """
     n_controls = step_displacements.shape[0]
     n_targets = covariances.shape[1]

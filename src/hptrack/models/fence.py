@@ -352,7 +352,9 @@ def sight_gap(fence: Fence, start: Sequence[float], point: Sequence[float]) -> f
     return math.hypot(fx - point[0], fy - point[1])
 
 
-def approach_length(fence: Fence, start: Sequence[float], point: Sequence[float]) -> float:
+def approach_length(
+    fence: Fence, start: Sequence[float] | np.ndarray, point: Sequence[float] | np.ndarray
+) -> float:
     """The length of the shortest free flight from ``start`` to ``point``'s nearest free point
     (``point`` itself when it is free; `nearest_free`), m; ``inf`` when there is none."""
     fx, fy = nearest_free(fence, float(point[0]), float(point[1]))
