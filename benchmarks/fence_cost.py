@@ -55,8 +55,10 @@ def config(name: str, targets: tuple[int, ...], seeds: int, iterations: int, no_
 
 def report(rows: dict, out: Path, iterations: int, names: list[str]) -> None:
     """Write ``table.md`` and ``summary.json`` from ``{(variant, fenced): {(n, seed): row}}``."""
+    searched = any(VARIANTS[name][0] == "mcts" for name in names)
     lines = [
-        f"mcts at {iterations:,} simulations per decision; paired over the same scenarios.",
+        (f"mcts at {iterations:,} simulations per decision; " if searched else "")
+        + "paired over the same scenarios.",
         "",
         "| n | planner | scenarios | mean U, open | std. error | mean U, fenced | std. error | "
         "cost, fenced - open | std. error | never detected, open | fenced |",
