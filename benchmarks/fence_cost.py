@@ -2,13 +2,15 @@
 random no-fly circles (``hptrack benchmark --no-fly``: one to three circles covering 10-25 % of
 the targets' square, margin 10 m).
 
-Planners: greedy, the default ``mcts`` and its paper preset (``--iterations`` simulations per
-decision, so the rows are reproducible) and the clairvoyant reference. Episodes are stored in
-``--db`` as they finish (a re-run resumes); the report is per ``n`` and planner the mean ``U``
-open and fenced with standard errors, the paired cost fenced - open with its standard error,
-and the targets never detected::
+Planners (``--planners``, default all): greedy, the default ``mcts`` and its paper preset
+(``--iterations`` simulations per decision, so the rows are reproducible), the clairvoyant
+reference, and the ARVI and A* baselines at their default (deterministic) settings. Episodes
+are stored in ``--db`` as they finish (a re-run resumes); the report is per ``n`` and planner
+the mean ``U`` open and fenced with standard errors, the paired cost fenced - open with its
+standard error, and the targets never detected::
 
     python3 benchmarks/fence_cost.py --targets 6,12 --seeds 30 --workers 2 \\
+        --planners greedy,mcts,"mcts paper",clairvoyant \\
         --db results/fence-cost.db --out docs/results/fence-cost
 """
 
@@ -29,6 +31,8 @@ VARIANTS = {
     "mcts": ("mcts", {}),
     "mcts paper": ("mcts", {"preset": "paper"}),
     "clairvoyant": ("clairvoyant", None),
+    "arvi": ("arvi", None),
+    "astar": ("astar", None),
 }
 """The planners flown: their names in the table, registered names and options (``{}``: the
 search with ``--iterations``)."""
@@ -49,10 +53,12 @@ def config(name: str, targets: tuple[int, ...], seeds: int, iterations: int, no_
     )
 
 
-def report(rows: dict, out: Path, iterations: int) -> None:
+def report(rows: dict, out: Path, iterations: int, names: list[str]) -> None:
     """Write ``table.md`` and ``summary.json`` from ``{(variant, fenced): {(n, seed): row}}``."""
+    searched = any(VARIANTS[name][0] == "mcts" for name in names)
     lines = [
-        f"mcts at {iterations:,} simulations per decision; paired over the same scenarios.",
+        (f"mcts at {iterations:,} simulations per decision; " if searched else "")
+        + "paired over the same scenarios.",
         "",
         "| n | planner | scenarios | mean U, open | std. error | mean U, fenced | std. error | "
         "cost, fenced - open | std. error | never detected, open | fenced |",
@@ -61,7 +67,7 @@ def report(rows: dict, out: Path, iterations: int) -> None:
     summary: dict = {"iterations": iterations, "rows": []}
     counts = sorted({n for by in rows.values() for n, _ in by})
     for n in counts:
-        for name in VARIANTS:
+        for name in names:
             open_, fenced = rows[name, False], rows[name, True]
             seeds = sorted(s for (m, s) in open_ if m == n and (m, s) in fenced)
             if not seeds:
@@ -107,13 +113,20 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--db", type=Path, default=Path("results/fence-cost.db"))
     parser.add_argument("--out", type=Path, default=Path("results/fence-cost"))
+    parser.add_argument(
+        "--planners", default=",".join(VARIANTS), help="the variants flown, comma-separated"
+    )
     args = parser.parse_args()
+    names = [name.strip() for name in args.planners.split(",")]
+    unknown = sorted(set(names) - set(VARIANTS))
+    if unknown:
+        parser.error(f"unknown --planners {unknown}; choose from {list(VARIANTS)}")
     targets = tuple(int(t) for t in args.targets.split(","))
     args.db.parent.mkdir(parents=True, exist_ok=True)
     store = ResultStore(args.db)
     try:
         rows = {}
-        for name in VARIANTS:
+        for name in names:
             for no_fly in (False, True):
                 c = config(name, targets, args.seeds, args.iterations, no_fly)
                 run_benchmark(c, store, args.workers)
@@ -123,7 +136,7 @@ def main() -> None:
                 }
     finally:
         store.close()
-    report(rows, args.out, args.iterations)
+    report(rows, args.out, args.iterations, names)
 
 
 if __name__ == "__main__":

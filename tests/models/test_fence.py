@@ -152,3 +152,39 @@ def test_the_chance_of_a_find_loses_what_the_footprint_cannot_see():
     leaving = np.array([100.0, 0.0, -2.0, 0.0])
     later = visible_find(wall.record, leaving, 0.0, cov, 0.0, 0.8, 200)
     assert later > half
+
+
+def _wall_quadrature(vx: float, p: float, cutoff: int, hold: bool) -> float:
+    """`visible_find`'s quadrature by hand for the belief of the test below (N(mean, 100^2 I),
+    not growing, the mean at x = 100 m moving at ``vx`` m/s) behind the wall x >= 50 m (seen
+    where x <= 100 m): rings of equal mass, each reached later by the hidden share of the time
+    of the rings before it when ``hold``."""
+    rings, angles, tau = 12, 24, 0.5
+    scale = cutoff / math.log(1.0 - p)
+    held, seen = 0.0, 0
+    for k in range(rings):
+        u = p * (k + 0.5) / rings
+        steps = scale * math.log(1.0 - u) + held
+        theta = 2.0 * math.pi * (np.arange(angles) + 0.5 * (k % 2)) / angles
+        x = 100.0 + vx * steps * tau + 100.0 * math.sqrt(-2.0 * math.log(1.0 - u)) * np.cos(theta)
+        ring = int(np.sum(x <= 100.0))
+        seen += ring
+        if hold:
+            bounds = np.log(1.0 - p * np.array([k, k + 1]) / rings)
+            held += (1.0 - ring / angles) * scale * (bounds[1] - bounds[0])
+    return p * seen / (rings * angles)
+
+
+def test_each_ring_is_reached_later_by_the_time_spent_over_the_hidden_part():
+    from hptrack.models.mission import visible_find
+
+    cov = np.diag([100.0**2, 100.0**2, 1e-12, 1e-12])
+    wall = _fenced_mission(polygons=(((50.0, -1e5), (1e5, -1e5), (1e5, 1e5), (50.0, 1e5)),))
+    leaving = np.array([100.0, 0.0, -2.0, 0.0])
+    got = visible_find(wall.record, leaving, 0.0, cov, 0.0, 0.8, 200)
+    assert got == pytest.approx(_wall_quadrature(-2.0, 0.8, 200, hold=True), rel=1e-12)
+    assert got > _wall_quadrature(-2.0, 0.8, 200, hold=False)  # the belief has moved on
+    still = np.array([100.0, 0.0, 0.0, 0.0])  # a belief that stays put: the holding is moot
+    assert visible_find(wall.record, still, 0.0, cov, 0.0, 0.8, 200) == pytest.approx(
+        _wall_quadrature(0.0, 0.8, 200, hold=False), rel=1e-12
+    )

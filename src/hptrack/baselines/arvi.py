@@ -170,14 +170,15 @@ def prune(
 ) -> tuple[np.ndarray, bool]:
     """Reduced-value-iteration pruning of one level (Atanasov et al. 2014, Alg. 2).
 
-    Nodes are visited by increasing cost (stable, so earlier nodes win ties); a node is kept
+    Nodes are visited by increasing cost (stable, so earlier nodes win ties), those of infinite
+    cost (not candidates: a primitive the fenced vehicle may not fly) never; a node is kept
     unless a kept node lies closer than ``delta_m`` to it and ``Sigma_kept <= Sigma + epsilon I``
     on every target block (all eigenvalues, not only the diagonal). The cheapest node is
     therefore always kept, and first.
 
     Args:
         positions: ``(M, 2)`` agent positions, m.
-        costs: ``(M,)`` accumulated costs.
+        costs: ``(M,)`` accumulated costs (``inf``: not a candidate).
         covariances: ``(M, n, d, d)`` target covariances (``None`` when ``epsilon`` is
             ``inf``).
         delta_m: position radius, m (``0`` prunes nothing; ``inf`` keeps only the cheapest
@@ -189,6 +190,7 @@ def prune(
         Kept indices ordered by cost, and whether ``max_keep`` cut off further nodes.
     """
     order = np.argsort(costs, kind="stable")
+    order = order[np.isfinite(costs[order])]
     if covariances is None:
         if not math.isinf(epsilon):
             raise ValueError("a finite epsilon needs the covariances")

@@ -31,6 +31,7 @@ earlier arrival at the other, so it dwells far longer on one target than ARVI do
 from __future__ import annotations
 
 import heapq
+import math
 import time
 from typing import TYPE_CHECKING, Annotated
 
@@ -126,6 +127,8 @@ def _expand_node(
         bounds,
     )
     for c in range(n_controls):
+        if uncertainty[first + c] == np.inf:  # not a candidate (`rollout_children`)
+            continue
         h = bounds[c, 0] - uncertainty[first + c] if difference else np.sum(bounds[c])
         f[c] += weight * h
 
@@ -206,7 +209,8 @@ class AStarPlanner(PrimitivePlanner):
             )
             place = radix ** (horizon - 1 - level)
             for c, f_child in enumerate(f.tolist()):
-                heapq.heappush(heap, (f_child, code + (c + 1) * place, n_nodes + c))
+                if f_child != math.inf:  # inf: a primitive the fenced vehicle may not fly
+                    heapq.heappush(heap, (f_child, code + (c + 1) * place, n_nodes + c))
             n_nodes += n_controls
         plan = np.full(horizon, HOVER, dtype=np.int64)
         plan_cost = float(g[node])

@@ -10,6 +10,12 @@ A simple, sensible policy without look-ahead, the floor every tree-search planne
    single target it simply keeps following it.
 4. If the agent reaches the belief mean without measuring the target, it gives up on it; when
    every target has been given up on, the list is cleared.
+
+With a fence (`hptrack.models.fence`) the way to a mean is the shortest free flight to its
+nearest free point (`approach_length`): the reach times of step 1 are its length over the
+closing speed, and step 4 gives up once the agent is there (a mean inside a no-fly zone is never
+reached). The waypoint stays the belief mean: the fenced vehicle flies the shortest free flight
+towards it, which is pure pursuit around the zones.
 """
 
 from __future__ import annotations
@@ -18,7 +24,9 @@ import numpy as np
 
 from hptrack.interface import CurrentPlan, MissionSpec, Observation, one_vehicle
 from hptrack.models.beliefs import position_logdet
+from hptrack.models.fence import approach_length
 from hptrack.models.state import positions, speeds
+from hptrack.models.vehicle import FencedHolonomicVehicle
 from hptrack.settings import NoSettings
 
 
@@ -38,14 +46,23 @@ class GreedyPlanner:
     ) -> None:
         one_vehicle(self.name, mission)
         self._mission = mission
+        vehicle = mission.record.vehicle
+        self._fence = vehicle.fence if isinstance(vehicle, FencedHolonomicVehicle) else None
         self._target: int | None = None
         self._given_up = np.zeros(mission.n_targets, dtype=bool)
 
+    def _distances(self, obs: Observation) -> np.ndarray:
+        """How far the agent flies to each belief mean now, m: straight, or with a fence the
+        shortest free flight to the mean's nearest free point (module docstring)."""
+        means = positions(obs.means)
+        if self._fence is None:
+            return np.hypot(*(means - obs.agent_position).T)
+        return np.array([approach_length(self._fence, obs.agent_position, m) for m in means])
+
     def _reach_times(self, obs: Observation) -> np.ndarray:
-        """Time to reach each belief mean flying straight at full speed (conservative), s."""
-        distance = np.hypot(*(positions(obs.means) - obs.agent_position).T)
+        """Time to reach each belief mean flying at full speed (conservative), s."""
         closing = self._mission.agent_speed - speeds(obs.means)
-        return distance / closing
+        return self._distances(obs) / closing
 
     def _choose(self, obs: Observation) -> int | None:
         if self.claimed is not None and self.claimed.all():
@@ -72,8 +89,11 @@ class GreedyPlanner:
         if self._target is not None and self.claimed is not None and self.claimed[self._target]:
             self._target = None
         if self._target is not None:
-            mean = positions(obs.means[self._target])
-            if np.hypot(*(mean - obs.agent_position)) < self._mission.step_length:
+            if self._fence is None:
+                gap = np.hypot(*(positions(obs.means[self._target]) - obs.agent_position))
+            else:
+                gap = approach_length(self._fence, obs.agent_position, obs.means[self._target])
+            if gap < self._mission.step_length:
                 self._given_up[self._target] = True
                 self._target = None
         if self._target is None:

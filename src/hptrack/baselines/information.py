@@ -24,12 +24,19 @@ that node's children. Searches that prune before they need the children's covari
 (ARVI with ``epsilon = inf``) ask for the uncertainties first (`expand_uncertainty`) and for
 the covariances of the kept children only (`child_covariances`).
 
+With a fence (`hptrack.models.fence`), a primitive is a candidate only when the vehicle may
+fly it straight (`hptrack.models.vehicle`'s ``flies_straight_between``: it neither enters a
+no-fly zone nor leaves the operating area, both by the margin; hover always is): the others
+get an infinite cost and no search keeps them, so every plan is flown as it was scored. In open
+space every primitive is a candidate and nothing changes.
+
 `RiccatiBound` is the admissible heuristic of A* (Schlotfeldt, Atanasov, Pappas, IROS
 2019, "Maximum Information Bounds for Planning Active Sensing Trajectories"), with the step cost
 changed to match: every target is measured at every sub-step from the first one at which the
 agent could have reached its predicted mean. The "measured at every step" Riccati recursion is
 precomputed once per mission (`hptrack.models.riccati`), so the bound costs O(1) per
-target and node, whatever the horizon.
+target and node, whatever the horizon. A fence only lengthens the way to a target, so the
+bound's straight reach stays a lower bound with one (looser).
 """
 
 from __future__ import annotations
@@ -46,6 +53,7 @@ from hptrack.models.mission import follow_tables, predict_covariance_on
 from hptrack.models.motion import predicted_positions
 from hptrack.models.riccati import measured_covariance
 from hptrack.models.sensor import sensor_measures, sensor_reach, sensor_update_covariance
+from hptrack.models.vehicle import vehicle_flies_straight_between
 
 if TYPE_CHECKING:
     from hptrack.interface import MissionSpec
@@ -80,7 +88,9 @@ def rollout_children(
     (``mission``: the mission record).
 
     Writes each child's total ``log det Sigma^xy`` to ``out_uncertainty`` and, if ``store``, its
-    covariances to ``out_covariances`` (same order as ``children``).
+    covariances to ``out_covariances`` (same order as ``children``). A child whose primitive the
+    vehicle may not fly straight (into a no-fly zone or out of the operating area, by the
+    fence's margin) is not a candidate: its uncertainty is ``inf``, its covariances the node's.
     """
     n_controls = step_displacements.shape[0]
     n_targets = covariances.shape[1]
@@ -104,6 +114,13 @@ def rollout_children(
         py = positions[a, 1]
         dx = step_displacements[c, 0]
         dy = step_displacements[c, 1]
+        if not vehicle_flies_straight_between(
+            mission.vehicle, px, py, px + n_steps * dx, py + n_steps * dy
+        ):
+            out_uncertainty[j] = math.inf
+            if store:
+                out_covariances[j] = covariances[a]
+            continue
         total = 0.0
         for i in range(n_targets):
             if far_node[i] != a:

@@ -352,6 +352,15 @@ def sight_gap(fence: Fence, start: Sequence[float], point: Sequence[float]) -> f
     return math.hypot(fx - point[0], fy - point[1])
 
 
+def approach_length(
+    fence: Fence, start: Sequence[float] | np.ndarray, point: Sequence[float] | np.ndarray
+) -> float:
+    """The length of the shortest free flight from ``start`` to ``point``'s nearest free point
+    (``point`` itself when it is free; `nearest_free`), m; ``inf`` when there is none."""
+    fx, fy = nearest_free(fence, float(point[0]), float(point[1]))
+    return float(fenced_route(fence, float(start[0]), float(start[1]), fx, fy)[0])
+
+
 def in_sight(fence: Fence, start: Sequence[float], point: Sequence[float], radius: float) -> bool:
     """Whether a footprint of ``radius`` m flown from ``start`` inside ``fence`` can cover
     ``point`` (`sight_gap`)."""

@@ -288,29 +288,42 @@ def visible_find(mission, mean, elapsed, cov, q, p_find, cutoff_steps):
     swept at ``t_u = t_cutoff ln(1 - u) / ln(1 - p_find)``. A quadrature of equal weights,
     `QUADRATURE_RINGS` rings of equal mass steps ``u`` in ``(0, p_find)``, `QUADRATURE_ANGLES`
     points on each at the Mahalanobis radius ``sqrt(-2 ln(1 - u))`` of the belief predicted to
-    ``t_u`` around its mean then, counts the share of points the vehicle's footprint can see
-    (`hptrack.models.vehicle`); ``p_find`` times that share is returned."""
+    the ring's time around its mean then, counts the share of points the vehicle's footprint can
+    see (`hptrack.models.vehicle`); ``p_find`` times that share is returned. The time the
+    spiral spends over what the footprint cannot see is not spent covering: the vehicle is held
+    at the fence while the spiral is there, so each ring is reached later than ``t_u`` by the
+    hidden share of the time of the rings before it (a ring's time: between its bounds of mass
+    ``p_find k / R`` and ``p_find (k + 1) / R``), by when the belief has moved on relative to
+    the fixed fence."""
     if vehicle_open_space(mission.vehicle) or p_find <= 0.0:
         return p_find
     tau = mission.time_step
     radius = footprint_radius(mission.sensor)
-    scale = cutoff_steps / math.log(1.0 - min(p_find, 1.0 - 1e-12))
+    top = min(p_find, 1.0 - 1e-12)
+    scale = cutoff_steps / math.log(1.0 - top)
     seen = 0
+    held = 0.0  # steps the spiral has spent over what the footprint cannot see
     for k in range(QUADRATURE_RINGS):
         u = p_find * (k + 0.5) / QUADRATURE_RINGS
         log_miss = math.log(1.0 - u)
-        steps = scale * log_miss
+        steps = scale * log_miss + held
         x, y = mean_position_on(mission, mean, elapsed + steps * tau)
         sxx, sxy, syy = position_covariance_on(mission, cov, q, steps)
         l11 = math.sqrt(sxx)
         l21 = sxy / l11
         l22 = math.sqrt(max(syy - l21 * l21, 0.0))
         r = math.sqrt(-2.0 * log_miss)
+        ring_seen = 0
         for j in range(QUADRATURE_ANGLES):
             theta = 2.0 * math.pi * (j + 0.5 * (k % 2)) / QUADRATURE_ANGLES
             zx, zy = r * math.cos(theta), r * math.sin(theta)
             if vehicle_sees(mission.vehicle, x + l11 * zx, y + l21 * zx + l22 * zy, radius):
-                seen += 1
+                ring_seen += 1
+        seen += ring_seen
+        lo = top * k / QUADRATURE_RINGS
+        hi = top * (k + 1) / QUADRATURE_RINGS
+        hidden = 1.0 - ring_seen / QUADRATURE_ANGLES
+        held += hidden * scale * (math.log(1.0 - hi) - math.log(1.0 - lo))
     return p_find * (seen / (QUADRATURE_RINGS * QUADRATURE_ANGLES))
 
 

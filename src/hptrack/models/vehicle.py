@@ -17,7 +17,9 @@ with `register_vehicle` and its compiled kernels (`VehicleKernels`). Compiled co
 * ``open_space(vehicle) -> bool``: whether the vehicle may fly anywhere (a compile-time
   constant; ``True``, the default);
 * ``sees(vehicle, x, y, radius) -> bool``: whether a footprint of ``radius`` m flown where the
-  vehicle may fly can cover ``(x, y)`` (always, the default).
+  vehicle may fly can cover ``(x, y)`` (always, the default);
+* ``flies_straight_between(vehicle, ax, ay, bx, by) -> bool``: whether the vehicle may fly the
+  straight segment from ``(ax, ay)`` to ``(bx, by)`` (m) as it is (always, the default).
 
 The models: `HolonomicVehicle` (the paper's): a point that flies straight at up to ``v_a``.
 Interception, with ``d = mean - agent`` and the point's velocity ``v_hat``: the smallest
@@ -45,7 +47,14 @@ import numpy as np
 from numba.extending import overload
 
 from hptrack._dispatch import registered
-from hptrack.models.fence import Fence, fenced_route, nearest_free, point_free, sees
+from hptrack.models.fence import (
+    Fence,
+    fenced_route,
+    nearest_free,
+    point_free,
+    sees,
+    segment_free,
+)
 
 
 class HolonomicVehicle(NamedTuple):
@@ -90,15 +99,22 @@ def sees_anything(vehicle, x, y, radius):
     return True
 
 
+@numba.njit(cache=True, inline="always")
+def any_segment(vehicle, ax, ay, bx, by):
+    """Default ``flies_straight_between``: every straight segment may be flown."""
+    return True
+
+
 class VehicleKernels(NamedTuple):
-    """The compiled kernels of a vehicle model (module docstring); ``open_space`` and
-    ``sees`` default to open space."""
+    """The compiled kernels of a vehicle model (module docstring); ``open_space``,
+    ``sees`` and ``flies_straight_between`` default to open space."""
 
     move: Callable
     intercept_time: Callable
     approach_step: Callable
     open_space: Callable = anywhere
     sees: Callable = sees_anything
+    flies_straight_between: Callable = any_segment
 
 
 _VEHICLES: dict[type, VehicleKernels] = {}
@@ -136,6 +152,16 @@ def vehicle_open_space(vehicle):
 def vehicle_sees(vehicle, x, y, radius):
     """The registered ``sees`` of ``vehicle``'s class (compiled code only)."""
     raise NotImplementedError
+
+
+def vehicle_flies_straight_between(vehicle, ax, ay, bx, by):
+    """The registered ``flies_straight_between`` of ``vehicle``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(vehicle_flies_straight_between, inline="always")
+def _flies_straight_between(vehicle, ax, ay, bx, by):
+    return _kernel(vehicle, "flies_straight_between")
 
 
 @overload(vehicle_open_space, inline="always")
@@ -339,10 +365,24 @@ def fenced_sees(vehicle, x, y, radius):
     return sees(vehicle.fence, x, y, radius)
 
 
+@numba.njit(cache=True, inline="always")
+def fenced_segment(vehicle, ax, ay, bx, by):
+    """`FencedHolonomicVehicle`: the segment stays in the free space
+    (`hptrack.models.fence.segment_free`; a segment of no length, where the vehicle is)."""
+    if ax == bx and ay == by:
+        return True
+    return segment_free(vehicle.fence, ax, ay, bx, by)
+
+
 register_vehicle(
     FencedHolonomicVehicle,
     VehicleKernels(
-        fenced_move, fenced_intercept_time, holonomic_approach_step, fenced, fenced_sees
+        fenced_move,
+        fenced_intercept_time,
+        holonomic_approach_step,
+        fenced,
+        fenced_sees,
+        fenced_segment,
     ),
 )
 
