@@ -1043,22 +1043,7 @@ async def fly_mission(
                 raise FlightError(
                     f"the mission log cannot be written ({log.stopped}); nothing was flown"
                 )
-            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            try:
-                sock.bind((host, port))
-            except OSError as err:
-                raise InputError(
-                    f"--detections {options.detections!r}: cannot receive there ({err.strerror})"
-                ) from None
-            enlarge_receive_buffer(sock)
-            drops_before = kernel_drops(sock)
-            intake = flight.intake = DetectionIntake(
-                sock,
-                flight.detection_line,
-                flight.mission_time,
-                dataclasses.replace(options.intake, slice_s=1.0 / options.setpoint_rate_hz),
-            )
-            intake.start()
+            sock, drops_before, intake = open_detections(options, host, port, flight)
             started = time.monotonic()
             controller.prepare(flight.position_enu())
             flight.say("computing the first plan (the planner compiles or loads its kernels)")
@@ -1247,6 +1232,33 @@ def _say_intake(
             show=datagrams > 0,
             dropped_datagrams=datagrams,
         )
+
+
+def open_detections(options, host: str, port: int, flight) -> tuple[socket.socket, int, Any]:
+    """Bind the detection port and start ``flight``'s intake on it (``flight.intake``):
+    ``(socket, the kernel's drops so far, the intake)``.
+
+    Raises:
+        InputError: the port cannot be bound (the ``--detections`` option named).
+    """
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.bind((host, port))
+    except OSError as err:
+        sock.close()
+        raise InputError(
+            f"--detections {options.detections!r}: cannot receive there ({err.strerror})"
+        ) from None
+    enlarge_receive_buffer(sock)
+    drops_before = kernel_drops(sock)
+    intake = flight.intake = DetectionIntake(
+        sock,
+        flight.detection_line,
+        flight.mission_time,
+        dataclasses.replace(options.intake, slice_s=1.0 / options.setpoint_rate_hz),
+    )
+    intake.start()
+    return sock, drops_before, intake
 
 
 async def _take_off(flight: _Flight, system: Any) -> None:

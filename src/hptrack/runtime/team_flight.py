@@ -62,10 +62,11 @@ from hptrack.runtime.mavsdk_adapter import (
     _route_mavsdk_logs,
     _say_intake,
     _take_off,
+    open_detections,
     plain_error,
     read_limits,
 )
-from hptrack.runtime.network import enlarge_receive_buffer, kernel_drops, udp_address
+from hptrack.runtime.network import kernel_drops, udp_address
 from hptrack.runtime.team import TeamController
 
 
@@ -411,22 +412,7 @@ async def fly_team_mission(
                 raise FlightError(
                     f"the mission log cannot be written ({log.stopped}); nothing was flown"
                 )
-            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            try:
-                sock.bind((host, port))
-            except OSError as err:
-                raise InputError(
-                    f"--detections {options.detections!r}: cannot receive there ({err.strerror})"
-                ) from None
-            enlarge_receive_buffer(sock)
-            drops_before = kernel_drops(sock)
-            intake = lead.intake = DetectionIntake(
-                sock,
-                lead.detection_line,
-                lead.mission_time,
-                dataclasses.replace(options.intake, slice_s=1.0 / options.setpoint_rate_hz),
-            )
-            intake.start()
+            sock, drops_before, intake = open_detections(options, host, port, lead)
             started = time.monotonic()
             controller.prepare(np.array([m.position_enu() for m in members]))
             on_message("computing the first plan (the planner compiles or loads its kernels)")
