@@ -54,7 +54,7 @@ def test_the_simulator_hands_the_truth_to_a_truth_reader_only():
     assert len(seen) == 10
     assert all(np.array_equal(s, t) for s, t in zip(seen, record.true_states[:-1], strict=True))
     readers = [name for name, entry in PLANNERS.items() if entry.reads_truth]
-    assert readers == ["clairvoyant"]
+    assert readers == ["clairvoyant", "team-clairvoyant"]  # the references, one UAV and a team
     assert not any(isinstance(make_planner(name), TruthReader) for name in ("greedy", "mcts"))
 
 

@@ -152,6 +152,7 @@ def test_every_planner_of_one_vehicle_refuses_two_in_one_line(name, options):
     )
     planner = make_planner(name, options)
     with pytest.raises(
-        InputError, match=rf"^planner '{name}' flies one vehicle; .*n_vehicles is 2$"
+        InputError,
+        match=rf"^planner '{name}' flies one vehicle; .*n_vehicles is 2 \(a team flies with team-",
     ):
         planner.reset(two, scenario.initial_observation(), np.random.default_rng(0))

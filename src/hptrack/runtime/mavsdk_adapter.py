@@ -1064,31 +1064,9 @@ async def fly_mission(
                     "offboard never started",
                     reason="take-off failed",
                 )
-            if not await flight.wait_for(
-                lambda: (
-                    controller.first_plan(0.0) is not None or controller.planner_error is not None
-                ),
-                options.first_plan_timeout_s,
-            ):
-                if stop.is_set():
-                    raise FlightError("interrupted before the mission started")
-                raise FlightError(
-                    f"the planner gave no first plan within {options.first_plan_timeout_s:g} s; "
-                    "the vehicle stays in its current mode (offboard never started)"
-                )
-            if controller.first_plan_s is None:
-                raise FlightError(
-                    f"the planner failed on its first plan ({controller.planner_error}); "
-                    "the vehicle stays in its current mode (offboard never started)"
-                )
-            flight.say(
-                f"first plan ready before offboard: {controller.first_plan_s:.2f} s of "
-                f"planning, {time.monotonic() - started:.1f} s after the start of the "
-                "take-off phase",
-                first_plan_s=controller.first_plan_s,
+            await wait_for_first_plan(
+                flight, controller, options, stop, started, "the vehicle stays in its current mode"
             )
-            if stop.is_set():
-                raise FlightError("interrupted before the mission started")
             if flight.log_failed():
                 raise FlightError(
                     f"the mission log stopped before the mission started ({log.stopped}); "
@@ -1232,6 +1210,41 @@ def _say_intake(
             show=datagrams > 0,
             dropped_datagrams=datagrams,
         )
+
+
+async def wait_for_first_plan(
+    flight, controller, options, stop, started: float, stays: str
+) -> None:
+    """Wait, before offboard, for the controller's first plan (``options.first_plan_timeout_s``)
+    and say how long it took (``started``: the take-off phase's start, monotonic s).
+
+    Raises:
+        FlightError: interrupted, no plan in time or a failed one (``stays``: what the vehicles
+            do then, said in the message).
+    """
+    if not await flight.wait_for(
+        lambda: controller.first_plan(0.0) is not None or controller.planner_error is not None,
+        options.first_plan_timeout_s,
+    ):
+        if stop.is_set():
+            raise FlightError("interrupted before the mission started")
+        raise FlightError(
+            f"the planner gave no first plan within {options.first_plan_timeout_s:g} s; "
+            f"{stays} (offboard never started)"
+        )
+    if controller.first_plan_s is None:
+        raise FlightError(
+            f"the planner failed on its first plan ({controller.planner_error}); "
+            f"{stays} (offboard never started)"
+        )
+    flight.say(
+        f"first plan ready before offboard: {controller.first_plan_s:.2f} s of "
+        f"planning, {time.monotonic() - started:.1f} s after the start of the "
+        "take-off phase",
+        first_plan_s=controller.first_plan_s,
+    )
+    if stop.is_set():
+        raise FlightError("interrupted before the mission started")
 
 
 def open_detections(options, host: str, port: int, flight) -> tuple[socket.socket, int, Any]:

@@ -65,6 +65,7 @@ from hptrack.runtime.mavsdk_adapter import (
     open_detections,
     plain_error,
     read_limits,
+    wait_for_first_plan,
 )
 from hptrack.runtime.network import kernel_drops, udp_address
 from hptrack.runtime.team import TeamController
@@ -424,31 +425,9 @@ async def fly_team_mission(
                 raise FlightError(
                     "a vehicle is not armed and in the air; pass --takeoff to arm and take off"
                 )
-            if not await lead.wait_for(
-                lambda: (
-                    controller.first_plan(0.0) is not None or controller.planner_error is not None
-                ),
-                options.first_plan_timeout_s,
-            ):
-                if stop.is_set():
-                    raise FlightError("interrupted before the mission started")
-                raise FlightError(
-                    f"the planner gave no first plan within {options.first_plan_timeout_s:g} s; "
-                    "the vehicles stay in their current modes (offboard never started)"
-                )
-            if controller.first_plan_s is None:
-                raise FlightError(
-                    f"the planner failed on its first plan ({controller.planner_error}); "
-                    "the vehicles stay in their current modes (offboard never started)"
-                )
-            lead.say(
-                f"first plan ready before offboard: {controller.first_plan_s:.2f} s of "
-                f"planning, {time.monotonic() - started:.1f} s after the start of the "
-                "take-off phase",
-                first_plan_s=controller.first_plan_s,
+            await wait_for_first_plan(
+                lead, controller, options, stop, started, "the vehicles stay in their current modes"
             )
-            if stop.is_set():
-                raise FlightError("interrupted before the mission started")
             offboards = await _start_offboard_all(members, systems, options.altitude_m)
             left: int | None = None
             try:
