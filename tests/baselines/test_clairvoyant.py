@@ -99,3 +99,12 @@ def test_a_plan_of_no_time_ranks_first_without_a_warning():
     ]
     record = run_episode(scenario.model_copy(update={"targets": targets}), ClairvoyantPlanner())
     assert record.info["visits"][0] == {"step": 0, "target_index": 0, "stay_s": 0.0}
+
+
+def test_a_teams_gap_is_closed_between_its_greedy_and_clairvoyant_teams():
+    summary = {
+        "team-greedy": {12: {"mean": 300.0}},
+        "team-clairvoyant": {12: {"mean": 100.0}},
+        "team-mcts": {12: {"mean": 150.0}},
+    }
+    assert gap_closed(summary)["team-mcts"] == {12: 75.0}

@@ -544,7 +544,13 @@ def reductions(summary: dict, planner: str) -> dict:
 def gap_closed(summary: dict, floor: str = "greedy", reference: str = "clairvoyant") -> dict:
     """Share of the gap from ``floor`` (no look-ahead) to ``reference`` (reads the truth) that
     each planner's mean ``U`` closes, percent: ``{planner: {n: 100 (U_floor - U) / (U_floor -
-    U_reference)}}`` (empty without both)."""
+    U_reference)}}`` (empty without both; a team's ``team-greedy`` and ``team-clairvoyant``
+    stand in for the two when only they ran)."""
+    if (floor not in summary or reference not in summary) and {
+        f"team-{floor}",
+        f"team-{reference}",
+    } <= set(summary):
+        floor, reference = f"team-{floor}", f"team-{reference}"
     if floor not in summary or reference not in summary:
         return {}
     low, ref = summary[floor], summary[reference]
