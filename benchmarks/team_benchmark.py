@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hptrack.experiments.benchmark import BenchmarkConfig, run_benchmark
+from hptrack.experiments.benchmark import BenchmarkConfig, run_variants
 from hptrack.experiments.report import mean_se, write_tables
 from hptrack.experiments.store import ResultStore
 from hptrack.registry import planner_settings
@@ -173,18 +173,15 @@ def main() -> None:
     args.db.parent.mkdir(parents=True, exist_ok=True)
     store = ResultStore(args.db)
     try:
-        by_team: dict[int, dict[str, dict]] = {}
-        for m in counts(args.teams):
-            by_team[m] = {}
-            for variant, config in configs(
-                counts(args.targets), args.seeds, m, args.time_limit, args.links
-            ).items():
-                if not args.report_only:
-                    run_benchmark(config, store, args.workers)
-                wanted = set(config.keys())
-                by_team[m][variant] = {
-                    (r.key.n_targets, r.key.seed): r for r in store.rows() if r.key in wanted
-                }
+        by_team = {
+            m: run_variants(
+                configs(counts(args.targets), args.seeds, m, args.time_limit, args.links),
+                store,
+                args.workers,
+                run=not args.report_only,
+            )
+            for m in counts(args.teams)
+        }
     finally:
         store.close()
     report(by_team, args.out, command)

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hptrack.experiments.benchmark import BenchmarkConfig, run_benchmark
+from hptrack.experiments.benchmark import BenchmarkConfig, run_variants
 from hptrack.experiments.report import mean_se, write_tables
 from hptrack.experiments.store import ResultStore
 from hptrack.registry import planner_settings
@@ -203,21 +203,15 @@ def main() -> None:
     args.db.parent.mkdir(parents=True, exist_ok=True)
     store = ResultStore(args.db)
     try:
-        by_variant = {}
-        for variant, config in configs(
+        variants = configs(
             counts(args.targets),
             args.seeds,
             args.time_limit,
             counts(args.long_targets),
             args.long_seeds,
             args.long_time_limit,
-        ).items():
-            if not args.report_only:
-                run_benchmark(config, store, args.workers)
-            wanted = set(config.keys())
-            by_variant[variant] = {
-                (r.key.n_targets, r.key.seed): r for r in store.rows() if r.key in wanted
-            }
+        )
+        by_variant = run_variants(variants, store, args.workers, run=not args.report_only)
     finally:
         store.close()
     report(by_variant, args.out, command)

@@ -394,6 +394,20 @@ def run_keys(
     return finished
 
 
+def run_variants(
+    configs: dict[str, BenchmarkConfig], store: ResultStore, workers: int, run: bool = True
+) -> dict[str, dict[tuple[int, int], Any]]:
+    """Run each named benchmark on ``store`` (unless ``run`` is false: report only) and return
+    its stored rows, ``{name: {(n, seed): row}}`` (the benchmark scripts' side-by-side runs)."""
+    out = {}
+    for name, config in configs.items():
+        if run:
+            run_benchmark(config, store, workers)
+        wanted = set(config.keys())
+        out[name] = {(r.key.n_targets, r.key.seed): r for r in store.rows() if r.key in wanted}
+    return out
+
+
 def benchmark(
     planners: Sequence[str] = ("mcts", "greedy"),
     target_counts: Sequence[int] = (2, 3, 4, 5, 6),
