@@ -64,7 +64,7 @@ def test_a_layout_2_database_is_migrated_with_every_result(layout_2):
     store.close()
     assert _raw(layout_2) == before  # every result unchanged, only identities rewritten
     with sqlite3.connect(layout_2) as db:
-        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 7
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 8
     for r in rows:
         assert (r.gospa_mean, r.gospa_end, r.track_loss) == (None, None, None)
         text = r.key.planner_settings
@@ -190,7 +190,7 @@ def test_a_layout_6_database_gains_the_metrics_as_null(tmp_path):
     assert old.metric("gospa_end") is None
     store.close()
     with sqlite3.connect(path) as db:
-        assert db.execute("PRAGMA user_version").fetchone()[0] == 7
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
         db.execute("UPDATE episodes SET gospa_end = 'far' WHERE seed = 1")
     with pytest.raises(InputError, match=r"seed=1: gospa_end is 'far', not a finite number"):
         ResultStore(path).rows()

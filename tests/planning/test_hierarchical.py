@@ -119,7 +119,7 @@ def test_settings_default_effort_and_identity():
     assert default.preset == "improved"  # the default since the quality-against-time benchmark
     assert default.canonical() == (
         '{"backup":"max","commit":0.0,"common_rollouts":false,"dwell":0.0,"estimator":"paper",'
-        '"exploration":0.5,"iterations":100000,"max_weight":1.0,"miss":"drop",'
+        '"exploration":0.5,"fortify":false,"iterations":100000,"max_weight":1.0,"miss":"drop",'
         '"passes":"ignore","readmit":false,"rollout":"uniform","rollout_epsilon":0.1,'
         '"root_split":"even","threads":1,"time_limit":null}'
     )

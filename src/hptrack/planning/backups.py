@@ -30,8 +30,9 @@ Compiled code calls `back_up`, dispatched on the backup's class, so the search i
   visits on the best action, so the most visited one is the best without picking a lucky
   rollout.
 
-Every backup counts ``N(N^s) += 1`` and ``N(N^a) += 1`` along the path; `back_up` then
-widens the observed return range and counts the simulation.
+Every backup counts ``N(N^s) += 1`` and ``N(N^a) += 1`` along the path; `back_up` then adds
+the return and its square to each action's sums (for its standard error), widens the observed
+return range and counts the simulation.
 """
 
 from __future__ import annotations
@@ -65,8 +66,8 @@ def _registered(backup) -> _Registered:
 
 
 def back_up(backup, tree, path_state, path_action, path_outcome, depth, ret):
-    """Back ``ret`` up the path with ``backup``'s registered kernel, then widen the return
-    range and count the simulation (compiled code only)."""
+    """Back ``ret`` up the path with ``backup``'s registered kernel, then add it to the path's
+    return sums, widen the return range and count the simulation (compiled code only)."""
     raise NotImplementedError
 
 
@@ -81,6 +82,10 @@ def _back_up(backup, tree, path_state, path_action, path_outcome, depth, ret):
 
     def impl(backup, tree, path_state, path_action, path_outcome, depth, ret):
         back(backup, tree, path_state, path_action, path_outcome, depth, ret)
+        for d in range(depth):
+            x = path_action[d]
+            tree.a_return_sum[x] += ret
+            tree.a_return_square_sum[x] += ret * ret
         tree.value_range[0] = min(tree.value_range[0], ret)
         tree.value_range[1] = max(tree.value_range[1], ret)
         tree.counts[2] += 1

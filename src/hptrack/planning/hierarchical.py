@@ -25,6 +25,7 @@ follows the last found target, or hovers.
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import replace
 from typing import Annotated, Any, Literal
 
@@ -32,8 +33,10 @@ import numpy as np
 from pydantic import Field, field_validator, model_validator
 
 from hptrack.interface import CurrentPlan, MissionSpec, Observation, one_vehicle
-from hptrack.models.mission import follow_tables
+from hptrack.models.mission import follow_tables, state_size
+from hptrack.models.state import positions
 from hptrack.planning.backups import backup_of
+from hptrack.planning.fortified import fortified_choice
 from hptrack.planning.rollout import UniformRandom
 from hptrack.planning.search import DEFAULT_EXPLORATION, SearchOptions, SearchResult
 from hptrack.planning.subtask_flight import SubtaskFlight, feasible
@@ -43,6 +46,8 @@ from hptrack.planning.subtask_mdp import (
     PlanningProblem,
     SubtaskOptions,
     action_table,
+    apply_outcome,
+    new_work,
 )
 from hptrack.planning.subtask_rollout import (
     MostUncertain,
@@ -52,8 +57,20 @@ from hptrack.planning.subtask_rollout import (
     UniformNoFollow,
 )
 from hptrack.planning.subtask_search import search, warm_up
+from hptrack.planning.tour import (
+    TourPlan,
+    TourRollout,
+    TourSettings,
+    cyclic_order,
+    plan_tour,
+    tour_choice,
+)
 from hptrack.settings import Iterations, PlannerSettings, TimeLimit
 from hptrack.subtasks import HOVER, Subtask
+
+TOUR_BASE = TourSettings()
+"""The tour of ``rollout="tour_plan"``: the ``tour`` planner's defaults (``settle_variance``,
+``min_find``, ``samples``), scored in the search's own MDP."""
 
 DEFAULT_ITERATIONS = 100_000
 """Simulations per tree search when neither ``iterations`` nor ``time_limit`` is given."""
@@ -72,6 +89,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "passes": "ignore",
         "readmit": False,
         "commit": 0.0,
+        "fortify": False,
     },
     "improved": {
         "backup": "max",
@@ -85,6 +103,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "passes": "ignore",
         "readmit": False,
         "commit": 0.0,
+        "fortify": False,
     },
 }
 """The search options each preset stands for: the paper's algorithm exactly as written, and the
@@ -104,6 +123,7 @@ ROLLOUT_POLICIES: dict[str, type] = {
     "nearest": Nearest,
     "most_uncertain": MostUncertain,
     "tour": Tour,
+    "tour_plan": TourRollout,
 }
 """The rollout policy classes by their settings' names (`MctsSettings.rollout`)."""
 
@@ -130,8 +150,10 @@ class MctsSettings(PlannerSettings):
             random draws (common random numbers) instead of all drawing from one stream.
         rollout: ``"uniform"`` (the paper's random policy), ``"uniform_no_follow"`` (the same
             without following the target just found), ``"uniform_no_dwell"`` (the same
-            without the dwell actions), ``"nearest"``, ``"most_uncertain"`` or ``"tour"``
-            (`hptrack.planning.subtask_rollout`).
+            without the dwell actions), ``"nearest"``, ``"most_uncertain"``, ``"tour"``
+            (`hptrack.planning.subtask_rollout`) or ``"tour_plan"``: the revisit tour that the
+            ``tour`` planner would fly, planned at every decision in the search's own MDP and
+            flown to the end of the budget from every leaf (`hptrack.planning.tour`).
         rollout_epsilon: probability of a random action in a ``nearest``,
             ``most_uncertain`` or ``tour`` rollout.
         estimator: the sub-task outcome estimator of the search's expansions, ``"paper"``
@@ -156,6 +178,9 @@ class MctsSettings(PlannerSettings):
         threads: independent trees searched in parallel and merged (root parallelism), each
             with the effort above; 1 (the paper's single tree) unless the machine has spare
             cores.
+        fortify: with ``rollout="tour_plan"``, a decision keeps the tour's action unless the
+            search's best beats its value by more than the standard error of the difference
+            (`hptrack.planning.fortified`); ``False`` (the paper): the search's best.
     """
 
     iterations: Iterations | None = None
@@ -168,7 +193,13 @@ class MctsSettings(PlannerSettings):
     common_rollouts: bool | None = None
     rollout: (
         Literal[
-            "uniform", "uniform_no_follow", "uniform_no_dwell", "nearest", "most_uncertain", "tour"
+            "uniform",
+            "uniform_no_follow",
+            "uniform_no_dwell",
+            "nearest",
+            "most_uncertain",
+            "tour",
+            "tour_plan",
         ]
         | None
     ) = None
@@ -180,6 +211,7 @@ class MctsSettings(PlannerSettings):
     readmit: bool | None = None
     commit: Annotated[float | None, Field(ge=0.0, le=1e6)] = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
+    fortify: bool | None = None
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
 
@@ -216,6 +248,14 @@ class MctsSettings(PlannerSettings):
             raise ValueError(
                 f"option max_weight={self.max_weight:g} applies only to "
                 f"backup=max, got backup={self.backup}"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _fortify_needs_the_tour(self) -> MctsSettings:
+        if self.fortify and self.rollout != "tour_plan":
+            raise ValueError(
+                f"option fortify=true applies only to rollout=tour_plan, got rollout={self.rollout}"
             )
         return self
 
@@ -295,7 +335,11 @@ class HierarchicalPlanner:
         observation: Observation,
         current_action: int | None = None,
         last_found: int | None = None,
-    ) -> SearchResult:
+    ) -> tuple[SearchResult, tuple[int | None, ...]]:
+        """A search from ``observation`` and its decisions: the action to take (a first plan),
+        or the next action after each outcome of ``current_action`` (re-planning); with
+        ``fortify``, each the tour's unless the search beats it (`fortified_choice`)."""
+        began = time.perf_counter()
         problem = PlanningProblem.from_observation(
             self._record,
             observation,
@@ -304,24 +348,90 @@ class HierarchicalPlanner:
             current_action=current_action,
             follow=self._follow_tables,
         )
+        options, tour = self.options, None
+        time_limit = self.time_limit
+        if self.settings.rollout == "tour_plan":
+            tour = self._tour(problem)
+            options = options._replace(
+                rollout=TourRollout(tour.order, tour.settle, TOUR_BASE.min_find)
+            )
+            if time_limit is not None:  # the tour's planning counts in the decision's time
+                time_limit = max(time_limit - (time.perf_counter() - began), 1e-3)
         result = search(
             problem,
-            self.options,
+            options,
             self.subtask_options,
             iterations=self.iterations,
-            time_limit=self.time_limit,
+            time_limit=time_limit,
             seed=self._rng,
             threads=self.settings.threads,
         )
-        self._searches.append(
-            {
-                "step": observation.step,
-                "simulations": result.simulations,
-                "elapsed_s": result.elapsed,
-                "stopped_by": result.stopped_by,
-            }
+        entry = {
+            "step": observation.step,
+            "simulations": result.simulations,
+            "elapsed_s": result.elapsed,
+            "stopped_by": result.stopped_by,
+        }
+        if current_action is None:
+            decisions: tuple[int | None, ...] = (result.best_action,)
+        else:
+            decisions = tuple(result.best_after(o) for o in (FIND, MISS))
+        if tour is not None and self.settings.fortify:
+            bases = self._tour_actions(problem, tour, result)
+            stats = (result.root,) if current_action is None else result.after
+            decisions = tuple(
+                fortified_choice(stats[o] if o < len(stats) else None, base)
+                for o, base in enumerate(bases)
+            )
+            entry["tour_actions"] = list(bases)
+        self._searches.append(entry)
+        return result, decisions
+
+    def _tour(self, problem: PlanningProblem) -> TourPlan:
+        """The tour (`hptrack.planning.tour.plan_tour`) from ``problem``'s root in the
+        search's own MDP, entered at the current action's target when re-planning."""
+        env = problem.env(self.subtask_options)
+        root = problem.root_state()
+        kept = np.flatnonzero(problem.available).astype(np.int64)
+        order = cyclic_order(
+            positions(problem.means),
+            problem.agent_position,
+            kept,
+            problem.last_found,
+            self._mission.agent_speed,
         )
-        return result
+        entry = problem.current_action
+        if entry is not None and entry >= problem.n_targets:  # a dwell: the tour goes on after
+            entry = int(order[0]) if order.size else None
+        draws = self._rng.random((TOUR_BASE.samples, problem.n_steps + 1))
+        return plan_tour(env, root, order, TOUR_BASE, draws, self._tour_work, entry=entry)
+
+    def _tour_actions(
+        self, problem: PlanningProblem, tour: TourPlan, result: SearchResult
+    ) -> tuple[int, ...]:
+        """The tour's action at each state the search decides for: the root (a first plan),
+        or the state after each outcome of the current action (re-planning)."""
+        if problem.current_action is None:
+            return (tour.first,)
+        env = problem.env(self.subtask_options)
+        actions = []
+        for o in (FIND, MISS):
+            if o >= result.root.payload.shape[1] or np.isnan(result.root.p[0, o]):
+                actions.append(-1)
+                continue
+            state = problem.root_state()
+            apply_outcome(
+                env,
+                state,
+                problem.current_action,
+                o,
+                int(result.root.payload[0, o]),
+                self._tour_work,
+            )
+            actions.append(
+                int(tour_choice(env, state, tour.order, tour.settle, TOUR_BASE.min_find))
+            )
+        return tuple(actions)
 
     def _start(self, observation: Observation, index: int | None, last_found: int | None) -> None:
         """Begin flying action ``index`` (`hptrack.subtasks.ActionTable`; ``None``: follow
@@ -334,12 +444,12 @@ class HierarchicalPlanner:
         self._flight = flight
         after_find = after_miss = None
         if action.kind == "pursue":
-            plan = self._search(observation, current_action=action.target)
-            self._plan = (plan.best_after(FIND), plan.best_after(MISS))
+            _, (find, miss) = self._search(observation, current_action=action.target)
+            self._plan = (find, miss)
             after_miss = self._table.action(self._plan[1])
         elif action.kind == "dwell":
-            plan = self._search(observation, current_action=index, last_found=action.target)
-            self._plan = (plan.best_after(FIND), None)
+            _, (find, _) = self._search(observation, current_action=index, last_found=action.target)
+            self._plan = (find, None)
         else:
             self._plan = (None, None)
         after_find = self._table.action(self._plan[0], action.target)
@@ -348,7 +458,7 @@ class HierarchicalPlanner:
     def _search_afresh(self, observation: Observation, last_found: int | None) -> int | None:
         """The best action of a new search, or ``None`` if no target is left or no time."""
         if self._action_list(last_found).any() and observation.remaining_budget > 0:
-            return self._search(observation, last_found=last_found).best_action
+            return self._search(observation, last_found=last_found)[1][0]
         return None
 
     def _readmit(self, step: int) -> bool:
@@ -399,6 +509,7 @@ class HierarchicalPlanner:
         self._mission = mission
         self._record = mission.record
         self._follow_tables = follow_tables(self._record)
+        self._tour_work = new_work(state_size(self._record))
         self._rng = rng
         self._available = np.ones(mission.n_targets, dtype=bool)
         self._table = action_table(mission.n_targets, mission.time_step, self.subtask_options)

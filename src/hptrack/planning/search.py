@@ -542,6 +542,8 @@ def _result(tree: Tree, fixed: int, stopped_by: StoppedBy, elapsed: float) -> Se
             np.zeros(0),
             np.zeros((0, n_outcomes)),
             np.zeros((0, n_outcomes), dtype=np.int64),
+            np.zeros(0),
+            np.zeros(0),
         )
     after: tuple[ActionStats | None, ...] = ()
     if fixed >= 0 and root.actions.size:

@@ -33,15 +33,16 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Annotated, Literal
+from typing import Annotated, Literal, NamedTuple
 
 import numba
 import numpy as np
 from pydantic import Field
 
 from hptrack.interface import CurrentPlan, MissionSpec, Observation, one_vehicle
-from hptrack.models.mission import follow_tables, state_size
+from hptrack.models.mission import follow_tables, mean_position_on, state_size
 from hptrack.models.state import positions, velocity_variance_of
+from hptrack.planning.rollout import register_policy
 from hptrack.planning.subtask_flight import SubtaskFlight
 from hptrack.planning.subtask_mdp import (
     FIND,
@@ -195,42 +196,61 @@ def improved_tour(cost):
 
 # --- the score -----------------------------------------------------------------------------
 @numba.njit(cache=True)
+def tour_dwells(env, state, settle):
+    """Whether the tour dwells now: a dwell action exists and is available, and the target just
+    found has a velocity variance above ``settle`` (``np.inf``: never)."""
+    si, base_cov = state[0], state[2]
+    last = si[I_LAST]
+    return (
+        env.stay_steps.shape[0] > 0
+        and last >= 0
+        and velocity_variance_of(base_cov[last]) > settle
+        and is_available(env, state, env.means.shape[0])
+    )
+
+
+@numba.njit(cache=True)
+def next_pursuit(env, state, order, at, min_find, gone, work):
+    """The tour's next pursuit: the first target of the cyclic ``order`` from position ``at``
+    that is not the one just found, not ``gone``, available, and found on arrival with chance
+    ``p_max >= min_find``; every target passed over for its low chance is marked ``gone``.
+    Returns ``(target, p_max, find steps, miss steps, position after it)``; target ``-1``:
+    none left."""
+    m = order.shape[0]
+    last = state[0][I_LAST]
+    for k in range(m):
+        a = order[(at + k) % m]
+        if a == last or gone[a] or not is_available(env, state, a):
+            continue
+        p, find_steps, miss_steps = expand_action(env, state, a, work)
+        if p >= min_find:
+            return a, p, find_steps, miss_steps, (at + k + 1) % m
+        gone[a] = True
+    return -1, 0.0, 0, 0, at
+
+
+@numba.njit(cache=True)
 def fly_tour(env, state, order, start, settle, min_find, draws, gone, work):
     """Fly the tour ``order`` (target indices, cyclic, entered at position ``start``) in the MDP
     from ``state`` (changed in place) to the end of the budget, each outcome drawn from
-    ``draws`` (uniforms, at least one per sub-task); dwells after a find while the target's
-    velocity variance is above ``settle`` (``np.inf``: never). A target whose chance of a find
-    falls below ``min_find`` is let go for the rest of the flight (unmeasured, its belief only
-    grows); ``gone`` is ``(n,)`` bool scratch. Returns ``(-U, first action)`` (``-1``: nothing
-    to do)."""
-    si, base_cov = state[0], state[2]
-    n = env.means.shape[0]
+    ``draws`` (uniforms, at least one per sub-task); dwells after a find while `tour_dwells`.
+    A target whose chance of a find falls below ``min_find`` is let go for the rest of the
+    flight (unmeasured, its belief only grows); ``gone`` is ``(n,)`` bool scratch. Returns
+    ``(-U, first action)`` (``-1``: nothing to do)."""
+    si = state[0]
     gone[:] = False
-    dwell = n if env.stay_steps.shape[0] > 0 else -1
-    m = order.shape[0]
+    dwell = env.means.shape[0]
     at, drawn, first = start, 0, -1
     while si[I_STEP] < env.n_steps:
         last = si[I_LAST]
-        if (
-            dwell >= 0
-            and last >= 0
-            and velocity_variance_of(base_cov[last]) > settle
-            and is_available(env, state, dwell)
-        ):
+        if tour_dwells(env, state, settle):
             _, steps, _ = expand_action(env, state, dwell, work)
             apply_outcome(env, state, dwell, FIND, steps, work)
             first = dwell if first < 0 else first
             continue
-        pick, p, find_steps, miss_steps = -1, 0.0, 0, 0
-        for k in range(m):
-            a = order[(at + k) % m]
-            if a == last or gone[a] or not is_available(env, state, a):
-                continue
-            p, find_steps, miss_steps = expand_action(env, state, a, work)
-            if p >= min_find:
-                pick, at = a, (at + k + 1) % m
-                break
-            gone[a] = True
+        pick, p, find_steps, miss_steps, at = next_pursuit(
+            env, state, order, at, min_find, gone, work
+        )
         if pick < 0:
             if last >= 0:  # nothing left to pursue: follow the target just found
                 first = last if first < 0 else first
@@ -256,6 +276,166 @@ def tour_score(env, root, scratch, order, start, settle, min_find, draws, gone, 
         value, first = fly_tour(env, scratch, order, start, settle, min_find, draws[r], gone, work)
         total += value
     return total / draws.shape[0], first
+
+
+# --- the plan ------------------------------------------------------------------------------
+class TourPlan(NamedTuple):
+    """The best tour from one MDP state (`plan_tour`).
+
+    Attributes:
+        order: ``(k,)`` the kept targets in their cyclic order, entered at position 0.
+        settle: the velocity variance below which a found target is left, (m/s)^2
+            (``inf``: the tour does not dwell).
+        first: its first action (`hptrack.subtasks.ActionTable` index; ``-1``: none).
+        value: its mean ``-U`` over the outcome sequences it was scored on.
+    """
+
+    order: np.ndarray
+    settle: float
+    first: int
+    value: float
+
+
+def cyclic_order(
+    where: np.ndarray, agent: np.ndarray, kept: np.ndarray, last_found: int | None, speed: float
+) -> np.ndarray:
+    """The cyclic order of the ``kept`` targets (nearest insertion, 2-opt, or-opt on the
+    flight times at ``speed`` m/s between their positions ``where``, ``(n, 2)`` m), entered
+    after ``last_found`` when it is kept, else at the target nearest ``agent`` (m)."""
+    if kept.size == 0:
+        return kept
+    at = where[kept]
+    gaps = at[:, None, :] - at[None, :, :]
+    cycle = kept[improved_tour(np.hypot(gaps[..., 0], gaps[..., 1]) / speed)]
+    if last_found is not None and last_found in cycle:
+        start = int(np.flatnonzero(cycle == last_found)[0]) + 1
+    else:
+        start = int(np.argmin(np.hypot(*(at - agent).T)))
+        start = int(np.flatnonzero(cycle == kept[start])[0])
+    return np.roll(cycle, -start)
+
+
+def plan_tour(
+    env,
+    root: tuple,
+    order: np.ndarray,
+    settings: TourSettings,
+    draws: np.ndarray,
+    work: np.ndarray,
+    entry: int | None = None,
+) -> TourPlan:
+    """The best tour from the MDP state ``root`` (not changed) over the cyclic ``order``
+    (`cyclic_order`), scored on the outcome sequences ``draws`` (``(samples, N + 1)``
+    uniforms; module docstring: the direction, the targets kept, the dwells, the entry).
+    ``entry``: the target the tour must begin with (kept, and the entry not searched), or
+    ``None``: the planner's choice."""
+    scratch = tuple(np.array(a, copy=True) for a in root)
+    gone = np.zeros(env.means.shape[0], dtype=bool)
+
+    def score(o: np.ndarray, settle: float, start: int = 0) -> tuple[float, int]:
+        value, first = tour_score(
+            env, root, scratch, o, start, settle, settings.min_find, draws, gone, work
+        )
+        return float(value), int(first)
+
+    def entered(o: np.ndarray) -> np.ndarray:
+        return o if entry is None else np.roll(o, -int(np.flatnonzero(o == entry)[0]))
+
+    last = int(root[0][I_LAST])
+    orders = [entered(order), entered(np.roll(order[::-1], -1 if last in order else 1))]
+    scored = [score(o, settings.settle_variance) for o in orders]
+    k = int(np.argmax([v for v, _ in scored]))
+    order, (best, first) = orders[k], scored[k]
+    gains = np.array(
+        [
+            -np.inf
+            if order[i] == entry
+            else score(np.delete(order, i), settings.settle_variance)[0] - best
+            for i in range(order.size)
+        ]
+    )
+    ranked = np.argsort(-gains, kind="stable")
+    full = order
+    for count in range(1, int((gains > 0).sum()) + 1):
+        candidate = np.delete(full, ranked[:count])
+        value, action = score(candidate, settings.settle_variance)
+        if value > best:
+            order, best, first = candidate, value, action
+    settle = settings.settle_variance
+    value, action = score(order, math.inf)
+    if value > best:
+        best, first, settle = value, action, math.inf
+    start = 0
+    for at in range(1, order.size if entry is None else 1):
+        value, action = score(order, settle, at)
+        if value > best:
+            best, first, start = value, action, at
+    return TourPlan(np.roll(order, -start), settle, first, best)
+
+
+def predicted_positions(env, state: tuple) -> np.ndarray:
+    """``(n, 2)`` the belief means' positions at the MDP ``state``'s step, m."""
+    t = float(state[0][I_STEP]) * env.mission.time_step
+    return np.array([mean_position_on(env.mission, m, t) for m in env.means])
+
+
+# --- the tour as the search's base policy ---------------------------------------------------
+class TourRollout(NamedTuple):
+    """Rollouts that fly one tour (`plan_tour`'s, planned at the search's decision) to the end
+    of the budget: the tour as the search's base policy and the value of its leaves
+    (`tour_choice`). ``order`` empty: follow the target just found, or stop.
+
+    Attributes:
+        order: the tour's targets in their cyclic order, entered at position 0.
+        settle: `TourPlan.settle`, (m/s)^2.
+        min_find: `TourSettings.min_find`.
+    """
+
+    order: np.ndarray = np.zeros(0, dtype=np.int64)
+    settle: float = 0.05
+    min_find: float = 0.9
+
+
+@numba.njit(cache=True)
+def tour_position(env, state, order):
+    """Where in ``order`` a state of the tour stands: after the target whose predicted mean
+    the agent is at (every sub-task ends there), else at the start (the root of a search)."""
+    si, sf = state[0], state[1]
+    t = si[I_STEP]
+    if t == 0:
+        return 0
+    elapsed = t * env.mission.time_step
+    m = order.shape[0]
+    for k in range(m):
+        x, y = mean_position_on(env.mission, env.means[order[k]], elapsed)
+        if x == sf[0] and y == sf[1]:
+            return (k + 1) % m
+    return 0
+
+
+@numba.njit(cache=True)
+def tour_choice(env, state, order, settle, min_find):
+    """The tour's action in ``state`` (`fly_tour`'s rule, its position read off the state by
+    `tour_position`): dwell, the next pursuit, else follow the target just found; ``-1``:
+    nothing to do."""
+    if tour_dwells(env, state, settle):
+        return env.means.shape[0]
+    gone = np.zeros(env.means.shape[0], dtype=np.bool_)
+    work = np.empty((1, state[2].shape[1], state[2].shape[1]))
+    at = tour_position(env, state, order)
+    pick = next_pursuit(env, state, order, at, min_find, gone, work)[0]
+    if pick >= 0:
+        return pick
+    return state[0][I_LAST]
+
+
+@numba.njit(cache=True)
+def tour_rollout(policy, env, state, rng, candidates):
+    """`TourRollout`'s decision (deterministic: the outcomes are the only draws)."""
+    return tour_choice(env, state, policy.order, policy.settle, policy.min_find)
+
+
+register_policy(TourRollout, tour_rollout)
 
 
 # --- the planner ---------------------------------------------------------------------------
@@ -288,7 +468,6 @@ class TourPlanner:
     def plan(self, observation: Observation, last_found: int | None) -> tuple[int, dict]:
         """The first action (`hptrack.subtasks.ActionTable` index; ``-1``: none) of the best
         tour from ``observation``, and what was chosen (kept targets in order, with dwells)."""
-        s = self.settings
         problem = PlanningProblem.from_observation(
             self._record,
             observation,
@@ -297,67 +476,21 @@ class TourPlanner:
             follow=self._follow_tables,
         )
         env = problem.env(self.subtask_options)
-        root = problem.root_state()
-        scratch = problem.root_state()
-        draws = self._rng.random((s.samples, problem.n_steps + 1))
-        work = self._work
-        gone = np.zeros(problem.n_targets, dtype=bool)
-
-        def score(order: np.ndarray, settle: float, start: int = 0) -> tuple[float, int]:
-            value, first = tour_score(
-                env, root, scratch, order, start, settle, s.min_find, draws, gone, work
-            )
-            return float(value), int(first)
-
+        draws = self._rng.random((self.settings.samples, problem.n_steps + 1))
         kept = np.flatnonzero(self._available).astype(np.int64)
-        order = self.order(observation, kept, last_found)
-        orders = [order, np.roll(order[::-1], -1 if last_found in order else 1)]
-        scored = [score(o, s.settle_variance) for o in orders]
-        k = int(np.argmax([v for v, _ in scored]))
-        order, (best, first) = orders[k], scored[k]
-        gains = np.array(
-            [score(np.delete(order, i), s.settle_variance)[0] - best for i in range(order.size)]
+        order = cyclic_order(
+            positions(observation.means),
+            observation.agent_position,
+            kept,
+            last_found,
+            self._mission.agent_speed,
         )
-        ranked = np.argsort(-gains, kind="stable")
-        full = order
-        for count in range(1, int((gains > 0).sum()) + 1):
-            candidate = np.delete(full, ranked[:count])
-            value, action = score(candidate, s.settle_variance)
-            if value > best:
-                order, best, first = candidate, value, action
-        settle = s.settle_variance
-        value, action = score(order, math.inf)
-        if value > best:
-            best, first, settle = value, action, math.inf
-        start = 0
-        for entry in range(1, order.size):
-            value, action = score(order, settle, entry)
-            if value > best:
-                best, first, start = value, action, entry
-        return first, {
-            "order": np.roll(order, -start).tolist(),
-            "dwells": math.isfinite(settle),
-            "expected_u": -best,
+        plan = plan_tour(env, problem.root_state(), order, self.settings, draws, self._work)
+        return plan.first, {
+            "order": plan.order.tolist(),
+            "dwells": math.isfinite(plan.settle),
+            "expected_u": -plan.value,
         }
-
-    def order(
-        self, observation: Observation, kept: np.ndarray, last_found: int | None
-    ) -> np.ndarray:
-        """The cyclic order of the ``kept`` targets (nearest insertion, 2-opt, or-opt on the
-        flight times between the belief means predicted to now), entered after ``last_found``
-        when it is kept, else at the target nearest the agent."""
-        if kept.size == 0:
-            return kept
-        where = positions(observation.means[kept])
-        gaps = where[:, None, :] - where[None, :, :]
-        cost = np.hypot(gaps[..., 0], gaps[..., 1]) / self._mission.agent_speed
-        cycle = kept[improved_tour(cost)]
-        if last_found is not None and last_found in cycle:
-            start = int(np.flatnonzero(cycle == last_found)[0]) + 1
-        else:
-            start = int(np.argmin(np.hypot(*(where - observation.agent_position).T)))
-            start = int(np.flatnonzero(cycle == kept[start])[0])
-        return np.roll(cycle, -start)
 
     # --- flying ---------------------------------------------------------------------------
     def _next(self, observation: Observation, last_found: int | None) -> None:

@@ -2,12 +2,13 @@
 spirit of mctx: state nodes ``s_*`` and action (chance) nodes ``a_*``.
 
 A state node stores its visit count ``N(N^s)``, its first action slot and the number of slots;
-an action node stores its action, ``N(N^a)``, ``V(N^a)`` and, in one column per chance outcome
-(as many as the MDP declares, `hptrack.planning.mdp.outcome_count`), the expansion results
-(``a_p[:, o]``, the outcome's probability, and ``a_payload[:, o]``, one integer that the MDP needs
-to replay the transition, e.g. a duration), the child state node and the per-outcome statistics
-of the backups that keep them. States themselves are not stored: the search rebuilds them from
-the root by replaying the stored transitions.
+an action node stores its action, ``N(N^a)``, ``V(N^a)``, the sum and the sum of squares of
+the returns through it (whatever the backup, for their standard error) and, in one column per
+chance outcome (as many as the MDP declares, `hptrack.planning.mdp.outcome_count`), the
+expansion results (``a_p[:, o]``, the outcome's probability, and ``a_payload[:, o]``, one
+integer that the MDP needs to replay the transition, e.g. a duration), the child state node
+and the per-outcome statistics of the backups that keep them. States themselves are not
+stored: the search rebuilds them from the root by replaying the stored transitions.
 
 `select` is UCB1 (paper Algorithm 1, line 23), the tree's whatever the MDP; the backups
 are registered kernels (`hptrack.planning.backups`).
@@ -54,6 +55,8 @@ class Tree(NamedTuple):
     a_child: np.ndarray
     a_out_visits: np.ndarray
     a_out_value: np.ndarray
+    a_return_sum: np.ndarray
+    a_return_square_sum: np.ndarray
     counts: np.ndarray
     value_range: np.ndarray
     rng: np.ndarray
@@ -73,6 +76,8 @@ _FILL = {
     "a_child": (-1, np.int32),
     "a_out_visits": (0, np.int32),
     "a_out_value": (0.0, np.float64),
+    "a_return_sum": (0.0, np.float64),
+    "a_return_square_sum": (0.0, np.float64),
 }
 """Initial value and dtype of each node array of `Tree` (those in `PER_OUTCOME`: one column
 per outcome; ``a_p < 0``: not expanded yet)."""
@@ -155,6 +160,8 @@ class ActionStats:
             sub-task MDP outcome 0 is the find, 1 the miss.
         payload: ``(actions, outcomes)``, each outcome's payload (the sub-task MDP: the
             sub-task's duration after that outcome, steps).
+        return_sum: the sum of the returns of the simulations through each action.
+        return_square_sum: the sum of their squares.
     """
 
     actions: np.ndarray
@@ -162,6 +169,23 @@ class ActionStats:
     values: np.ndarray
     p: np.ndarray
     payload: np.ndarray
+    return_sum: np.ndarray
+    return_square_sum: np.ndarray
+
+    def standard_errors(self) -> np.ndarray:
+        """The standard error of the mean return through each action (the returns' sample
+        standard deviation over ``sqrt(N(N^a))``; ``inf`` below two visits)."""
+        n = self.visits.astype(float)
+        spread = self.return_square_sum - self.return_sum**2 / np.maximum(n, 1.0)
+        variance = np.divide(
+            np.maximum(spread, 0.0), n * (n - 1.0), out=np.full(n.size, np.inf), where=n > 1
+        )
+        return np.sqrt(variance)
+
+    def of(self, action: int) -> int | None:
+        """The position of ``action`` in these arrays, ``None`` if it is not one of them."""
+        at = np.flatnonzero(self.actions == action)
+        return int(at[0]) if at.size else None
 
     @property
     def best(self) -> int | None:
@@ -183,16 +207,20 @@ def merge_stats(stats: list[ActionStats | None]) -> ActionStats | None:
     n_outcomes = present[0].p.shape[1]
     visits = np.zeros(actions.size, dtype=np.int64)
     weighted = np.zeros(actions.size)
+    return_sum = np.zeros(actions.size)
+    return_square_sum = np.zeros(actions.size)
     p = np.full((actions.size, n_outcomes), np.nan)
     payload = np.zeros((actions.size, n_outcomes), dtype=np.int64)
     for s in present:
         at = np.searchsorted(actions, s.actions)
         visits[at] += s.visits
         weighted[at] += s.visits * s.values
+        return_sum[at] += s.return_sum
+        return_square_sum[at] += s.return_square_sum
         new = np.isnan(p[at, 0]) & ~np.isnan(s.p[:, 0])
         p[at[new]], payload[at[new]] = s.p[new], s.payload[new]
     values = np.divide(weighted, visits, out=np.zeros(actions.size), where=visits > 0)
-    return ActionStats(actions, visits, values, p, payload)
+    return ActionStats(actions, visits, values, p, payload, return_sum, return_square_sum)
 
 
 def node_stats(tree: Tree, s: int) -> ActionStats | None:
@@ -209,4 +237,6 @@ def node_stats(tree: Tree, s: int) -> ActionStats | None:
         tree.a_value[xs].copy(),
         p,
         tree.a_payload[xs].astype(np.int64),
+        tree.a_return_sum[xs].copy(),
+        tree.a_return_square_sum[xs].copy(),
     )
