@@ -500,10 +500,10 @@ def subtask_feasible(mission, means, stays, a, si, agent_x, agent_y, elapsed, le
     ``si`` is the state's integer part (its action list and last found target, `int_state`).
     A dwell (``stays``: the dwell lengths in steps) needs a target just found
     (``si[I_LAST] >= 0``) and ends strictly before the budget. A target needs to be in the
-    action list (`in_list`); the target just found is followed; any other must be interceptable strictly
-    before the budget ends from the agent at ``(agent_x, agent_y)`` m, its belief mean (row of
-    ``means``) predicted ``elapsed`` s ahead, and slower than the agent unless the agent is
-    already over it."""
+    action list (`in_list`); the target just found is followed; any other must be
+    interceptable strictly before the budget ends from the agent at ``(agent_x, agent_y)`` m,
+    its belief mean (row of ``means``) predicted ``elapsed`` s ahead, and slower than the agent
+    unless the agent is already over it."""
     if left <= 0:
         return False
     n = means.shape[0]
