@@ -1,0 +1,145 @@
+"""The default search on many targets: what a search holds and what it wins at n = 20 .. 80.
+
+Homogeneous random scenarios of the paper (``--targets``, seeds ``0..N-1``), flown by the default
+``mcts`` at ``--time-limit`` s per decision, by ``tour`` (its defaults) and by ``greedy``. Each
+``mcts`` episode runs in a fresh process, so its peak resident memory (``ru_maxrss``) is that of
+one mission; per search it logs the simulations run and ``tree_bytes``, the memory the tree's
+arrays hold. The report: per n, the searches, their simulations and tree memory, the peak RSS,
+and the mean U (with its standard error) of each planner.
+
+    python3 benchmarks/large_n.py --targets 20,30,40,80 --seeds 3 --time-limit 1 --workers 1 \\
+        --out docs/results/large-n
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import resource
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from hptrack.experiments.report import mean_se, write_tables
+from hptrack.planning.hierarchical import HierarchicalPlanner
+from hptrack.registry import make_planner, planner_settings
+from hptrack.scenario.random import random_scenario
+from hptrack.sim.episode import run_episode
+
+
+class _MeasuredSearch(HierarchicalPlanner):
+    """The ``mcts`` planner with each search's ``tree_bytes`` in its search log."""
+
+    def _search(self, *args, **kwargs):
+        result = super()._search(*args, **kwargs)
+        self._searches[-1]["tree_bytes"] = result.tree_bytes
+        return result
+
+
+def _episode(planner, n: int, seed: int) -> tuple[float, float, dict]:
+    """U, targets never detected and the planner's episode info of one scenario."""
+    scenario = random_scenario(n, seed=seed, homogeneous=True)
+    record = run_episode(scenario, planner, belief_stride=scenario.n_steps)
+    return record.uncertainty, record.metrics()["targets_never_detected"], record.info
+
+
+def mcts_episode(n: int, seed: int, time_limit: float) -> dict:
+    """One ``mcts`` episode (the default preset at ``time_limit`` s per decision), run in a
+    process of its own: U, its searches' simulations and tree bytes, the peak RSS (bytes)."""
+    planner = _MeasuredSearch(planner_settings("mcts", {"time_limit": time_limit}))
+    u, never, info = _episode(planner, n, seed)
+    return {
+        "n": n,
+        "seed": seed,
+        "U": u,
+        "never_detected": never,
+        "simulations": [s["simulations"] for s in info["searches"]],
+        "tree_bytes": [s["tree_bytes"] for s in info["searches"]],
+        "peak_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+    }
+
+
+def report(mcts: list[dict], others: dict[str, dict], out: Path, command: str) -> None:
+    """Write ``table.md`` and ``summary.json``."""
+    counts = sorted({r["n"] for r in mcts})
+    lines = [
+        "Homogeneous random scenarios (seeds from 0); `mcts` the default preset at the planning",
+        "time per decision given, one process per episode; `tour` and `greedy` at their defaults.",
+        "",
+        "```bash",
+        command,
+        "```",
+        "",
+        "Per n: the searches of all episodes, their simulations (mean, least), the memory held by",
+        "the tree's arrays (`tree_bytes`, mean and largest), the largest peak resident memory of",
+        "an episode's process, and mean U +- standard error (episodes) of each planner, with the",
+        "targets `mcts` never detected per episode.",
+        "",
+        "| n | episodes | searches | simulations, mean (least) | tree MB, mean (largest) | "
+        "peak RSS, MB | mcts U | tour U | greedy U | mcts never detected |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    summary: dict = {"command": command, "rows": [], "episodes": mcts}
+    for n in counts:
+        rows = [r for r in mcts if r["n"] == n]
+        seeds = [r["seed"] for r in rows]
+        sims = np.concatenate([r["simulations"] for r in rows])
+        tree = np.concatenate([r["tree_bytes"] for r in rows]) / 1e6
+        rss = max(r["peak_rss_bytes"] for r in rows) / 1e6
+        u = {"mcts": mean_se(np.array([r["U"] for r in rows]))}
+        for name, by_key in others.items():
+            u[name] = mean_se(np.array([by_key[n, s] for s in seeds]))
+        never = float(np.mean([r["never_detected"] for r in rows]))
+        cells = " | ".join(f"{m:.2f} +- {se:.2f}" for m, se in u.values())
+        lines.append(
+            f"| {n} | {len(rows)} | {sims.size} | {sims.mean():.0f} ({sims.min()}) | "
+            f"{tree.mean():.1f} ({tree.max():.1f}) | {rss:.0f} | {cells} | {never:.2f} |"
+        )
+        summary["rows"].append(
+            {
+                "n": n,
+                "episodes": len(rows),
+                "searches": int(sims.size),
+                "mean_simulations": float(sims.mean()),
+                "least_simulations": int(sims.min()),
+                "mean_tree_mb": float(tree.mean()),
+                "largest_tree_mb": float(tree.max()),
+                "peak_rss_mb": rss,
+                "mean_U": {name: m for name, (m, _) in u.items()},
+                "se_U": {name: se for name, (_, se) in u.items()},
+                "mcts_never_detected": never,
+            }
+        )
+    write_tables(out, lines, summary)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--targets", default="20,30,40,80", help="numbers of targets")
+    parser.add_argument("--seeds", type=int, default=3, help="scenarios per n (seeds 0..N-1)")
+    parser.add_argument("--time-limit", type=float, default=1.0, help="mcts, s per decision")
+    parser.add_argument("--workers", type=int, default=1, help="mcts episodes at once")
+    parser.add_argument("--out", type=Path, default=Path("results/large-n"))
+    args = parser.parse_args()
+    counts = tuple(int(t) for t in args.targets.split(",") if t)
+    keys = [(n, s) for n in counts for s in range(args.seeds)]
+    command = (
+        f"python3 benchmarks/large_n.py --targets {args.targets} --seeds {args.seeds} "
+        f"--time-limit {args.time_limit:g} --workers {args.workers} --out {args.out}"
+    )
+    pool = ProcessPoolExecutor(
+        args.workers, multiprocessing.get_context("spawn"), max_tasks_per_child=1
+    )
+    with pool:
+        futures = [pool.submit(mcts_episode, n, s, args.time_limit) for n, s in keys]
+        mcts = [f.result() for f in futures]
+    others = {
+        name: {(n, s): _episode(make_planner(name), n, s)[0] for n, s in keys}
+        for name in ("tour", "greedy")
+    }
+    report(mcts, others, args.out, command)
+
+
+if __name__ == "__main__":
+    main()
