@@ -14,6 +14,7 @@ and the mean U (with its standard error) of each planner.
 from __future__ import annotations
 
 import argparse
+import csv
 import multiprocessing
 import resource
 from concurrent.futures import ProcessPoolExecutor
@@ -61,7 +62,8 @@ def mcts_episode(n: int, seed: int, time_limit: float) -> dict:
 
 
 def report(mcts: list[dict], others: dict[str, dict], out: Path, command: str) -> None:
-    """Write ``table.md`` and ``summary.json``."""
+    """Write ``table.md``, ``summary.json`` (with every episode) and ``rows.csv`` (the table's
+    rows, for quotes)."""
     counts = sorted({r["n"] for r in mcts})
     lines = [
         "Homogeneous random scenarios (seeds from 0); `mcts` the default preset at the planning",
@@ -80,7 +82,11 @@ def report(mcts: list[dict], others: dict[str, dict], out: Path, command: str) -
         "peak RSS, MB | mcts U | tour U | greedy U | mcts never detected |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    summary: dict = {"command": command, "rows": [], "episodes": mcts}
+    episodes = [
+        r | {f"{name}_U": by_key[r["n"], r["seed"]] for name, by_key in others.items()}
+        for r in mcts
+    ]
+    summary: dict = {"command": command, "rows": [], "episodes": episodes}
     for n in counts:
         rows = [r for r in mcts if r["n"] == n]
         seeds = [r["seed"] for r in rows]
@@ -106,12 +112,16 @@ def report(mcts: list[dict], others: dict[str, dict], out: Path, command: str) -
                 "mean_tree_mb": float(tree.mean()),
                 "largest_tree_mb": float(tree.max()),
                 "peak_rss_mb": rss,
-                "mean_U": {name: m for name, (m, _) in u.items()},
-                "se_U": {name: se for name, (_, se) in u.items()},
+                **{f"{name}_mean_U": m for name, (m, _) in u.items()},
+                **{f"{name}_se_U": se for name, (_, se) in u.items()},
                 "mcts_never_detected": never,
             }
         )
     write_tables(out, lines, summary)
+    with open(out / "rows.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(summary["rows"][0]))
+        writer.writeheader()
+        writer.writerows(summary["rows"])
 
 
 def main() -> None:
