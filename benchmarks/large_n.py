@@ -77,12 +77,14 @@ def report(mcts: list[dict], others: dict[str, dict], out: Path, command: str) -
         "Per n: the searches of all episodes, their simulations (median, least: a search late in",
         "the budget runs many more), the memory held by",
         "the tree's arrays (`tree_bytes`, mean and largest), the largest peak resident memory of",
-        "an episode's process, and mean U +- standard error (episodes) of each planner, with the",
+        "an episode's process, mean U +- standard error (episodes) of each planner, the paired",
+        "differences mcts - other on the same scenarios (negative: mcts is better), and the",
         "targets `mcts` never detected per episode.",
         "",
         "| n | episodes | searches | simulations, median (least) | tree MB, mean (largest) | "
-        "peak RSS, MB | mcts U | tour U | greedy U | mcts never detected |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "peak RSS, MB | mcts U | tour U | greedy U | mcts - tour | mcts - greedy | "
+        "mcts never detected |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     episodes = [
         r | {f"{name}_U": by_key[r["n"], r["seed"]] for name, by_key in others.items()}
@@ -96,10 +98,14 @@ def report(mcts: list[dict], others: dict[str, dict], out: Path, command: str) -
         tree = np.concatenate([r["tree_bytes"] for r in rows]) / 1e6
         rss = max(r["peak_rss_bytes"] for r in rows) / 1e6
         u = {"mcts": mean_se(np.array([r["U"] for r in rows]))}
+        paired = {}
         for name, by_key in others.items():
-            u[name] = mean_se(np.array([by_key[n, s] for s in seeds]))
+            theirs = np.array([by_key[n, s] for s in seeds])
+            u[name] = mean_se(theirs)
+            paired[name] = mean_se(np.array([r["U"] for r in rows]) - theirs)
         never = float(np.mean([r["never_detected"] for r in rows]))
         cells = " | ".join(f"{m:.2f} +- {se:.2f}" for m, se in u.values())
+        cells += " | " + " | ".join(f"{m:+.2f} +- {se:.2f}" for m, se in paired.values())
         lines.append(
             f"| {n} | {len(rows)} | {sims.size} | {np.median(sims):.0f} ({sims.min()}) | "
             f"{tree.mean():.1f} ({tree.max():.1f}) | {rss:.0f} | {cells} | {never:.2f} |"
@@ -116,6 +122,8 @@ def report(mcts: list[dict], others: dict[str, dict], out: Path, command: str) -
                 "peak_rss_mb": rss,
                 **{f"{name}_mean_U": m for name, (m, _) in u.items()},
                 **{f"{name}_se_U": se for name, (_, se) in u.items()},
+                **{f"mcts_minus_{name}": m for name, (m, _) in paired.items()},
+                **{f"mcts_minus_{name}_se": se for name, (_, se) in paired.items()},
                 "mcts_never_detected": never,
             }
         )
