@@ -428,28 +428,32 @@ def int_size(n_targets):
 
 
 @numba.njit(cache=True, inline="always")
-def _word_of(a):
-    """Index in ``si`` of the action-list word holding target ``a``."""
-    w = a // WORD_BITS
-    return I_MASK if w == 0 else I_LAST + w
+def _word_bit(a):
+    """Index in ``si`` of the action-list word holding target ``a``, and ``a``'s bit in it."""
+    if a < WORD_BITS:
+        return I_MASK, a
+    return I_LAST + a // WORD_BITS, a % WORD_BITS
 
 
 @numba.njit(cache=True, inline="always")
 def in_list(si, a):
     """Whether target ``a`` is in the action list of the state's integer part ``si``."""
-    return (si[_word_of(a)] >> (a % WORD_BITS)) & 1 == 1
+    w, b = _word_bit(a)
+    return (si[w] >> b) & 1 == 1
 
 
 @numba.njit(cache=True, inline="always")
 def drop_from_list(si, a):
     """Take target ``a`` out of the action list of ``si``."""
-    si[_word_of(a)] &= ~(np.int64(1) << (a % WORD_BITS))
+    w, b = _word_bit(a)
+    si[w] &= ~(np.int64(1) << b)
 
 
 @numba.njit(cache=True, inline="always")
 def add_to_list(si, a):
     """Put target ``a`` in the action list of ``si``."""
-    si[_word_of(a)] |= np.int64(1) << (a % WORD_BITS)
+    w, b = _word_bit(a)
+    si[w] |= np.int64(1) << b
 
 
 @numba.njit(cache=True)
