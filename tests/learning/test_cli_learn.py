@@ -28,7 +28,7 @@ def app():
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--targets", "0", "--steps", "10"], "--targets must be between 1 and 62, got 0"),
+        (["--targets", "0", "--steps", "10"], "--targets must be between 1 and 256, got 0"),
         (["--targets", "2", "--steps", "0"], "--steps must be between 1 and 1e+10, got 0"),
         (["--targets", "2", "--steps", "10", "--seed", "-1"], "--seed"),
         (

@@ -223,7 +223,7 @@ def test_memo_gives_the_same_expansion():
         (dict(remaining_budget=0.0), "remaining_budget"),
         (dict(available=[True, False], current_action=1), "current_action"),
         (dict(last_found=2), "last_found"),
-        (dict(mission=mission(0)), "1 to 62 targets"),
+        (dict(mission=mission(0)), "1 to 256 targets"),
     ],
 )
 def test_problem_validation(change, message):
@@ -244,7 +244,7 @@ def test_problem_arrays_are_frozen_copies():
     means[0, 0] = 5.0
     assert problem.means[0, 0] == 0.0
     assert not problem.means.flags.writeable
-    assert (problem.n_steps, problem.mask) == (1800, 1)
+    assert problem.n_steps == 1800
     assert problem.root_state()[0].tolist() == [0, 1, 0]
 
 

@@ -10,6 +10,7 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hptrack.models.mission import MAX_TARGETS
 from hptrack.scenario import ScenarioError, load_scenario, parse_scenario
 from hptrack.scenario.io import MAX_VALUES
 
@@ -190,4 +191,4 @@ def test_fuzz_yaml_text_loads_or_is_refused_in_one_line(tmp_path_factory, text):
 
 
 def test_the_value_count_bound_counts_expanded_aliases():
-    assert MAX_VALUES >= 62 * 40  # the largest scenario fits
+    assert MAX_VALUES >= MAX_TARGETS * 40  # the largest scenario fits

@@ -11,8 +11,8 @@ The world's parts are fields of the record, registered classes dispatched at com
 The rules, one place each: `steps_left` (whole steps of a remaining budget, the same for
 the mission's budget), `intercept_steps` (the whole steps of the flight to a belief mean, asked
 of the sensor, the vehicle and the motion), `reachable_before_budget` (an intercept that ends
-strictly before the budget), `MAX_TARGETS` (the planner's action list is an ``int64``
-bitmask). The motion's kernels are offered here on the record (`predict_covariance_on`,
+strictly before the budget), `MAX_TARGETS` (what one decision of the planner holds in memory).
+The motion's kernels are offered here on the record (`predict_covariance_on`,
 `position_covariance_on`, `mean_position_on`, ...), so that no layer above the models handles
 the motion itself.
 """
@@ -53,8 +53,12 @@ from hptrack.models.vehicle import (
     vehicle_sees,
 )
 
-MAX_TARGETS = 62
-"""Most targets of a mission: the planner's action list is an ``int64`` bitmask."""
+MAX_TARGETS = 256
+"""Most targets of a mission. The search's action list takes any number (63 per ``int64``
+word, `hptrack.planning.subtask_mdp.in_list`); the cap bounds what a decision holds: the memo,
+24 bytes per target and budget step (11 MB at the paper's 1800 steps), and a state node's
+action slots, 70 bytes each, one per action (18 KB per node at 256 targets). A scenario file
+of 256 targets fits the file bounds (`hptrack.scenario.io.MAX_VALUES`)."""
 
 STEP_TOLERANCE = 1e-9
 """The one slack of every whole-step rule, in steps: a time within this of ``k tau`` is step

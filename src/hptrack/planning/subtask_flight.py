@@ -17,7 +17,7 @@ import numpy as np
 from hptrack.coverage.subtask import CoverageSubtask
 from hptrack.interface import MissionSpec, Observation
 from hptrack.models.mission import steps_left
-from hptrack.planning.subtask_mdp import subtask_feasible
+from hptrack.planning.subtask_mdp import int_state, subtask_feasible
 from hptrack.subtasks import ActionTable, Subtask, SubtaskAction
 
 
@@ -34,15 +34,14 @@ def feasible(
     the target just found ``last_found``."""
     agent = observation.agent_position
     left = steps_left(mission.time_step, observation.remaining_budget)
-    mask = sum(1 << int(i) for i in np.flatnonzero(available))
+    si = int_state(0, np.asarray(available, dtype=bool), -1 if last_found is None else last_found)
     return bool(
         subtask_feasible(
             mission.record,
             np.ascontiguousarray(observation.means),
             np.array(table.stay_steps, dtype=np.int64),
             int(index),
-            mask,
-            -1 if last_found is None else int(last_found),
+            si,
             float(agent[0]),
             float(agent[1]),
             0.0,

@@ -10,7 +10,7 @@ expectation the mean stays on its open-loop prediction ``mean + v t``. A state i
 described by
 
 * ``step`` ``t`` (remaining budget ``N - t`` steps),
-* ``mask``: the action list as a bitmask of the targets not yet missed,
+* the action list: the targets not yet missed, as a bitmask in 63-bit words (`in_list`),
 * ``last``: the target found by the previous sub-task (``-1`` if none); choosing it again means
   following it to the end of the budget,
 * the agent position (m): the estimated position of the last pursued target at step ``t``,
@@ -19,10 +19,11 @@ described by
   any later step follows in closed form (Eq. (1), `hptrack.models.motion.predict_covariance`).
 
 A state is the tuple of arrays ``(si, sf, base_cov, base_step)``: the integer part
-``(t, mask, last)`` in an ``int64`` array ``si``, the agent position in a ``float64`` array
-``sf``; the kernels mutate them in place. The kernels take ``env`` (`SubtaskEnv`: the
-mission record, its Riccati tables, the root's means, the options, the memo) first, the
-interface `hptrack.planning.search` expects of an MDP.
+``(t, word 0, last, word 1, word 2, ...)`` in an ``int64`` array ``si`` (`int_size`; one word,
+``(t, mask, last)``, up to 63 targets), the agent position in a ``float64`` array ``sf``; the
+kernels mutate them in place. The kernels take ``env`` (`SubtaskEnv`: the mission record, its
+Riccati tables, the root's means, the options, the memo) first, the interface
+`hptrack.planning.search` expects of an MDP.
 
 **Action** "pursue target a" (node expansion). The agent flies to the belief mean in
 ``n_i = ceil(t_intercept / tau)`` steps (`hptrack.coverage.intercept.intercept_steps`, the
@@ -116,7 +117,12 @@ if TYPE_CHECKING:
     from hptrack.interface import Observation
 
 I_STEP, I_MASK, I_LAST = 0, 1, 2
-"""Indices of ``t``, the action bitmask and the last found target in the state array ``si``."""
+"""Indices of ``t``, the action list's first word and the last found target in the state array
+``si``; the list's further words follow ``I_LAST`` (`int_size`)."""
+
+WORD_BITS = 63
+"""Targets per word of the action list: target ``a`` is bit ``a % 63`` of word ``a // 63``, an
+``int64`` without its sign bit (so a word is never negative)."""
 
 OUTCOMES = ("find", "miss")
 """A sub-task's chance outcomes, by index (the search's outcome ``o``)."""
@@ -301,11 +307,6 @@ class PlanningProblem:
         """``N``: whole steps left in the budget."""
         return steps_left(self.mission.time_step, self.remaining_budget)
 
-    @property
-    def mask(self) -> int:
-        """The root's action list as a bitmask."""
-        return int(sum(1 << int(i) for i in np.flatnonzero(np.asarray(self.available))))
-
     def env(self, options: SubtaskOptions = PAPER_SUBTASK) -> SubtaskEnv:
         """The compiled kernels' view of the problem with ``options``, with a fresh memo.
 
@@ -338,9 +339,8 @@ class PlanningProblem:
     def root_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Fresh state arrays ``(si, sf, base_cov, base_step)`` of the root (``base_step`` 0)."""
         last = -1 if self.last_found is None else self.last_found
-        si = np.array([0, self.mask, last], dtype=np.int64)
         return (
-            si,
+            int_state(0, np.asarray(self.available), last),
             np.array(self.agent_position, dtype=np.float64),
             np.array(self.covariances, dtype=np.float64),
             np.zeros(self.n_targets, dtype=np.int64),
@@ -421,12 +421,61 @@ def new_memo(n_targets: int, n_steps: int) -> Memo:
 
 
 @numba.njit(cache=True)
+def int_size(n_targets):
+    """Length of the state's integer part ``si`` for ``n_targets`` targets: ``t``, ``last`` and
+    one word of the action list per `WORD_BITS` targets (3 up to 63 targets)."""
+    return 2 + max(1, (n_targets + WORD_BITS - 1) // WORD_BITS)
+
+
+@numba.njit(cache=True, inline="always")
+def _word_bit(a):
+    """Index in ``si`` of the action-list word holding target ``a``, and ``a``'s bit in it."""
+    if a < WORD_BITS:
+        return I_MASK, a
+    return I_LAST + a // WORD_BITS, a % WORD_BITS
+
+
+@numba.njit(cache=True, inline="always")
+def in_list(si, a):
+    """Whether target ``a`` is in the action list of the state's integer part ``si``."""
+    w, b = _word_bit(a)
+    return (si[w] >> b) & 1 == 1
+
+
+@numba.njit(cache=True, inline="always")
+def drop_from_list(si, a):
+    """Take target ``a`` out of the action list of ``si``."""
+    w, b = _word_bit(a)
+    si[w] &= ~(np.int64(1) << b)
+
+
+@numba.njit(cache=True, inline="always")
+def add_to_list(si, a):
+    """Put target ``a`` in the action list of ``si``."""
+    w, b = _word_bit(a)
+    si[w] |= np.int64(1) << b
+
+
+@numba.njit(cache=True)
+def int_state(step, available, last):
+    """The state's integer part ``si`` at ``step`` with the action list ``available``
+    (``(n,)`` bool) and the last found target ``last`` (``-1``: none)."""
+    si = np.zeros(int_size(available.shape[0]), dtype=np.int64)
+    si[I_STEP] = step
+    si[I_LAST] = last
+    for a in range(available.shape[0]):
+        if available[a]:
+            add_to_list(si, a)
+    return si
+
+
+@numba.njit(cache=True)
 def copy_state(env, src, dst):
     """Copy the state ``src`` into the scratch state ``dst`` (both ``(si, sf, base_cov,
     base_step)``)."""
     si, sf, base_cov, base_step = src
     di, df, dcov, dstep = dst
-    for i in range(3):
+    for i in range(si.shape[0]):
         di[i] = si[i]
     df[0] = sf[0]
     df[1] = sf[1]
@@ -447,23 +496,25 @@ def intercept_of(env, sf, a, t):
 
 
 @numba.njit(cache=True)
-def subtask_feasible(mission, means, stays, a, mask, last, agent_x, agent_y, elapsed, left):
+def subtask_feasible(mission, means, stays, a, si, agent_x, agent_y, elapsed, left):
     """Whether action index ``a`` (`hptrack.subtasks.ActionTable`) can be flown with ``left``
     whole steps of budget: the one feasibility rule of the MDP, the planner and the sub-task
     environment.
 
-    A dwell (``stays``: the dwell lengths in steps) needs a target just found (``last >= 0``)
-    and ends strictly before the budget. A target needs to be in the action list (bitmask
-    ``mask``); the target just found is followed; any other must be interceptable strictly
-    before the budget ends from the agent at ``(agent_x, agent_y)`` m, its belief mean (row of
-    ``means``) predicted ``elapsed`` s ahead, and slower than the agent unless the agent is
-    already over it."""
+    ``si`` is the state's integer part (its action list and last found target, `int_state`).
+    A dwell (``stays``: the dwell lengths in steps) needs a target just found
+    (``si[I_LAST] >= 0``) and ends strictly before the budget. A target needs to be in the
+    action list (`in_list`); the target just found is followed; any other must be
+    interceptable strictly before the budget ends from the agent at ``(agent_x, agent_y)`` m,
+    its belief mean (row of ``means``) predicted ``elapsed`` s ahead, and slower than the agent
+    unless the agent is already over it."""
     if left <= 0:
         return False
     n = means.shape[0]
+    last = si[I_LAST]
     if is_dwell_index(n, a):
         return last >= 0 and stays[dwell_number(n, a)] < left
-    if not (mask >> a) & 1:
+    if not in_list(si, a):
         return False
     if a == last:
         return True
@@ -497,8 +548,7 @@ def is_available(env, state, a):
         env.means,
         env.stay_steps,
         a,
-        si[I_MASK],
-        si[I_LAST],
+        si,
         sf[0],
         sf[1],
         t * env.mission.time_step,
@@ -598,7 +648,7 @@ def apply_outcome(env, state, a, outcome, payload, work):
         si[I_LAST] = a
     else:
         if not env.keep_missed:
-            si[I_MASK] &= ~(np.int64(1) << a)
+            drop_from_list(si, a)
         si[I_LAST] = -1
     x, y = mean_position_on(mission, env.means[a], end * mission.time_step)
     if env.credit_passes:
@@ -645,7 +695,7 @@ def credit_passes(env, state, a, end_x, end_y, end, prior):
             predict_covariance_on(mission, base_cov[b], q, k - base_step[b], prior)
             sensor_update_covariance(mission.sensor, prior, base_cov[b])
             base_step[b] = k
-            si[I_MASK] |= np.int64(1) << b
+            add_to_list(si, b)
 
 
 @numba.njit(cache=True)

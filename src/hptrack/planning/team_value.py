@@ -48,6 +48,7 @@ from hptrack.planning.subtask_mdp import (
     SubtaskEnv,
     SubtaskOptions,
     expand_action,
+    int_state,
     is_available,
     new_work,
 )
@@ -61,7 +62,7 @@ def walk_path(env, root_cov, position, path, work):
     mission = env.mission
     n = root_cov.shape[0]
     n_steps = env.n_steps
-    si = np.array([0, (np.int64(1) << n) - 1, -1], dtype=np.int64)
+    si = int_state(0, np.ones(n, dtype=np.bool_), -1)
     sf = np.array([position[0], position[1]])
     state = (si, sf, root_cov, np.zeros(n, dtype=np.int64))
     found, unseen = work[1], work[2]

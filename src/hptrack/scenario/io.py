@@ -22,11 +22,13 @@ class ScenarioError(InputError):
 
 
 MAX_FILE_BYTES = 2**18
-"""Largest scenario file, bytes (62 targets written in full take about 40 KB)."""
+"""Largest scenario file, bytes (62 targets written in full take about 40 KB; the
+`hptrack.models.mission.MAX_TARGETS` of 256 as `save_scenario` writes them, about 120 KB)."""
 MAX_VALUES = 20_000
 """Most values (numbers, strings, lists, mappings) a file may hold, as written and once its
 YAML aliases are expanded (a few aliases can name billions of values: a "YAML bomb"); 62
-targets take about 2,500. Parsing 20,000 values takes about a second."""
+targets take about 2,500, 256 as `save_scenario` writes them about 8,500. Parsing 20,000
+values takes about a second."""
 MAX_DEPTH = 32
 """Deepest nesting of lists and mappings (a scenario is four levels deep)."""
 MAX_INT_DIGITS = 100
