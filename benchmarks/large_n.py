@@ -24,19 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from hptrack.experiments.report import mean_se, write_tables
-from hptrack.planning.hierarchical import HierarchicalPlanner
-from hptrack.registry import make_planner, planner_settings
+from hptrack.registry import make_planner
 from hptrack.scenario.random import random_scenario
 from hptrack.sim.episode import run_episode
-
-
-class _MeasuredSearch(HierarchicalPlanner):
-    """The ``mcts`` planner with each search's ``tree_bytes`` in its search log."""
-
-    def _search(self, *args, **kwargs):
-        result = super()._search(*args, **kwargs)
-        self._searches[-1]["tree_bytes"] = result.tree_bytes
-        return result
 
 
 def _episode(planner, n: int, seed: int) -> tuple[float, float, dict]:
@@ -49,7 +39,7 @@ def _episode(planner, n: int, seed: int) -> tuple[float, float, dict]:
 def mcts_episode(n: int, seed: int, time_limit: float) -> dict:
     """One ``mcts`` episode (the default preset at ``time_limit`` s per decision), run in a
     process of its own: U, its searches' simulations and tree bytes, the peak RSS (bytes)."""
-    planner = _MeasuredSearch(planner_settings("mcts", {"time_limit": time_limit}))
+    planner = make_planner("mcts", {"time_limit": time_limit})
     u, never, info = _episode(planner, n, seed)
     return {
         "n": n,

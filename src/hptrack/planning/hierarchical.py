@@ -371,6 +371,7 @@ class HierarchicalPlanner:
             "simulations": result.simulations,
             "elapsed_s": result.elapsed,
             "stopped_by": result.stopped_by,
+            "tree_bytes": result.tree_bytes,
         }
         if current_action is None:
             decisions: tuple[int | None, ...] = (result.best_action,)

@@ -417,7 +417,7 @@ def tour_position(env, state, order):
 def tour_choice(env, state, order, settle, min_find):
     """The tour's action in ``state`` (`fly_tour`'s rule, its position read off the state by
     `tour_position`): dwell, the next pursuit, else follow the target just found; ``-1``:
-    nothing to do."""
+    nothing to do (or no budget left)."""
     if tour_dwells(env, state, settle):
         return env.means.shape[0]
     gone = np.zeros(env.means.shape[0], dtype=np.bool_)
@@ -426,7 +426,8 @@ def tour_choice(env, state, order, settle, min_find):
     pick = next_pursuit(env, state, order, at, min_find, gone, work)[0]
     if pick >= 0:
         return pick
-    return state[0][I_LAST]
+    last = state[0][I_LAST]
+    return last if last >= 0 and is_available(env, state, last) else -1
 
 
 @numba.njit(cache=True)
