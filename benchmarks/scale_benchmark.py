@@ -44,7 +44,7 @@ VARIANTS: dict[str, tuple[str, dict]] = {
 searches' time limit added)."""
 
 REFERENCES = ("greedy", "clairvoyant")
-"""The two ends of the gap closed; always run."""
+"""The two ends of the gap closed (``--references``: run by default)."""
 
 
 def configs(
@@ -201,6 +201,11 @@ def main() -> None:
         default="tour_plan+fortify,improved,paper,tour",
         help=f"comma-separated, the first compared with the rest; of {', '.join(VARIANTS)}",
     )
+    parser.add_argument(
+        "--references",
+        default=",".join(REFERENCES),
+        help="the gap's ends run beside the variants (none: an empty string)",
+    )
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--db", type=Path, default=Path("results/scale.db"))
     parser.add_argument("--out", type=Path, default=Path("results/scale"))
@@ -209,15 +214,17 @@ def main() -> None:
     )
     args = parser.parse_args()
     names = tuple(v for v in args.variants.split(",") if v)
-    unknown = [v for v in names if v not in VARIANTS]
+    references = tuple(v for v in args.references.split(",") if v)
+    unknown = [v for v in (*names, *references) if v not in VARIANTS]
     if unknown:
-        parser.error(f"--variants: unknown {', '.join(unknown)}; known: {', '.join(VARIANTS)}")
-    names = (*names, *(r for r in REFERENCES if r not in names))
+        parser.error(f"unknown variants {', '.join(unknown)}; known: {', '.join(VARIANTS)}")
+    names = (*names, *(r for r in references if r not in names))
     targets = tuple(int(t) for t in args.targets.split(",") if t)
     command = (
         f"python3 benchmarks/scale_benchmark.py --targets {args.targets} --seeds {args.seeds} "
-        f"--time-limit {args.time_limit:g} --variants {args.variants} --workers {args.workers} "
-        f"--db {args.db} --out {args.out}"
+        f"--time-limit {args.time_limit:g} --variants {args.variants} "
+        + (f"--references '{args.references}' " if references != REFERENCES else "")
+        + f"--workers {args.workers} --db {args.db} --out {args.out}"
     )
     args.db.parent.mkdir(parents=True, exist_ok=True)
     store = ResultStore(args.db)
