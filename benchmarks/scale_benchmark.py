@@ -7,8 +7,8 @@ process pool side by side; episodes are stored in the results database ``--db`` 
 finish (a re-run resumes; a run at another time limit is another identity). The report: mean
 ``U`` with its standard error, the share of the greedy-to-clairvoyant gap closed on the
 scenarios all three flew, the targets never detected per episode, the paired difference of
-the first variant and each other one (negative: the first is better), and a figure of the gap
-closed against n.
+the first variant and each other one (negative: the first is better), the searches' effort
+(simulations and wall time per search), and a figure of the gap closed against n.
 
     python3 benchmarks/scale_benchmark.py --targets 6,12,20 --seeds 30 --time-limit 0.05 \\
         --workers 2 --db results/scale.db --out docs/results/scale-0.05s
@@ -159,6 +159,39 @@ def report(by_variant: dict[str, dict], out: Path, command: str, time_limit: flo
                     "se": se,
                     "percent": pct,
                     "percent_se": pct_se,
+                }
+            )
+    lines += [
+        "",
+        "The searches' effort: searches per episode, simulations per search (median, and the",
+        "least), wall time per search (median), s.",
+        "",
+        "| n | planner | searches per episode | simulations, median (least) | wall, median |",
+        "|---|---|---|---|---|",
+    ]
+    summary["searches"] = []
+    for n in counts:
+        for variant, rows in by_variant.items():
+            searches = [
+                s for (m, _), r in rows.items() if m == n for s in r.info.get("searches", ())
+            ]
+            if not searches:
+                continue
+            episodes = sum(1 for m, _ in rows if m == n)
+            sims = np.array([s["simulations"] for s in searches])
+            wall = float(np.median([s["elapsed_s"] for s in searches]))
+            lines.append(
+                f"| {n} | {variant} | {len(searches) / episodes:.1f} | "
+                f"{np.median(sims):.0f} ({sims.min()}) | {wall:.3f} |"
+            )
+            summary["searches"].append(
+                {
+                    "n": n,
+                    "planner": variant,
+                    "searches_per_episode": len(searches) / episodes,
+                    "median_simulations": float(np.median(sims)),
+                    "least_simulations": int(sims.min()),
+                    "median_wall_s": wall,
                 }
             )
     write_tables(out, lines, summary)

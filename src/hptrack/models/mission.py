@@ -57,7 +57,7 @@ MAX_TARGETS = 256
 """Most targets of a mission. The search's action list takes any number (63 per ``int64``
 word, `hptrack.planning.subtask_mdp.in_list`); the cap bounds what a decision holds: the memo,
 24 bytes per target and budget step (11 MB at the paper's 1800 steps), and a state node's
-action slots, 70 bytes each, one per action (18 KB per node at 256 targets). A scenario file
+action slots, 86 bytes each, one per action (22 KB per node at 256 targets). A scenario file
 of 256 targets fits the file bounds (`hptrack.scenario.io.MAX_VALUES`)."""
 
 STEP_TOLERANCE = 1e-9
