@@ -69,6 +69,8 @@ def configs(
 def gap_closed(by_variant: dict[str, dict], variant: str, n: int) -> tuple[float, int]:
     """The share (%) of the greedy-to-clairvoyant gap that ``variant`` closes at ``n`` on the
     mean U of the scenarios all three flew, and their number."""
+    if not all(ref in by_variant for ref in REFERENCES):
+        return math.nan, 0
     rows = by_variant[variant]
     common = [s for m, s in rows if m == n and all((n, s) in by_variant[ref] for ref in REFERENCES)]
     if not common:
@@ -114,7 +116,7 @@ def report(by_variant: dict[str, dict], out: Path, command: str, time_limit: flo
             never = float(np.mean([rows[n, s].info["targets_never_detected"] for s in seeds]))
             lines.append(
                 f"| {n} | {variant} | {len(seeds)} | {mean:.2f} +- {se:.2f} | "
-                f"{gap:.0f} ({common}) | {never:.2f} |"
+                f"{f'{gap:.0f} ({common})' if common else '-'} | {never:.2f} |"
             )
             summary["rows"].append(
                 {
