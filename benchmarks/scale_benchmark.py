@@ -8,7 +8,8 @@ finish (a re-run resumes; a run at another time limit is another identity). The 
 ``U`` with its standard error, the share of the greedy-to-clairvoyant gap closed on the
 scenarios all three flew, the targets never detected per episode, the paired difference of
 the first variant and each other one (negative: the first is better), the searches' effort
-(simulations and wall time per search), and a figure of the gap closed against n.
+(simulations and wall time per search), and a figure of the gap closed against n (when the
+references ran).
 
     python3 benchmarks/scale_benchmark.py --targets 6,12,20 --seeds 30 --time-limit 0.05 \\
         --workers 2 --db results/scale.db --out docs/results/scale-0.05s
@@ -197,7 +198,8 @@ def report(by_variant: dict[str, dict], out: Path, command: str, time_limit: flo
                 }
             )
     write_tables(out, lines, summary)
-    figure(summary, out / "gap.png", time_limit)
+    if any(math.isfinite(r["gap_closed_percent"]) for r in summary["rows"]):
+        figure(summary, out / "gap.png", time_limit)
 
 
 def figure(summary: dict, path: Path, time_limit: float) -> None:
