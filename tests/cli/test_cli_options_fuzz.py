@@ -53,7 +53,7 @@ def scenario_path(tmp_path_factory):
         (["replay", "/dev/zero"], "not a mission log (a folder, a device"),
         (["replay", "/dev/urandom"], "not a mission log (a folder, a device"),
         (["benchmark", "--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "inf"], "3600"),
-        (["learn", "adfq", "--targets", "100", "--steps", "10", "--out", "x"], "--targets"),
+        (["learn", "adfq", "--targets", "300", "--steps", "10", "--out", "x"], "--targets"),
         (
             ["learn", "adfq", "--targets", "2", "--steps", "10", "--out", "x", "--buffer", "1e12"],
             "--buffer",
