@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from hptrack.experiments.benchmark import BenchmarkConfig, run_variants
-from hptrack.experiments.report import mean_se, write_tables
+from hptrack.experiments.report import mean_se, paired_differences, write_tables
 from hptrack.experiments.store import ResultStore
 from hptrack.registry import planner_settings
 
@@ -139,31 +139,8 @@ def report(by_variant: dict[str, dict], out: Path, command: str, time_limit: flo
         f"| n | {first} - | scenarios | mean difference | in % of the other |",
         "|---|---|---|---|---|",
     ]
-    lead = by_variant[first]
-    for n in counts:
-        for variant, rows in by_variant.items():
-            seeds = sorted(s for m, s in rows if m == n and (m, s) in lead)
-            if variant == first or not seeds:
-                continue
-            other = np.array([rows[n, s].uncertainty for s in seeds])
-            diff = np.array([lead[n, s].uncertainty for s in seeds]) - other
-            mean, se = mean_se(diff)
-            pct, pct_se = mean_se(100.0 * diff / other)
-            lines.append(
-                f"| {n} | {variant} | {len(seeds)} | {mean:+.2f} +- {se:.2f} | "
-                f"{pct:+.2f} +- {pct_se:.2f} |"
-            )
-            summary["paired"].append(
-                {
-                    "n": n,
-                    "other": variant,
-                    "scenarios": len(seeds),
-                    "first_minus_other": mean,
-                    "se": se,
-                    "percent": pct,
-                    "percent_se": pct_se,
-                }
-            )
+    paired, summary["paired"] = paired_differences(by_variant, counts, first, "first_minus_other")
+    lines += paired
     lines += [
         "",
         "The searches' effort: searches per episode, simulations per search (median, and the",

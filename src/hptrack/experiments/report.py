@@ -33,6 +33,42 @@ def mean_se(values: Sequence[float] | np.ndarray) -> tuple[float, float]:
     return float(np.mean(v)), se
 
 
+def paired_differences(
+    by_variant: dict[str, dict], counts: Sequence[int], lead: str, field: str
+) -> tuple[list[str], list[dict]]:
+    """The rows of a table of paired differences of ``U``, ``lead`` minus every other variant,
+    per n of ``counts``, on the scenarios both flew (``by_variant``: ``{variant: {(n, seed):
+    row}}``): the markdown rows and their records (the difference under ``field``)."""
+    lines: list[str] = []
+    records: list[dict] = []
+    first = by_variant[lead]
+    for n in counts:
+        for variant, rows in by_variant.items():
+            seeds = sorted(s for m, s in rows if m == n and (m, s) in first)
+            if variant == lead or not seeds:
+                continue
+            other = np.array([rows[n, s].uncertainty for s in seeds])
+            diff = np.array([first[n, s].uncertainty for s in seeds]) - other
+            mean, se = mean_se(diff)
+            pct, pct_se = mean_se(100.0 * diff / other)
+            lines.append(
+                f"| {n} | {variant} | {len(seeds)} | {mean:+.2f} +- {se:.2f} | "
+                f"{pct:+.2f} +- {pct_se:.2f} |"
+            )
+            records.append(
+                {
+                    "n": n,
+                    "other": variant,
+                    "scenarios": len(seeds),
+                    field: mean,
+                    "se": se,
+                    "percent": pct,
+                    "percent_se": pct_se,
+                }
+            )
+    return lines, records
+
+
 def write_tables(out: Path, lines: list[str], summary: dict) -> None:
     """Write a result folder: ``table.md`` (the ``lines``) and ``summary.json``, and print the
     table."""

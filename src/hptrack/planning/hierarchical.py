@@ -44,6 +44,7 @@ from hptrack.planning.subtask_mdp import (
     FIND,
     MISS,
     PlanningProblem,
+    SubtaskEnv,
     SubtaskOptions,
     action_table,
     apply_outcome,
@@ -351,7 +352,8 @@ class HierarchicalPlanner:
         options, tour = self.options, None
         time_limit = self.time_limit
         if self.settings.rollout == "tour_plan":
-            tour = self._tour(problem)
+            tour_env = problem.env(self.subtask_options)
+            tour = self._tour(problem, tour_env)
             options = options._replace(
                 rollout=TourRollout(tour.order, tour.settle, TOUR_BASE.min_find)
             )
@@ -378,7 +380,7 @@ class HierarchicalPlanner:
         else:
             decisions = tuple(result.best_after(o) for o in (FIND, MISS))
         if tour is not None and self.settings.fortify:
-            bases = self._tour_actions(problem, tour, result)
+            bases = self._tour_actions(problem, tour_env, tour, result)
             stats = (result.root,) if current_action is None else result.after
             decisions = tuple(
                 fortified_choice(stats[o] if o < len(stats) else None, base)
@@ -388,10 +390,9 @@ class HierarchicalPlanner:
         self._searches.append(entry)
         return result, decisions
 
-    def _tour(self, problem: PlanningProblem) -> TourPlan:
+    def _tour(self, problem: PlanningProblem, env: SubtaskEnv) -> TourPlan:
         """The tour (`hptrack.planning.tour.plan_tour`) from ``problem``'s root in the
-        search's own MDP, entered at the current action's target when re-planning."""
-        env = problem.env(self.subtask_options)
+        search's own MDP (``env``), entered at the current action's target when re-planning."""
         root = problem.root_state()
         kept = np.flatnonzero(problem.available).astype(np.int64)
         order = cyclic_order(
@@ -408,13 +409,12 @@ class HierarchicalPlanner:
         return plan_tour(env, root, order, TOUR_BASE, draws, self._tour_work, entry=entry)
 
     def _tour_actions(
-        self, problem: PlanningProblem, tour: TourPlan, result: SearchResult
+        self, problem: PlanningProblem, env: SubtaskEnv, tour: TourPlan, result: SearchResult
     ) -> tuple[int, ...]:
         """The tour's action at each state the search decides for: the root (a first plan),
         or the state after each outcome of the current action (re-planning)."""
         if problem.current_action is None:
             return (tour.first,)
-        env = problem.env(self.subtask_options)
         actions = []
         for o in (FIND, MISS):
             if o >= result.root.payload.shape[1] or np.isnan(result.root.p[0, o]):
