@@ -103,6 +103,11 @@ def test_a_blind_search_plans_with_the_paper_sensor_on_the_same_world(tmp_path):
         (["--blind"], "--blind needs a --detection-probability below 1"),
         (["--detection-probability", "1.5"], "--detection-probability must be in (0, 1], got 1.5"),
         (["--detection-probability", "0"], "--detection-probability must be in (0, 1], got 0.0"),
+        (["--false-alarm-density", "1e-6"], "--false-alarm-density 1e-06 needs --unlabelled"),
+        (
+            ["--unlabelled", "--false-alarm-density", "-1"],
+            "--false-alarm-density must be between 0 and 0.01 per m^2 per look, got -1.0",
+        ),
     ],
 )
 def test_bad_sensing_options_are_one_line_errors(cli, tmp_path, args, message):
@@ -110,6 +115,29 @@ def test_bad_sensing_options_are_one_line_errors(cli, tmp_path, args, message):
     common = ["--targets", "2", "--scenarios", "1", "--planners", "greedy", "--db", db]
     cli("benchmark", *common, "--out", tmp_path / "o", *args).refused(message)
     assert not db.exists()
+
+
+def test_detections_without_identity_and_clutter_are_part_of_the_identity():
+    plain = config(detection_probability=0.7, labelled=False)
+    clutter = config(detection_probability=0.7, labelled=False, false_alarm_density=1e-6)
+    assert plain.setting == "homogeneous+pd:0.7+unlabelled"
+    assert clutter.setting == "homogeneous+pd:0.7+unlabelled+clutter:1e-06"
+    assert config(labelled=False).setting == "homogeneous+unlabelled"
+    sensor = scenario_for(clutter.keys()[1]).sensor
+    assert (sensor.detection_probability, sensor.labelled) == (0.7, False)
+    assert sensor.false_alarm_density == 1e-6
+    assert scenario_for(plain.keys()[1]).sensor.false_alarm_density == 0.0
+    labelled = scenario_for(config(detection_probability=0.7).keys()[1])
+    assert scenario_for(clutter.keys()[1]).targets == labelled.targets  # the same worlds
+
+
+def test_an_unlabelled_benchmark_stores_its_tracking_metrics(tmp_path):
+    store = ResultStore(tmp_path / "r.db")
+    run_benchmark(config(labelled=False, false_alarm_density=1e-4), store)
+    rows = store.rows()
+    store.close()
+    assert {r.key.setting for r in rows} == {"homogeneous+unlabelled+clutter:0.0001"}
+    assert all(r.gospa_mean is not None and r.track_loss is not None for r in rows)
 
 
 def test_a_config_refuses_blindness_without_misses():

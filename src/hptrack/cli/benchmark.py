@@ -85,6 +85,19 @@ def benchmark(
             "detector misses (needs --detection-probability below 1).",
         ),
     ] = False,
+    unlabelled: Annotated[
+        bool,
+        typer.Option(
+            "--unlabelled",
+            help="Detections name no target: positions only, associated by the tracker (GNN).",
+        ),
+    ] = False,
+    false_alarm_density: Annotated[
+        float,
+        typer.Option(
+            help="False alarms per m^2 per look inside the footprint (needs --unlabelled).",
+        ),
+    ] = 0.0,
     no_fly: Annotated[
         bool,
         typer.Option(
@@ -208,6 +221,8 @@ def benchmark(
         blind=blind,
         no_fly=no_fly,
         team=team,
+        labelled=not unlabelled,
+        false_alarm_density=false_alarm_density,
     )
     check_team(names, team)
     scenario_for(config.keys()[0])  # a bad --motion value is refused before any work

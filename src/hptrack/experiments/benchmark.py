@@ -26,7 +26,12 @@ from hptrack.experiments.store import EpisodeKey, ResultStore
 from hptrack.experiments.workers import stop_workers, worker_pool
 from hptrack.interface import InputError, MissionSpec
 from hptrack.registry import check_team, planner_entry, planner_settings
-from hptrack.scenario.model import MAX_AGENTS, FootprintSensorSpec, Scenario
+from hptrack.scenario.model import (
+    MAX_AGENTS,
+    MAX_FALSE_ALARM_DENSITY,
+    FootprintSensorSpec,
+    Scenario,
+)
 from hptrack.scenario.random import random_scenario, with_no_fly
 from hptrack.settings import PlannerSettings
 from hptrack.sim.episode import run_episode
@@ -56,6 +61,10 @@ class BenchmarkConfig:
             footprint at each look (1: the paper's sensor).
         blind: the planners are told the paper's sensor (``Pd = 1``) while the world's detector
             misses (`hptrack.sim.episode.run_episode`'s ``planner_mission``).
+        labelled: every detection names its target (the paper's sensor); false: detections are
+            positions only, associated by the tracker (``sensor.labelled``, GNN).
+        false_alarm_density: the sensor's false alarms per m^2 per look inside its footprint
+            (``sensor.false_alarm_density``; above 0 only with ``labelled`` false).
         no_fly: each scenario gets random no-fly circles
             (`hptrack.scenario.random.with_no_fly`).
         team: UAVs per scenario, all from the start (1: the paper's one UAV).
@@ -73,6 +82,8 @@ class BenchmarkConfig:
     blind: bool = False
     no_fly: bool = False
     team: int = 1
+    labelled: bool = True
+    false_alarm_density: float = 0.0
 
     def __post_init__(self) -> None:
         missing = [p for p in self.planners if p not in self.settings]
@@ -88,6 +99,19 @@ class BenchmarkConfig:
             raise InputError(f"--detection-probability must be in (0, 1], got {p!r}")
         if self.blind and p == 1.0:
             raise InputError("--blind needs a --detection-probability below 1 (nothing to hide)")
+        clutter = self.false_alarm_density
+        if isinstance(clutter, bool) or not (
+            isinstance(clutter, int | float) and 0.0 <= clutter <= MAX_FALSE_ALARM_DENSITY
+        ):
+            raise InputError(
+                f"--false-alarm-density must be between 0 and {MAX_FALSE_ALARM_DENSITY:g} per m^2 "
+                f"per look, got {clutter!r}"
+            )
+        if clutter > 0.0 and self.labelled:
+            raise InputError(
+                f"--false-alarm-density {clutter:g} needs --unlabelled (a false alarm names no "
+                "target)"
+            )
         if isinstance(self.team, bool) or not 1 <= self.team <= MAX_AGENTS:
             raise InputError(f"--team must be between 1 and {MAX_AGENTS}, got {self.team!r}")
 
@@ -101,6 +125,8 @@ class BenchmarkConfig:
             self.blind,
             self.no_fly,
             self.team,
+            self.labelled,
+            self.false_alarm_density,
         )
 
     def keys(self) -> list[EpisodeKey]:
@@ -165,12 +191,16 @@ def setting_name(
     blind: bool = False,
     no_fly: bool = False,
     team: int = 1,
+    labelled: bool = True,
+    false_alarm_density: float = 0.0,
 ) -> str:
     """The setting part of an episode's identity: ``"homogeneous"`` or ``"heterogeneous"``,
     with ``"+paper_text"`` when ``Q`` is the paper's printed form, ``"+MODEL:VALUE"`` under
     another belief motion (`motion_label`), ``"+pd:P"`` when the sensor detects with
     probability ``P < 1``, ``"+blind"`` when the planners are told ``Pd = 1``, ``"+nofly"``
-    with random no-fly circles and ``"+team:M"`` with ``M > 1`` UAVs (`BenchmarkConfig`)."""
+    with random no-fly circles, ``"+team:M"`` with ``M > 1`` UAVs, ``"+unlabelled"`` for
+    detections without identity and ``"+clutter:L"`` for ``L > 0`` false alarms per m^2 per
+    look (`BenchmarkConfig`)."""
     base = "homogeneous" if homogeneous else "heterogeneous"
     parts = [base] + ([process_noise_form] if process_noise_form != "continuous" else [])
     parts += [motion] if motion_label(motion) is not None else []
@@ -180,6 +210,8 @@ def setting_name(
     parts += [BLIND_PART] if blind else []
     parts += [NO_FLY_PART] if no_fly else []
     parts += [f"{TEAM_PART}{team}"] if team > 1 else []
+    parts += [] if labelled else [UNLABELLED_PART]
+    parts += [f"{CLUTTER_PART}{float(false_alarm_density)!r}"] if false_alarm_density > 0 else []
     return "+".join(parts)
 
 
@@ -191,6 +223,10 @@ NO_FLY_PART = "nofly"
 """The setting part of scenarios with random no-fly circles (`setting_name`)."""
 TEAM_PART = "team:"
 """The prefix of a setting's team size part (`setting_name`)."""
+UNLABELLED_PART = "unlabelled"
+"""The setting part of a sensor whose detections name no target (`setting_name`)."""
+CLUTTER_PART = "clutter:"
+"""The prefix of a setting's false alarm density part (`setting_name`)."""
 
 
 def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
@@ -199,18 +235,24 @@ def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
     forms = [part for part in rest if part in ("continuous", "paper_text")]
     pds = [float(part[len(DETECTION_PART) :]) for part in rest if part.startswith(DETECTION_PART)]
     blind = BLIND_PART in rest
+    clutters = [float(part[len(CLUTTER_PART) :]) for part in rest if part.startswith(CLUTTER_PART)]
     motions = [
         motion_label(part)
         for part in rest
         if part not in forms
-        and not part.startswith((DETECTION_PART, TEAM_PART))
-        and part not in (BLIND_PART, NO_FLY_PART)
+        and not part.startswith((DETECTION_PART, TEAM_PART, CLUTTER_PART))
+        and part not in (BLIND_PART, NO_FLY_PART, UNLABELLED_PART)
     ]
     fields: dict = {"process_noise_form": forms[0] if forms else "continuous"}
     if motions:
         fields["motion"] = motions[0]
-    if pds:
-        fields["sensor"] = FootprintSensorSpec(detection_probability=pds[0])
+    sensor: dict = {"detection_probability": pds[0]} if pds else {}
+    if UNLABELLED_PART in rest:
+        sensor["labelled"] = False
+    if clutters:
+        sensor["false_alarm_density"] = clutters[0]
+    if sensor:
+        fields["sensor"] = FootprintSensorSpec(**sensor)
     teams = [int(part[len(TEAM_PART) :]) for part in rest if part.startswith(TEAM_PART)]
     if teams:
         fields["team"] = teams[0]
@@ -395,8 +437,8 @@ def run_keys(
 
 
 def run_variants(
-    configs: dict[str, BenchmarkConfig], store: ResultStore, workers: int, run: bool = True
-) -> dict[str, dict[tuple[int, int], Any]]:
+    configs: dict[Any, BenchmarkConfig], store: ResultStore, workers: int, run: bool = True
+) -> dict[Any, dict[tuple[int, int], Any]]:
     """Run each named benchmark on ``store`` (unless ``run`` is false: report only) and return
     its stored rows, ``{name: {(n, seed): row}}`` (the benchmark scripts' side-by-side runs)."""
     out = {}
@@ -424,6 +466,8 @@ def benchmark(
     blind: bool = False,
     no_fly: bool = False,
     team: int = 1,
+    labelled: bool = True,
+    false_alarm_density: float = 0.0,
     metric: str = "U",
 ) -> dict:
     """Fly every planner once on each random scenario and summarise ``U`` or another
@@ -447,6 +491,8 @@ def benchmark(
         blind: the planners are told the paper's certain sensor (`BenchmarkConfig`).
         no_fly: random no-fly circles in every scenario (`BenchmarkConfig`).
         team: UAVs per scenario (`BenchmarkConfig`).
+        labelled: detections name their targets; false: positions only (`BenchmarkConfig`).
+        false_alarm_density: false alarms per m^2 per look, only unlabelled (`BenchmarkConfig`).
         metric: what to summarise, one of `hptrack.sim.record.METRICS` (`summarise`).
 
     Returns:
@@ -483,6 +529,8 @@ def benchmark(
         blind=blind,
         no_fly=no_fly,
         team=team,
+        labelled=labelled,
+        false_alarm_density=false_alarm_density,
     )
     check_team(planners, team)
     store = ResultStore(db)

@@ -1,0 +1,208 @@
+"""The planners under a detector that misses, reports false alarms and names no target.
+
+Homogeneous random scenarios of the paper (``--targets``, seeds ``0..N-1``). For every
+detection probability of ``--pds`` the sensor is flown three ways: labelled (every detection
+names its target), unlabelled (positions only, associated by the tracker's GNN) without
+clutter, and unlabelled with ``--clutter`` false alarms per m^2 per look. Under each sensor
+the variants (``--variants``, names of `VARIANTS`) fly the same worlds: greedy, the paper's
+search, the default search, the clairvoyant reference, and below ``Pd = 1`` the default search
+told the paper's certain sensor (``blind``). Every search runs at ``--time-limit`` s per
+decision. Episodes are stored in the results database ``--db`` as they finish (a re-run
+resumes; every sensor is its own setting of the episodes' identity, as ``hptrack benchmark
+--detection-probability P --unlabelled --false-alarm-density L`` writes it).
+
+The report (``OUT/table.md``, ``OUT/summary.json``): per n, sensor and variant the mean ``U``,
+mean and end-of-mission GOSPA (m), tracks lost and targets never detected per episode; and the
+paired difference of ``U`` of the search told its sensor and the blind one.
+
+    python3 benchmarks/sensing_table.py --targets 6,12 --seeds 30 --time-limit 0.05 \\
+        --workers 2 --db results/sensing.db --out docs/results/sensing
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from hptrack.experiments.benchmark import BenchmarkConfig, run_variants
+from hptrack.experiments.report import mean_se, write_tables
+from hptrack.experiments.store import ResultStore
+from hptrack.registry import planner_settings
+
+VARIANTS: dict[str, tuple[str, dict, bool]] = {
+    "greedy": ("greedy", {}, False),
+    "paper": ("mcts", {"preset": "paper"}, False),
+    "default": ("mcts", {}, False),
+    "clairvoyant": ("clairvoyant", {}, False),
+    "blind": ("mcts", {}, True),
+}
+"""The planners compared, by their names in the tables: a planner, its options (the searches'
+time limit added) and whether it is told the paper's certain sensor (run only below
+``Pd = 1``)."""
+
+
+def sensors(pd: float, clutter: float) -> dict[str, dict]:
+    """The sensors flown at one detection probability, by their name in the table
+    (`BenchmarkConfig` fields)."""
+    base = {"detection_probability": pd}
+    return {
+        f"Pd {pd:g}, labelled": base,
+        f"Pd {pd:g}, unlabelled": base | {"labelled": False},
+        f"Pd {pd:g}, unlabelled, clutter {clutter:g}": base
+        | {"labelled": False, "false_alarm_density": clutter},
+    }
+
+
+def configs(
+    variants: tuple[str, ...],
+    targets: tuple[int, ...],
+    seeds: int,
+    time_limit: float,
+    pds: tuple[float, ...],
+    clutter: float,
+) -> dict[tuple[str, str], BenchmarkConfig]:
+    """The benchmark of each (sensor, variant), by their names in the table."""
+    out = {}
+    for pd in pds:
+        for sensor, fields in sensors(pd, clutter).items():
+            for name in variants:
+                planner, options, blind = VARIANTS[name]
+                if blind and pd == 1.0:
+                    continue
+                if planner == "mcts":
+                    options = {**options, "time_limit": time_limit}
+                out[sensor, name] = BenchmarkConfig(
+                    planners=(planner,),
+                    settings={planner: planner_settings(planner, options)},
+                    target_counts=targets,
+                    scenarios=seeds,
+                    homogeneous=True,
+                    blind=blind,
+                    **fields,
+                )
+    return out
+
+
+def _mean(rows: list, metric: str) -> float:
+    values = [r.metric(metric) for r in rows]
+    return float(np.mean(values)) if values and None not in values else float("nan")
+
+
+def report(by: dict[tuple[str, str], dict], out: Path, command: str, time_limit: float) -> None:
+    """Write ``table.md`` and ``summary.json`` from ``{(sensor, variant): {(n, seed): row}}``."""
+    counts = sorted({n for rows in by.values() for n, _ in rows})
+    lines = [
+        "Homogeneous random scenarios of the paper (seeds from 0); every search at "
+        f"{time_limit:g} s per decision.",
+        "`paper` is the paper's search, `default` the default search, `blind` the default told",
+        "`Pd = 1` on the same worlds; clutter in false alarms per m^2 per look; unlabelled",
+        "detections are associated by GNN.",
+        "",
+        "```bash",
+        command,
+        "```",
+        "",
+        "Mean U +- standard error; GOSPA (p = 2, alpha = 2, c = the footprint radius, m) over the",
+        "mission and at its end; tracks lost and targets never detected per episode.",
+        "",
+        "| n | sensor | planner | episodes | mean U | GOSPA, mean | GOSPA, end | tracks lost | "
+        "never detected |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    summary: dict = {"command": command, "time_limit_s": time_limit, "rows": [], "paired": []}
+    for n in counts:
+        for (sensor, variant), rows in by.items():
+            mine = [rows[key] for key in sorted(rows) if key[0] == n]
+            if not mine:
+                continue
+            mean, se = mean_se([r.uncertainty for r in mine])
+            record = {
+                "n": n,
+                "sensor": sensor,
+                "planner": variant,
+                "episodes": len(mine),
+                "mean_U": mean,
+                "se_U": se,
+                **{m: _mean(mine, m) for m in ("gospa_mean", "gospa_end", "track_loss")},
+                "never_detected": _mean(mine, "never_detected"),
+            }
+            lines.append(
+                f"| {n} | {sensor} | {variant} | {len(mine)} | {mean:.2f} +- {se:.2f} | "
+                f"{record['gospa_mean']:.1f} | {record['gospa_end']:.1f} | "
+                f"{record['track_loss']:.2f} | {record['never_detected']:.2f} |"
+            )
+            summary["rows"].append(record)
+    lines += [
+        "",
+        "Paired differences of U, the default search told its sensor minus the blind one, on the",
+        "scenarios both flew (negative: knowing the sensor is better).",
+        "",
+        "| n | sensor | scenarios | known - blind | std. error | margin / std. error |",
+        "|---|---|---|---|---|---|",
+    ]
+    for n in counts:
+        for sensor in dict.fromkeys(s for s, _ in by):
+            known, blind = by.get((sensor, "default"), {}), by.get((sensor, "blind"), {})
+            seeds = sorted(s for m, s in blind if m == n and (m, s) in known)
+            if len(seeds) < 2:
+                continue
+            diff = [known[n, s].uncertainty - blind[n, s].uncertainty for s in seeds]
+            d, d_se = mean_se(diff)
+            lines.append(
+                f"| {n} | {sensor} | {len(seeds)} | {d:+.2f} | {d_se:.2f} | {abs(d) / d_se:.1f} |"
+            )
+            summary["paired"].append(
+                {
+                    "n": n,
+                    "sensor": sensor,
+                    "scenarios": len(seeds),
+                    "known_minus_blind": d,
+                    "se": d_se,
+                }
+            )
+    write_tables(out, lines, summary)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--targets", default="6,12", help="numbers of targets, comma-separated")
+    parser.add_argument("--seeds", type=int, default=30, help="scenarios per n (seeds 0..N-1)")
+    parser.add_argument("--pds", default="1,0.9,0.7", help="detection probabilities per look")
+    parser.add_argument("--clutter", type=float, default=1e-6, help="per m^2 per look")
+    parser.add_argument("--time-limit", type=float, default=0.05, help="s per decision")
+    parser.add_argument(
+        "--variants", default=",".join(VARIANTS), help=f"comma-separated, of {', '.join(VARIANTS)}"
+    )
+    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--db", type=Path, default=Path("results/sensing.db"))
+    parser.add_argument("--out", type=Path, default=Path("results/sensing"))
+    parser.add_argument(
+        "--report-only", action="store_true", help="report what the database holds, run nothing"
+    )
+    args = parser.parse_args()
+    variants = tuple(v for v in args.variants.split(",") if v)
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        parser.error(f"unknown variants {', '.join(unknown)}; known: {', '.join(VARIANTS)}")
+    targets = tuple(int(t) for t in args.targets.split(",") if t)
+    pds = tuple(float(p) for p in args.pds.split(",") if p)
+    command = (
+        f"python3 benchmarks/sensing_table.py --targets {args.targets} --seeds {args.seeds} "
+        f"--pds {args.pds} --clutter {args.clutter:g} --time-limit {args.time_limit:g} "
+        + (f"--variants {args.variants} " if variants != tuple(VARIANTS) else "")
+        + f"--workers {args.workers} --db {args.db} --out {args.out}"
+    )
+    args.db.parent.mkdir(parents=True, exist_ok=True)
+    store = ResultStore(args.db)
+    try:
+        wanted = configs(variants, targets, args.seeds, args.time_limit, pds, args.clutter)
+        by = run_variants(wanted, store, args.workers, run=not args.report_only)
+    finally:
+        store.close()
+    report(by, args.out, command, args.time_limit)
+
+
+if __name__ == "__main__":
+    main()
