@@ -1,9 +1,9 @@
 """Estimator accuracy with a detector that misses: the absolute error of ``P_find`` per case.
 
 Reads the ``cases.csv`` of ``validate-coverage`` runs made with ``--detection-probability`` or
-``--detection-table`` (one folder each) and writes ``table.md``: per run and delay, the mean
-and largest ``|estimate - simulated|`` of ``P_find`` for the paper's estimator and the sharp one,
-and the share of cases within 0.03 (the issue's bound)::
+``--detection-table`` (and ``--detection-correlation-time``; one folder each) and writes
+``table.md``: per run and delay, the mean and largest ``|estimate - simulated|`` of ``P_find``
+for the paper's estimator and the sharp one, and the share of cases within 0.03::
 
     python3 benchmarks/detection_accuracy.py docs/results/coverage-validation-detection/pd-0.9 \\
         docs/results/coverage-validation-detection/pd-0.7 ... --out table.md
@@ -21,7 +21,9 @@ def rows_of(folder: Path) -> tuple[str, list[str]]:
     """The detector of a run (its ``config.json``) and its table rows."""
     config = json.loads((folder / "config.json").read_text())
     detector = config.get("detection_probability", 1.0)
-    label = detector if isinstance(detector, float | int) else json.dumps(detector)
+    label = str(detector if isinstance(detector, float | int) else json.dumps(detector))
+    if config.get("detection_correlation_time"):  # draws held over consecutive looks
+        label += f", held {config['detection_correlation_time']:g} s"
     with (folder / "cases.csv").open() as f:
         cases = list(csv.DictReader(f))
     lines = []
@@ -36,7 +38,7 @@ def rows_of(folder: Path) -> tuple[str, list[str]]:
         mean_emp = sum(float(c["emp_p_find"]) for c in at) / len(at)
         head = f"| {label} | {delay:g} | {len(at)} | {mean_emp:.3f} | "
         lines.append(head + " | ".join(cells) + " |")
-    return str(label), lines
+    return label, lines
 
 
 def main() -> None:

@@ -11,17 +11,23 @@ decision. Episodes are stored in the results database ``--db`` as they finish (a
 resumes; every sensor is its own setting of the episodes' identity, as ``hptrack benchmark
 --detection-probability P --unlabelled --false-alarm-density L`` writes it).
 
-The report (``OUT/table.md``, ``OUT/summary.json``): per n, sensor and variant the mean ``U``,
-mean and end-of-mission GOSPA (m), tracks lost and targets never detected per episode; and the
-paired difference of ``U`` of the search told its sensor and the blind one.
+The report (``OUT/table.md``, ``OUT/summary.json``, ``OUT/rows.csv``, ``OUT/paired.csv``): per
+n, sensor and variant the mean ``U``, mean and end-of-mission GOSPA (m), tracks lost and targets
+never detected per episode; and the paired difference of ``U`` of the search told its sensor and
+the blind one.
 
     python3 benchmarks/sensing_table.py --targets 6,12 --seeds 30 --time-limit 0.05 \\
         --workers 2 --db results/sensing.db --out docs/results/sensing
+
+``--iterations N`` runs every search at ``N`` simulations per decision instead (reproducible rows),
+``--correlation-time T`` holds each detection draw ``T`` s (misses in runs) and ``--sensors``
+picks some of labelled, unlabelled and clutter.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 from pathlib import Path
 
 import numpy as np
@@ -43,36 +49,53 @@ time limit added) and whether it is told the paper's certain sensor (run only be
 ``Pd = 1``)."""
 
 
-def sensors(pd: float, clutter: float) -> dict[str, dict]:
+SENSOR_KINDS = ("labelled", "unlabelled", "clutter")
+"""The sensors flown at each detection probability (``--sensors``)."""
+
+
+def sensors(
+    pd: float, clutter: float, correlation: float = 0.0, kinds: tuple[str, ...] = SENSOR_KINDS
+) -> dict[str, dict]:
     """The sensors flown at one detection probability, by their name in the table
-    (`BenchmarkConfig` fields)."""
-    base = {"detection_probability": pd}
-    return {
-        f"Pd {pd:g}, labelled": base,
-        f"Pd {pd:g}, unlabelled": base | {"labelled": False},
-        f"Pd {pd:g}, unlabelled, clutter {clutter:g}": base
-        | {"labelled": False, "false_alarm_density": clutter},
+    (`BenchmarkConfig` fields): of ``kinds``, labelled, unlabelled without clutter and
+    unlabelled with ``clutter``, each draw held ``correlation`` s (below ``Pd = 1``)."""
+    base: dict = {"detection_probability": pd}
+    held = ""
+    if correlation > 0.0 and pd < 1.0:
+        base["detection_correlation_time"] = correlation
+        held = f", held {correlation:g} s"
+    every = {
+        "labelled": (f"Pd {pd:g}{held}, labelled", base),
+        "unlabelled": (f"Pd {pd:g}{held}, unlabelled", base | {"labelled": False}),
+        "clutter": (
+            f"Pd {pd:g}{held}, unlabelled, clutter {clutter:g}",
+            base | {"labelled": False, "false_alarm_density": clutter},
+        ),
     }
+    return dict(every[kind] for kind in kinds)
 
 
 def configs(
     variants: tuple[str, ...],
     targets: tuple[int, ...],
     seeds: int,
-    time_limit: float,
+    effort: dict,
     pds: tuple[float, ...],
     clutter: float,
+    correlation: float = 0.0,
+    kinds: tuple[str, ...] = SENSOR_KINDS,
 ) -> dict[tuple[str, str], BenchmarkConfig]:
-    """The benchmark of each (sensor, variant), by their names in the table."""
+    """The benchmark of each (sensor, variant), by their names in the table (``effort``: the
+    searches' ``time_limit`` or ``iterations``)."""
     out = {}
     for pd in pds:
-        for sensor, fields in sensors(pd, clutter).items():
+        for sensor, fields in sensors(pd, clutter, correlation, kinds).items():
             for name in variants:
                 planner, options, blind = VARIANTS[name]
                 if blind and pd == 1.0:
                     continue
                 if planner == "mcts":
-                    options = {**options, "time_limit": time_limit}
+                    options = {**options, **effort}
                 out[sensor, name] = BenchmarkConfig(
                     planners=(planner,),
                     settings={planner: planner_settings(planner, options)},
@@ -90,12 +113,12 @@ def _mean(rows: list, metric: str) -> float:
     return float(np.mean(values)) if values and None not in values else float("nan")
 
 
-def report(by: dict[tuple[str, str], dict], out: Path, command: str, time_limit: float) -> None:
-    """Write ``table.md`` and ``summary.json`` from ``{(sensor, variant): {(n, seed): row}}``."""
+def report(by: dict[tuple[str, str], dict], out: Path, command: str, effort: str) -> None:
+    """Write ``table.md`` and ``summary.json`` from ``{(sensor, variant): {(n, seed): row}}``
+    (``effort``: the searches', as the table says it)."""
     counts = sorted({n for rows in by.values() for n, _ in rows})
     lines = [
-        "Homogeneous random scenarios of the paper (seeds from 0); every search at "
-        f"{time_limit:g} s per decision.",
+        f"Homogeneous random scenarios of the paper (seeds from 0); every search at {effort}.",
         "`paper` is the paper's search, `default` the default search, `blind` the default told",
         "`Pd = 1` on the same worlds; clutter in false alarms per m^2 per look; unlabelled",
         "detections are associated by GNN.",
@@ -111,7 +134,7 @@ def report(by: dict[tuple[str, str], dict], out: Path, command: str, time_limit:
         "never detected |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    summary: dict = {"command": command, "time_limit_s": time_limit, "rows": [], "paired": []}
+    summary: dict = {"command": command, "effort": effort, "rows": [], "paired": []}
     for n in counts:
         for (sensor, variant), rows in by.items():
             mine = [rows[key] for key in sorted(rows) if key[0] == n]
@@ -163,6 +186,12 @@ def report(by: dict[tuple[str, str], dict], out: Path, command: str, time_limit:
                 }
             )
     write_tables(out, lines, summary)
+    for name in ("rows", "paired"):
+        if summary[name]:
+            with (out / f"{name}.csv").open("w", newline="") as fh:
+                writer = csv.DictWriter(fh, fieldnames=list(summary[name][0]))
+                writer.writeheader()
+                writer.writerows(summary[name])
 
 
 def main() -> None:
@@ -172,6 +201,13 @@ def main() -> None:
     parser.add_argument("--pds", default="1,0.9,0.7", help="detection probabilities per look")
     parser.add_argument("--clutter", type=float, default=1e-6, help="per m^2 per look")
     parser.add_argument("--time-limit", type=float, default=0.05, help="s per decision")
+    parser.add_argument("--iterations", type=int, help="simulations per decision instead")
+    parser.add_argument(
+        "--correlation-time", type=float, default=0.0, help="s a detection draw holds (below 1)"
+    )
+    parser.add_argument(
+        "--sensors", default=",".join(SENSOR_KINDS), help=f"of {', '.join(SENSOR_KINDS)}"
+    )
     parser.add_argument(
         "--variants", default=",".join(VARIANTS), help=f"comma-separated, of {', '.join(VARIANTS)}"
     )
@@ -188,20 +224,33 @@ def main() -> None:
         parser.error(f"unknown variants {', '.join(unknown)}; known: {', '.join(VARIANTS)}")
     targets = tuple(int(t) for t in args.targets.split(",") if t)
     pds = tuple(float(p) for p in args.pds.split(",") if p)
+    kinds = tuple(k for k in args.sensors.split(",") if k)
+    if any(k not in SENSOR_KINDS for k in kinds):
+        parser.error(f"--sensors {args.sensors}: of {', '.join(SENSOR_KINDS)}")
+    if args.iterations is not None:
+        effort, said = {"iterations": args.iterations}, f"{args.iterations:,} simulations"
+        given = f"--iterations {args.iterations} "
+    else:
+        effort, said = {"time_limit": args.time_limit}, f"{args.time_limit:g} s"
+        given = f"--time-limit {args.time_limit:g} "
     command = (
         f"python3 benchmarks/sensing_table.py --targets {args.targets} --seeds {args.seeds} "
-        f"--pds {args.pds} --clutter {args.clutter:g} --time-limit {args.time_limit:g} "
+        f"--pds {args.pds} --clutter {args.clutter:g} {given}"
+        + (f"--correlation-time {args.correlation_time:g} " if args.correlation_time else "")
+        + (f"--sensors {args.sensors} " if kinds != SENSOR_KINDS else "")
         + (f"--variants {args.variants} " if variants != tuple(VARIANTS) else "")
         + f"--workers {args.workers} --db {args.db} --out {args.out}"
     )
     args.db.parent.mkdir(parents=True, exist_ok=True)
     store = ResultStore(args.db)
     try:
-        wanted = configs(variants, targets, args.seeds, args.time_limit, pds, args.clutter)
+        wanted = configs(
+            variants, targets, args.seeds, effort, pds, args.clutter, args.correlation_time, kinds
+        )
         by = run_variants(wanted, store, args.workers, run=not args.report_only)
     finally:
         store.close()
-    report(by, args.out, command, args.time_limit)
+    report(by, args.out, command, f"{said} per decision")
 
 
 if __name__ == "__main__":

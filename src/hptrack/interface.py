@@ -132,14 +132,17 @@ class MissionSpec:
         belief_motion: how the beliefs assume the targets move, a registered part of
             `hptrack.models.belief_motion`; ``None``: constant velocity with
             ``process_noise_form``.
-        detection_probability: the chance that a look detects a target inside the footprint,
-            independently at each look: a number in ``(0, 1]`` or a table of rows ``[distance
-            from the footprint's centre, m; Pd]`` (`hptrack.models.sensor.detection_table`);
-            1, the paper's sensor, by default.
+        detection_probability: the chance that a look detects a target inside the footprint
+            (independent looks unless ``detection_correlation_time``): a number in ``(0, 1]``
+            or a table of rows ``[distance from the footprint's centre, m; Pd]``
+            (`hptrack.models.sensor.detection_table`); 1, the paper's sensor, by default.
         fence: where the vehicle may fly (`hptrack.models.fence.FenceSpec`: an operating
             area, no-fly zones, a margin); ``None``, the paper's open space, by default.
         negative_information: a look that detects nothing updates the beliefs
             (`hptrack.models.miss_update`); ``False``, the paper's, by default.
+        detection_correlation_time: s, how long one detection draw holds while a target
+            stays in the footprint (misses correlated over consecutive looks); 0, independent
+            looks, by default.
     """
 
     time_step: float = 0.5
@@ -156,6 +159,7 @@ class MissionSpec:
     fence: FenceSpec | None = None
     negative_information: bool = False
     members: tuple[TeamMember, ...] = ()
+    detection_correlation_time: float = 0.0
     record: Mission = field(init=False, repr=False)
     """The mission's constants as the compiled kernels take them (built and validated once,
     with the spec)."""
@@ -189,6 +193,7 @@ class MissionSpec:
             self.detection_probability,
             self.fence,
             self.negative_information,
+            self.detection_correlation_time,
         )
         object.__setattr__(self, "measurement_noise", record.sensor.measurement_noise)
         object.__setattr__(self, "process_noise", record.process_noise)

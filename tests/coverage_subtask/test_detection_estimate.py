@@ -104,6 +104,23 @@ def test_the_find_probability_agrees_with_the_monte_carlo_of_the_spiral():
             assert row["t_cutoff"] == base["t_cutoff"]
 
 
+def test_with_draws_held_over_a_pass_the_estimates_are_conservative_and_close():
+    """Draws held over the pass (misses in runs): the share of covered targets one pass detects
+    lowers both estimates as much as the simulation, within 0.1, never above it by more than
+    0.02, and the paper's t_cutoff stays."""
+    certain = _monte_carlo(1.0)
+    mission = MissionSpec(detection_probability=0.7, detection_correlation_time=1000.0)
+    config = ValidationConfig(cases=3, runs=2000, seed=3, mission=mission)
+    rows = [row for i in range(3) for row in case_rows(draw_case(i, config.seed), config)[0]]
+    for row, base in zip(rows, certain, strict=True):
+        assert row["emp_p_find"] < base["emp_p_find"] - 0.05  # a pass misses with 0.3
+        for column in ("sharp_p_find", "est_p_find"):
+            error = row[column] - row["emp_p_find"]
+            assert -0.1 < error < 0.02, (column, row)
+        assert row["t_cutoff"] == base["t_cutoff"]
+    assert config.identity()["detection_correlation_time"] == 1000.0
+
+
 def test_the_identity_names_the_detection_probability_only_below_one():
     plain = ValidationConfig(cases=1, runs=10)
     assert "detection_probability" not in plain.identity()

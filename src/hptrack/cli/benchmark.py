@@ -98,6 +98,13 @@ def benchmark(
             help="False alarms per m^2 per look inside the footprint (needs --unlabelled).",
         ),
     ] = 0.0,
+    detection_correlation_time: Annotated[
+        float,
+        typer.Option(
+            help="Seconds one detection draw holds while a target stays in the footprint, so "
+            "misses come in runs (0: independent looks; needs --detection-probability below 1).",
+        ),
+    ] = 0.0,
     no_fly: Annotated[
         bool,
         typer.Option(
@@ -223,6 +230,7 @@ def benchmark(
         team=team,
         labelled=not unlabelled,
         false_alarm_density=false_alarm_density,
+        detection_correlation_time=detection_correlation_time,
     )
     check_team(names, team)
     scenario_for(config.keys()[0])  # a bad --motion value is refused before any work

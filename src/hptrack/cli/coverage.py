@@ -41,10 +41,11 @@ from hptrack.experiments.coverage_validation import (
 )
 from hptrack.interface import InputError, MissionSpec, one_line, shown
 from hptrack.models.motion import ProcessNoiseForm
+from hptrack.models.sensor import certain
 from hptrack.models.sensor import detection_table as checked_detection
 from hptrack.models.state import state_from, velocities
 from hptrack.scenario import load_scenario
-from hptrack.scenario.model import MotionSpec
+from hptrack.scenario.model import MAX_DETECTION_CORRELATION_TIME, MotionSpec
 
 MAX_DELAY_S = 3600.0
 """Longest departure delay of ``validate-coverage``, s (an hour; the paper's budget is 900 s)."""
@@ -329,11 +330,29 @@ def validate_coverage(
             "distance_m:Pd rows from 0 m, e.g. 0:0.9,30:0.8,50:0.5 (linear, the last held)."
         ),
     ] = None,
+    detection_correlation_time: Annotated[
+        float,
+        typer.Option(
+            help="Seconds one detection draw holds while the target stays in the footprint "
+            "(0: independent looks; needs a detection probability below 1)."
+        ),
+    ] = 0.0,
 ) -> None:
     """Estimator-accuracy experiment (paper Sec. V-A): MAPE of P_find and E[T_find] per delay,
     for the paper's estimator and the sharp one on the same simulated runs."""
     check_seed(seed)
     detection = detection_of(detection_probability, detection_table)
+    hold = detection_correlation_time
+    if not (math.isfinite(hold) and 0.0 <= hold <= MAX_DETECTION_CORRELATION_TIME):
+        raise InputError(
+            f"--detection-correlation-time must be between 0 and "
+            f"{MAX_DETECTION_CORRELATION_TIME:g} s, got {shown(hold)}"
+        )
+    if hold > 0.0 and certain(detection):
+        raise InputError(
+            "--detection-correlation-time needs a detection probability below 1 (no misses to "
+            "correlate)"
+        )
     motion_spec = motion_of(
         motion,
         process_noise_form,
@@ -363,7 +382,11 @@ def validate_coverage(
         runs=runs,
         delays=_parse_delays(delays),
         seed=seed,
-        mission=MissionSpec(process_noise_form=process_noise_form, detection_probability=detection),
+        mission=MissionSpec(
+            process_noise_form=process_noise_form,
+            detection_probability=detection,
+            detection_correlation_time=hold,
+        ),
         motion=motion_spec,
         budget=budget,
     )

@@ -31,6 +31,14 @@ p`` is not ``W = p w``: a target near a pass's line is inside the footprint for 
 tau)`` looks and is all but surely detected. With the paper's sensor ``eta = 1`` and every number
 is what it was, bit for bit.
 
+A detector whose draws hold over consecutive looks (``hold_looks > 1``: misses that come in
+runs) detects a target at most once per pass, whatever the pass's length: the passes, not the
+looks, are the independent trials. Its ``find_factor`` is then one pass's chance of a detection,
+and the chance of a find is ``P_cdf`` of the footprint's width times the share of covered targets
+that some pass over them detects (`hptrack.models.sensor.repeat_pass_share`: the spiral's loops
+overlap by a factor that depends on the belief's axis ratio); ``t_cutoff`` and ``E[T_find]`` are
+those of the certain sensor.
+
 `coverage_outcome` is the compiled kernel used by the tree search: O(t_cutoff) arithmetic
 with the covariance in closed form (for constant velocity polynomials in the step count; for
 other belief motions the motion's own terms, `hptrack.models.mission.position_det_on`), one
@@ -58,7 +66,7 @@ from hptrack.models.mission import (
     position_polynomials_on,
     steps_left,
 )
-from hptrack.models.sensor import sensor_find_factor
+from hptrack.models.sensor import held_find_share, sensor_find_factor, sensor_hold_looks
 
 MAX_COVERAGE_STEPS = 10_000_000
 """Cap on ``t_cutoff`` when no budget is given; reaching it means the belief does not grow."""
@@ -106,6 +114,9 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
     area1 = speed * diameter * tau
     inv_two_pi = 1.0 / (2.0 * math.pi)
     factor = sensor_find_factor(mission.sensor)  # W / w (1: the paper's sensor, exactly)
+    share = held_find_share(mission.sensor, cov, speed)  # draws held over a pass: P x share
+    if sensor_hold_looks(mission.sensor) > 1:
+        factor = 1.0
     k = 0
     area = area0
     det = x0 * y0 - c0 * c0
@@ -122,7 +133,7 @@ def coverage_outcome(mission, cov: np.ndarray, q: float, max_steps: int) -> tupl
     p = -math.expm1(-(factor * area) * inv_two_pi / math.sqrt(det))
     # E[T | T <= K] = sum_k k (P(k) - P(k-1)) / P(K) = (K P(K) - sum_{j<K} P(j)) / P(K)
     expected = (k * p - cdf_sum) / p
-    return float(k), p, expected
+    return float(k), share * p, expected
 
 
 @numba.njit(cache=True)
@@ -131,9 +142,12 @@ def coverage_cdf(mission, cov: np.ndarray, q: float, n_steps: int) -> np.ndarray
     sensor's ``find_factor``, 1 for the paper's), for plots and reports."""
     out = np.empty(n_steps)
     factor = sensor_find_factor(mission.sensor)
+    share = held_find_share(mission.sensor, cov, mission.vehicle.speed)
+    if sensor_hold_looks(mission.sensor) > 1:
+        factor = 1.0
     for k in range(n_steps):
         ratio = factor * _covered_ratio(mission, cov, q, float(k))
-        out[k] = -math.expm1(-ratio / (2.0 * math.pi))
+        out[k] = -share * math.expm1(-ratio / (2.0 * math.pi))
     return out
 
 

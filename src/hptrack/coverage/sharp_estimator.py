@@ -68,7 +68,7 @@ import numpy as np
 from hptrack.coverage.estimator import estimate_coverage, ratio_grows
 from hptrack.interface import MissionSpec
 from hptrack.models.mission import position_det_on, position_det_rate_on, position_polynomials_on
-from hptrack.models.sensor import sensor_find_factor
+from hptrack.models.sensor import held_find_share, sensor_find_factor, sensor_hold_looks
 
 PHASE_NODES = 2
 """Gauss-Legendre nodes in the phase of the last pass ``alpha``."""
@@ -277,14 +277,18 @@ def _found(
     start,
     flight_steps,
     strip,
+    share,
 ):
-    """``F(k)``: spiral plus flight strip."""
+    """``F(k)``: spiral plus flight strip (times ``share`` when the sensor's draws hold over a
+    pass, else as its sweep width says)."""
     h = _found_ratio(
         mission, poly, k, pitch, area_ab, perimeter, radius, peak_steps, peak_ratio, start
     )
     p = -math.expm1(-0.5 * h)
     if flight_steps > 0:
         p += strip_mass(h, strip)
+    if sensor_hold_looks(mission.sensor) > 1:
+        return share * p
     return swept_share(p, sensor_find_factor(mission.sensor))
 
 
@@ -359,6 +363,7 @@ def sharp_coverage_outcome(
     spacing = max(1, -(-(cutoff - EXACT_STEPS) // GRID_INTERVALS))
     at, before = 0, 0
     start = _outer_area_ratio(mission, poly, 0.0, area_ab, perimeter, radius)
+    share = held_find_share(mission.sensor, cov, speed)
     found = _found(
         mission,
         poly,
@@ -372,9 +377,12 @@ def sharp_coverage_outcome(
         start,
         flight_steps,
         strip,
+        share,
     )
     factor = sensor_find_factor(mission.sensor)
-    if factor != 1.0 and flight_steps > 0 and 0.0 < found < 1.0:  # F_flight sum to F_eta's
+    if sensor_hold_looks(mission.sensor) > 1:  # F_flight sum to the held draws' share of it
+        flight_sum *= share
+    elif factor != 1.0 and flight_steps > 0 and 0.0 < found < 1.0:  # F_flight sum to F_eta's
         flight_sum *= found / -math.expm1(math.log1p(-found) / factor)
     previous = found
     coverage_sum = 0.0
@@ -393,6 +401,7 @@ def sharp_coverage_outcome(
             start,
             flight_steps,
             strip,
+            share,
         )
         coverage_sum += length * found + 0.5 * (nxt - found) * (length - 1)
         if length > 1 and before > 0:

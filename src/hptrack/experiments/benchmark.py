@@ -28,6 +28,7 @@ from hptrack.interface import InputError, MissionSpec
 from hptrack.registry import check_team, planner_entry, planner_settings
 from hptrack.scenario.model import (
     MAX_AGENTS,
+    MAX_DETECTION_CORRELATION_TIME,
     MAX_FALSE_ALARM_DENSITY,
     FootprintSensorSpec,
     Scenario,
@@ -65,6 +66,8 @@ class BenchmarkConfig:
             positions only, associated by the tracker (``sensor.labelled``, GNN).
         false_alarm_density: the sensor's false alarms per m^2 per look inside its footprint
             (``sensor.false_alarm_density``; above 0 only with ``labelled`` false).
+        detection_correlation_time: s, how long one detection draw holds while a target stays
+            in the footprint (``sensor.detection_correlation_time``; 0: independent looks).
         no_fly: each scenario gets random no-fly circles
             (`hptrack.scenario.random.with_no_fly`).
         team: UAVs per scenario, all from the start (1: the paper's one UAV).
@@ -84,6 +87,7 @@ class BenchmarkConfig:
     team: int = 1
     labelled: bool = True
     false_alarm_density: float = 0.0
+    detection_correlation_time: float = 0.0
 
     def __post_init__(self) -> None:
         missing = [p for p in self.planners if p not in self.settings]
@@ -107,6 +111,19 @@ class BenchmarkConfig:
                 f"--false-alarm-density must be between 0 and {MAX_FALSE_ALARM_DENSITY:g} per m^2 "
                 f"per look, got {clutter!r}"
             )
+        hold = self.detection_correlation_time
+        if isinstance(hold, bool) or not (
+            isinstance(hold, int | float) and 0.0 <= hold <= MAX_DETECTION_CORRELATION_TIME
+        ):
+            raise InputError(
+                f"--detection-correlation-time must be between 0 and "
+                f"{MAX_DETECTION_CORRELATION_TIME:g} s, got {hold!r}"
+            )
+        if hold > 0.0 and p == 1.0:
+            raise InputError(
+                "--detection-correlation-time needs a --detection-probability below 1 (no misses "
+                "to correlate)"
+            )
         if clutter > 0.0 and self.labelled:
             raise InputError(
                 f"--false-alarm-density {clutter:g} needs --unlabelled (a false alarm names no "
@@ -127,6 +144,7 @@ class BenchmarkConfig:
             self.team,
             self.labelled,
             self.false_alarm_density,
+            self.detection_correlation_time,
         )
 
     def keys(self) -> list[EpisodeKey]:
@@ -193,20 +211,23 @@ def setting_name(
     team: int = 1,
     labelled: bool = True,
     false_alarm_density: float = 0.0,
+    detection_correlation_time: float = 0.0,
 ) -> str:
     """The setting part of an episode's identity: ``"homogeneous"`` or ``"heterogeneous"``,
     with ``"+paper_text"`` when ``Q`` is the paper's printed form, ``"+MODEL:VALUE"`` under
     another belief motion (`motion_label`), ``"+pd:P"`` when the sensor detects with
     probability ``P < 1``, ``"+blind"`` when the planners are told ``Pd = 1``, ``"+nofly"``
     with random no-fly circles, ``"+team:M"`` with ``M > 1`` UAVs, ``"+unlabelled"`` for
-    detections without identity and ``"+clutter:L"`` for ``L > 0`` false alarms per m^2 per
-    look (`BenchmarkConfig`)."""
+    detections without identity, ``"+clutter:L"`` for ``L > 0`` false alarms per m^2 per
+    look and ``"+correlation:T"`` for detection draws held ``T > 0`` s (`BenchmarkConfig`)."""
     base = "homogeneous" if homogeneous else "heterogeneous"
     parts = [base] + ([process_noise_form] if process_noise_form != "continuous" else [])
     parts += [motion] if motion_label(motion) is not None else []
     parts += (
         [f"{DETECTION_PART}{float(detection_probability)!r}"] if detection_probability != 1 else []
     )
+    hold = float(detection_correlation_time)
+    parts += [f"{CORRELATION_PART}{hold!r}"] if hold > 0 else []
     parts += [BLIND_PART] if blind else []
     parts += [NO_FLY_PART] if no_fly else []
     parts += [f"{TEAM_PART}{team}"] if team > 1 else []
@@ -227,6 +248,8 @@ UNLABELLED_PART = "unlabelled"
 """The setting part of a sensor whose detections name no target (`setting_name`)."""
 CLUTTER_PART = "clutter:"
 """The prefix of a setting's false alarm density part (`setting_name`)."""
+CORRELATION_PART = "correlation:"
+"""The prefix of a setting's detection correlation time part (`setting_name`)."""
 
 
 def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
@@ -236,11 +259,14 @@ def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
     pds = [float(part[len(DETECTION_PART) :]) for part in rest if part.startswith(DETECTION_PART)]
     blind = BLIND_PART in rest
     clutters = [float(part[len(CLUTTER_PART) :]) for part in rest if part.startswith(CLUTTER_PART)]
+    holds = [
+        float(part[len(CORRELATION_PART) :]) for part in rest if part.startswith(CORRELATION_PART)
+    ]
     motions = [
         motion_label(part)
         for part in rest
         if part not in forms
-        and not part.startswith((DETECTION_PART, TEAM_PART, CLUTTER_PART))
+        and not part.startswith((DETECTION_PART, TEAM_PART, CLUTTER_PART, CORRELATION_PART))
         and part not in (BLIND_PART, NO_FLY_PART, UNLABELLED_PART)
     ]
     fields: dict = {"process_noise_form": forms[0] if forms else "continuous"}
@@ -251,6 +277,8 @@ def _setting_parts(setting: str) -> tuple[str, dict, float, bool]:
         sensor["labelled"] = False
     if clutters:
         sensor["false_alarm_density"] = clutters[0]
+    if holds:
+        sensor["detection_correlation_time"] = holds[0]
     if sensor:
         fields["sensor"] = FootprintSensorSpec(**sensor)
     teams = [int(part[len(TEAM_PART) :]) for part in rest if part.startswith(TEAM_PART)]
@@ -468,6 +496,7 @@ def benchmark(
     team: int = 1,
     labelled: bool = True,
     false_alarm_density: float = 0.0,
+    detection_correlation_time: float = 0.0,
     metric: str = "U",
 ) -> dict:
     """Fly every planner once on each random scenario and summarise ``U`` or another
@@ -493,6 +522,7 @@ def benchmark(
         team: UAVs per scenario (`BenchmarkConfig`).
         labelled: detections name their targets; false: positions only (`BenchmarkConfig`).
         false_alarm_density: false alarms per m^2 per look, only unlabelled (`BenchmarkConfig`).
+        detection_correlation_time: s a detection draw holds (`BenchmarkConfig`).
         metric: what to summarise, one of `hptrack.sim.record.METRICS` (`summarise`).
 
     Returns:
@@ -531,6 +561,7 @@ def benchmark(
         team=team,
         labelled=labelled,
         false_alarm_density=false_alarm_density,
+        detection_correlation_time=detection_correlation_time,
     )
     check_team(planners, team)
     store = ResultStore(db)

@@ -58,10 +58,14 @@ from hptrack.models.belief_motion import extended_prior
 from hptrack.models.sensor import (
     certain,
     detected_mask,
+    detection_hold,
     draws_detection,
+    held_draw,
+    held_draws,
     measured_mask,
     sensor_detects,
     sensor_draws,
+    sensor_hold_looks,
     sensor_measures,
 )
 from hptrack.models.state import position_of, positions, velocities
@@ -195,6 +199,8 @@ class ValidationConfig:
             identity["detection_probability"] = (
                 float(p) if isinstance(p, int | float) else [[float(d), float(v)] for d, v in p]
             )
+            if m.detection_correlation_time > 0.0:
+                identity["detection_correlation_time"] = float(m.detection_correlation_time)
         return identity
 
 
@@ -282,14 +288,17 @@ def _advance_block(
     first_any,
     first_spiral,
     uniforms,
+    held,
 ):
     """Advance the ``active`` runs through steps ``first_step ..`` by the ``truth`` motion
     with unit normal ``noise`` ``(runs, steps, d)`` and record detections; a run stops at its
     first detection on the spiral (step >= ``flight_steps``). ``mission`` is the mission
     record, ``sqrt_q`` ``(1,)``; a sensor that draws (`sensor_draws`) detects a target inside
     its footprint at step ``t`` of the block when ``sensor_detects`` with ``uniforms[a, t]``
-    (``(runs, steps)``; unread otherwise)."""
+    (``(runs, steps)``; unread otherwise), or with the draw it holds (`held_draw`, ``held``
+    ``(runs, 2)``) when its draws hold for several looks."""
     sensor = mission.sensor
+    hold = sensor_hold_looks(sensor)
     for a in range(active.shape[0]):
         i = active[a]
         for t in range(noise.shape[1]):
@@ -297,8 +306,10 @@ def _advance_block(
             j = first_step + t
             x, y = position_of(states[i])
             inside = sensor_measures(sensor, path[j, 0], path[j, 1], x, y)
-            if inside and sensor_draws(sensor):
-                inside = sensor_detects(sensor, path[j, 0], path[j, 1], x, y, uniforms[a, t])
+            if sensor_draws(sensor):
+                draw = held_draw(held, i, uniforms[a, t], hold, inside)
+                if inside:
+                    inside = sensor_detects(sensor, path[j, 0], path[j, 1], x, y, draw)
             if inside:
                 if first_any[i] < 0:
                     first_any[i] = j
@@ -336,8 +347,12 @@ def first_detections(
     first_spiral = np.full(runs, -1, dtype=np.int64)
     no_draws = np.zeros((0, 0))
     detection_rng = detection_rng if draws else None
+    held = np.zeros((runs, 2))
     if detection_rng is not None and draws:
         uniforms = detection_rng.random(runs)
+        inside = measured_mask(sensor, plan.path[0], positions(states))
+        hold = int(detection_hold(sensor))
+        uniforms[inside] = held_draws(held, inside, uniforms[inside], hold)
         hit = detected_mask(sensor, plan.path[0], positions(states), uniforms)
     else:
         hit = measured_mask(sensor, plan.path[0], positions(states))
@@ -364,6 +379,7 @@ def first_detections(
             first_any,
             first_spiral,
             u,
+            held,
         )
         active = active[first_spiral[active] < 0]
         step += block

@@ -1,7 +1,8 @@
 """The detector: what one look reports, the targets it detects and false alarms (issue 29).
 
 A look from the agent detects each target the sensor part measures (`hptrack.models.sensor`:
-inside the footprint and, with a `DetectingFootprintSensor`, a uniform below ``Pd(d)``) and
+inside the footprint and, with a `DetectingFootprintSensor`, a uniform below ``Pd(d)``, held
+over consecutive looks when the sensor's draws hold, `hptrack.models.sensor.held_draws`) and
 reports it as ``z = [x, y] + L e`` (``L L' = R``, ``e`` unit normals); it also reports a
 Poisson number of false alarms of mean ``lambda pi (w/2)^2`` (``lambda`` the false-alarm
 density, per m^2 per look), uniform over the footprint. The reports come in a random order, so
@@ -18,7 +19,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hptrack.models.sensor import SensorPart, detected_mask, draws_detection, measured_mask
+from hptrack.models.sensor import (
+    SensorPart,
+    detected_mask,
+    detection_hold,
+    draws_detection,
+    held_draws,
+    measured_mask,
+)
 
 
 class Detections(NamedTuple):
@@ -58,15 +66,22 @@ class Detector:
         self.mean_false_alarms = self.false_alarm_density * math.pi * self.radius**2
         self.rng = rng
         self._draws = bool(draws_detection(sensor))
+        self._hold = int(detection_hold(sensor))
+        self._held = np.zeros((0, 2))
 
     def look(self, agent: np.ndarray, positions: np.ndarray) -> Detections:
         """The reports of a look from ``agent`` ``(2,)`` over targets at ``positions``
         ``(n, 2)`` (m)."""
         rng = self.rng
         agent = np.asarray(agent, dtype=float)
-        inside = np.flatnonzero(measured_mask(self.sensor, agent, positions))
+        measured = measured_mask(self.sensor, agent, positions)
+        inside = np.flatnonzero(measured)
         if self._draws:
             u = rng.random(inside.size)
+            if self._hold > 1:  # each target's draw held over consecutive looks inside
+                if self._held.shape[0] != measured.size:
+                    self._held = np.zeros((measured.size, 2))
+                u = held_draws(self._held, measured, u, self._hold)
             inside = inside[detected_mask(self.sensor, agent, positions[inside], u)]
         noise = rng.standard_normal((inside.size, 2)) @ self.factor.T
         measured = positions[inside] + noise

@@ -40,6 +40,7 @@ from hptrack.models.sensor import (
     certain,
     detecting_sensor,
     footprint_radius,
+    hold_looks_of,
     negative_information_sensor,
     sensor_measures,
 )
@@ -103,6 +104,7 @@ def mission_record(
     detection_probability: float | Sequence = 1.0,
     fence: FenceSpec | None = None,
     negative_information: bool = False,
+    detection_correlation_time: float = 0.0,
 ) -> Mission:
     """The validated `Mission` (``continuous_noise``: the continuous form of ``Q``, else
     the paper's printed one; ``motion``: a registered belief motion, default constant velocity
@@ -111,7 +113,9 @@ def mission_record(
     gives the paper's `FootprintSensor`, anything else a `DetectingFootprintSensor`;
     ``fence``: where the vehicle may fly, `hptrack.models.fence`, a `FencedHolonomicVehicle`;
     ``negative_information``: a `NegativeInformationSensor` of that detector instead, whose
-    looks that see nothing update the beliefs).
+    looks that see nothing update the beliefs; ``detection_correlation_time``: s, how long a
+    detector's draw holds while a target stays in the footprint, 0 for independent looks,
+    `hptrack.models.sensor.hold_looks_of`).
 
     Raises:
         ValueError: a constant not positive and finite, ``R`` not symmetric positive definite,
@@ -147,13 +151,19 @@ def mission_record(
         raise ValueError(
             f"negative_information must be true or false, got {negative_information!r}"
         )
+    correlation = float(detection_correlation_time)
+    if not (math.isfinite(correlation) and correlation >= 0.0):
+        raise ValueError(f"detection_correlation_time must be >= 0 s, got {correlation!r}")
+    if correlation > 0.0 and negative_information:
+        raise ValueError("negative_information needs independent looks (correlation time 0)")
     step = float(agent_speed) * tau
     if negative_information:
         sensor = negative_information_sensor(
             float(sensor_diameter), noise, detection_probability, step
         )
     elif not certain_detection:
-        sensor = detecting_sensor(float(sensor_diameter), noise, detection_probability, step)
+        hold = hold_looks_of(correlation, tau)
+        sensor = detecting_sensor(float(sensor_diameter), noise, detection_probability, step, hold)
     return Mission(
         time_step=tau,
         process_noise=q,

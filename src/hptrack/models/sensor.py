@@ -77,7 +77,11 @@ class FootprintSensor(NamedTuple):
 
 class DetectingFootprintSensor(NamedTuple):
     """A circular footprint whose looks detect a target inside with a probability ``Pd(d)``
-    below one (``d`` the distance from the footprint's centre, m), independently at each look.
+    below one (``d`` the distance from the footprint's centre, m): a look detects a target
+    when a uniform draw lies below ``Pd(d)``. The draw is fresh at every look
+    (``hold_looks = 1``, independent looks) or held for ``hold_looks`` consecutive looks while
+    the target stays inside (misses correlated in time: a target hidden or misclassified at one
+    frame tends to stay so at the next).
 
     Attributes:
         diameter: ``w``, m; a look may detect a target within ``w/2`` of the agent.
@@ -87,6 +91,8 @@ class DetectingFootprintSensor(NamedTuple):
             held to ``w/2``; one row: a constant ``Pd``).
         find_factor: the factor of a coverage estimate's chance of a find
             (`pass_detection_factor` of this table for the vehicle's step length).
+        hold_looks: consecutive looks one draw holds for while a target stays inside (1:
+            independent looks; `hold_looks_of` a correlation time).
     """
 
     diameter: float
@@ -94,13 +100,14 @@ class DetectingFootprintSensor(NamedTuple):
     distances: np.ndarray
     probabilities: np.ndarray
     find_factor: float
+    hold_looks: int = 1
 
 
 class NegativeInformationSensor(NamedTuple):
     """`DetectingFootprintSensor`'s detector (any ``Pd``, 1 included) whose look that detects
     nothing conditions the belief on the miss (`hptrack.models.miss_update.miss_update`).
 
-    Attributes: as `DetectingFootprintSensor`'s.
+    Attributes: as `DetectingFootprintSensor`'s (its looks independent: ``hold_looks`` 1).
     """
 
     diameter: float
@@ -108,6 +115,7 @@ class NegativeInformationSensor(NamedTuple):
     distances: np.ndarray
     probabilities: np.ndarray
     find_factor: float
+    hold_looks: int = 1
 
 
 SensorPart = FootprintSensor | DetectingFootprintSensor | NegativeInformationSensor
@@ -143,10 +151,16 @@ def search_unchanged(sensor, p_find, cov):
     """Default ``search_missed``: the covariance as predicted (the paper's)."""
 
 
+@numba.njit(cache=True, inline="always")
+def independent_looks(sensor):
+    """Default ``hold_looks``: 1, every look draws afresh."""
+    return 1
+
+
 class SensorKernels(NamedTuple):
     """The compiled kernels of a sensor model (module docstring); ``draws``, ``detects`` and
     ``find_factor`` default to certain detection, ``informs`` and ``search_missed`` to no
-    negative information."""
+    negative information, ``hold_looks`` to independent looks."""
 
     measures: Callable
     reach: Callable
@@ -158,6 +172,7 @@ class SensorKernels(NamedTuple):
     find_factor: Callable = certain_find_factor
     informs: Callable = uninformed
     search_missed: Callable = search_unchanged
+    hold_looks: Callable = independent_looks
 
 
 _SENSORS: dict[type, SensorKernels] = {}
@@ -220,6 +235,16 @@ def sensor_informs(sensor):
 def sensor_search_missed(sensor, p_find, cov):
     """The registered ``search_missed`` of ``sensor``'s class (compiled code only)."""
     raise NotImplementedError
+
+
+def sensor_hold_looks(sensor):
+    """The registered ``hold_looks`` of ``sensor``'s class (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(sensor_hold_looks, inline="always")
+def _hold_looks(sensor):
+    return _kernel(sensor, "hold_looks")
 
 
 @overload(sensor_informs, inline="always")
@@ -332,6 +357,12 @@ def detecting_find_factor(sensor):
     return sensor.find_factor
 
 
+@numba.njit(cache=True, inline="always")
+def detecting_hold_looks(sensor):
+    """`DetectingFootprintSensor`: its ``hold_looks`` field."""
+    return sensor.hold_looks
+
+
 register_sensor(
     DetectingFootprintSensor,
     SensorKernels(
@@ -343,6 +374,7 @@ register_sensor(
         detecting_draws,
         detecting_detects,
         detecting_find_factor,
+        hold_looks=detecting_hold_looks,
     ),
 )
 
@@ -446,12 +478,20 @@ MAX_PASS_STEPS = 20_000
 
 
 def pass_probability(
-    distances: np.ndarray, probabilities: np.ndarray, radius: float, step: float, offsets
+    distances: np.ndarray,
+    probabilities: np.ndarray,
+    radius: float,
+    step: float,
+    offsets,
+    hold_looks: int = 1,
 ) -> np.ndarray:
     """The chance that one straight pass of the footprint (radius ``radius`` m, a look every
-    ``step`` m) detects a target at each lateral offset of ``offsets`` (m) from its line, with
-    ``Pd(d)`` at each look independently, averaged over the phase of the looks along the line:
-    ``1 - E_phase prod_j (1 - Pd(sqrt(s_j^2 + c^2)))`` over the looks ``s_j`` within the chord.
+    ``step`` m) detects a target at each lateral offset of ``offsets`` (m) from its line,
+    averaged over the phase of the looks along the line. With independent looks
+    (``hold_looks = 1``) it is ``1 - E_phase prod_j (1 - Pd(sqrt(s_j^2 + c^2)))`` over the looks
+    ``s_j`` within the chord; with one draw held for ``hold_looks`` looks from the target's
+    entry, the looks form blocks of that many and a block misses with ``1 - max Pd`` over its
+    looks (its draw ``u`` detects at a look where ``u < Pd``).
     """
 
     def pd(d: np.ndarray) -> np.ndarray:  # `table_probability`, the same interpolation
@@ -461,7 +501,7 @@ def pass_probability(
     for i, c in enumerate(np.asarray(offsets, dtype=float)):
         half = math.sqrt(max(radius * radius - c * c, 0.0))
         looks = 2.0 * half / step
-        if looks > MAX_PASS_STEPS:  # a continuum of looks: exp(sum log(1 - Pd) ds / step)
+        if looks > MAX_PASS_STEPS and hold_looks == 1:  # a continuum: exp(sum log(1 - Pd) ds)
             s = np.linspace(-half, half, 4001)
             with np.errstate(divide="ignore"):
                 log_miss = np.log1p(-np.minimum(pd(np.hypot(s, c)), 1.0))
@@ -473,13 +513,28 @@ def pass_probability(
         count = int(math.floor(looks)) + 1
         s = first[:, None] + step * np.arange(count)[None, :]
         inside = s <= half
-        miss = np.where(inside, 1.0 - pd(np.hypot(s, c)), 1.0)
-        out[i] = 1.0 - float(np.mean(np.prod(miss, axis=1)))
+        detect = np.where(inside, pd(np.hypot(s, c)), 0.0)
+        if hold_looks > 1:  # each block of held looks detects with its largest Pd
+            blocks = -(-count // hold_looks)
+            padded = np.zeros((PASS_PHASES, blocks * hold_looks))
+            padded[:, :count] = detect
+            detect = padded.reshape(PASS_PHASES, blocks, hold_looks).max(axis=2)
+        out[i] = 1.0 - float(np.mean(np.prod(1.0 - detect, axis=1)))
     return out
 
 
+def hold_looks_of(correlation_time: float, time_step: float) -> int:
+    """The looks one detection draw holds for: those within ``correlation_time`` s of the
+    first, a look every ``time_step`` s (1 for a correlation time of 0: independent looks)."""
+    return max(1, math.ceil(float(correlation_time) / float(time_step) - 1e-9))
+
+
 def pass_detection_factor(
-    distances: np.ndarray, probabilities: np.ndarray, diameter: float, step: float
+    distances: np.ndarray,
+    probabilities: np.ndarray,
+    diameter: float,
+    step: float,
+    hold_looks: int = 1,
 ) -> float:
     """``W_Pd / W_1``: the effective sweep width of one straight pass with ``Pd`` (the integral
     of `pass_probability` over the lateral offset in ``[-w/2, w/2]``) over the same with
@@ -489,21 +544,27 @@ def pass_detection_factor(
     (``docs/model.md``, "Sensor and measurement")."""
     radius = 0.5 * float(diameter)
     offsets = radius * ((np.arange(PASS_OFFSETS) + 0.5) / PASS_OFFSETS)  # symmetric in c
-    with_pd = pass_probability(distances, probabilities, radius, float(step), offsets)
+    with_pd = pass_probability(distances, probabilities, radius, float(step), offsets, hold_looks)
     certain_pass = pass_probability(np.zeros(1), np.ones(1), radius, float(step), offsets)
     return float(np.sum(with_pd) / np.sum(certain_pass))
 
 
 def detecting_sensor(
-    diameter: float, noise: np.ndarray, detection_probability: float | Sequence, step: float
+    diameter: float,
+    noise: np.ndarray,
+    detection_probability: float | Sequence,
+    step: float,
+    hold_looks: int = 1,
 ) -> DetectingFootprintSensor:
     """The `DetectingFootprintSensor` of a ``detection_probability`` (`detection_table`), its
-    ``find_factor`` for looks every ``step`` m."""
+    ``find_factor`` for looks every ``step`` m, each draw held for ``hold_looks`` looks."""
     distances, probabilities = detection_table(detection_probability)
-    factor = pass_detection_factor(distances, probabilities, diameter, step)
+    factor = pass_detection_factor(distances, probabilities, diameter, step, hold_looks)
     distances.flags.writeable = False
     probabilities.flags.writeable = False
-    return DetectingFootprintSensor(float(diameter), noise, distances, probabilities, factor)
+    return DetectingFootprintSensor(
+        float(diameter), noise, distances, probabilities, factor, int(hold_looks)
+    )
 
 
 def negative_information_sensor(
@@ -534,6 +595,153 @@ def draws_detection(sensor):
     """Whether ``sensor`` draws a uniform per target inside its footprint (`sensor_draws`, for
     Python callers)."""
     return sensor_draws(sensor)
+
+
+@numba.njit(cache=True)
+def detection_hold(sensor):
+    """The looks one detection draw of ``sensor`` holds for (`sensor_hold_looks`, for Python
+    callers; 1: independent looks)."""
+    return sensor_hold_looks(sensor)
+
+
+@numba.njit(cache=True)
+def held_draw(held, i, draw, hold_looks, inside):
+    """The detection draw of target ``i`` at this look: ``draw`` (a fresh uniform) with
+    independent looks, else the draw ``held[i, 0]`` taken at the first of at most
+    ``hold_looks`` consecutive looks with the target inside (``held[i, 1]``: the looks it has
+    served; a target outside starts afresh at its next look inside). ``NaN`` outside."""
+    if hold_looks <= 1:
+        return draw
+    if not inside:
+        held[i, 1] = 0.0
+        return math.nan
+    if held[i, 1] <= 0.0 or held[i, 1] >= hold_looks:
+        held[i, 0] = draw
+        held[i, 1] = 0.0
+    held[i, 1] += 1.0
+    return held[i, 0]
+
+
+REPEAT_ANGLES = 32
+"""Directions of the half turn `repeat_pass_share` averages over (midpoints)."""
+REPEAT_RADII = 8
+"""Radii of the whitened belief it averages over (midpoints of the Rayleigh quantiles)."""
+REPEAT_DRIFTS = (-1.6506801238857844, -0.5246476232752904, 0.5246476232752904,
+                 1.6506801238857844)  # fmt: skip
+"""Gauss-Hermite nodes (probabilists') of the radial drift's own noise."""
+REPEAT_DRIFT_WEIGHTS = (0.045875854768068, 0.454124145231932, 0.454124145231932,
+                        0.045875854768068)  # fmt: skip
+"""Their weights (sum 1)."""
+
+
+@numba.njit(cache=True)
+def repeat_pass_share(pass_find, cov, speed, diameter):
+    """The chance that a target the elliptic spiral covers is detected when each pass of the
+    footprint over it detects with ``pass_find`` on its own (a draw held within a pass), for
+    the belief covariance ``cov`` (``d x d``, position then velocity) at the start of the
+    coverage, the vehicle's ``speed`` (m/s) and the footprint's ``diameter`` (m).
+
+    In the whitened position ``z = L^-1 (x - mean)`` (``L = [u1 u2] diag(A, B)``, the spiral's
+    axes, `hptrack.coverage.spiral`) the belief is ``N(0, I)`` and the spiral ``|z| = b
+    theta``, its loops ``w / A`` apart (``b = w / (2 pi A)``, Eq. (4)). The footprint spans
+    ``m(theta) = sqrt(cos^2 theta + (A/B)^2 sin^2 theta)`` loop spacings across the track, so a
+    still point lies under ``m`` passes. A target drifts: its velocity error, given its
+    position, has the mean ``K (x - mean)`` (``K = P_vp P_pp^-1``) and the covariance ``P_vv -
+    K P_pv``, so its radial speed in ``z`` is ``u`` while the loops advance at ``v_f = (w / A)
+    v_a / (|z| P)`` (``P`` the perimeter of the ``A, B`` ellipse); it stays under the front
+    ``v_f / (v_f - u)`` times as many loops (a target that outruns the front is not covered and
+    not counted). ``N = m v_f / (v_f - u)`` passes detect it with ``1 - (1 - p)^floor(N) (1 -
+    (N - floor(N)) p)``; the share is its mean over direction, radius and the drift's noise,
+    over the covered targets."""
+    sxx, sxy, syy = cov[0, 0], cov[0, 1], cov[1, 1]
+    tr = 0.5 * (sxx + syy)
+    gap = math.sqrt(max(tr * tr - (sxx * syy - sxy * sxy), 0.0))
+    lam1 = tr + gap
+    lam2 = max(tr - gap, 1e-12 * lam1)
+    semi_a, semi_b = math.sqrt(lam1), math.sqrt(lam2)
+    if gap > 0.0:  # the major axis u1
+        ux, uy = sxy, lam1 - sxx
+        if abs(ux) + abs(uy) == 0.0:
+            ux, uy = lam1 - syy, sxy
+        norm = math.hypot(ux, uy)
+        ux, uy = ux / norm, uy / norm
+    else:
+        ux, uy = 1.0, 0.0
+    # K = P_vp P_pp^-1 and the velocity's residual covariance (none without a velocity)
+    k00 = k01 = k10 = k11 = r00 = r01 = r11 = 0.0
+    if cov.shape[0] >= 4:
+        det = sxx * syy - sxy * sxy
+        ixx, ixy, iyy = syy / det, -sxy / det, sxx / det
+        k00 = cov[2, 0] * ixx + cov[2, 1] * ixy
+        k01 = cov[2, 0] * ixy + cov[2, 1] * iyy
+        k10 = cov[3, 0] * ixx + cov[3, 1] * ixy
+        k11 = cov[3, 0] * ixy + cov[3, 1] * iyy
+        r00 = cov[2, 2] - (k00 * cov[0, 2] + k01 * cov[1, 2])
+        r01 = cov[2, 3] - (k00 * cov[0, 3] + k01 * cov[1, 3])
+        r11 = cov[3, 3] - (k10 * cov[0, 3] + k11 * cov[1, 3])
+    ratio2 = lam1 / lam2
+    perimeter = math.pi * (3.0 * (semi_a + semi_b) - math.sqrt(
+        (3.0 * semi_a + semi_b) * (semi_a + 3.0 * semi_b)))  # fmt: skip
+    front = (diameter / semi_a) * speed / perimeter  # v_f |z|, whitened units per s
+    miss = 1.0 - pass_find
+    total = 0.0
+    weight = 0.0
+    for j in range(REPEAT_ANGLES):
+        theta = math.pi * (j + 0.5) / REPEAT_ANGLES
+        c, s = math.cos(theta), math.sin(theta)
+        m = math.sqrt(1.0 + (ratio2 - 1.0) * s * s)
+        # the whitened direction e and the physical offset per unit radius x = L e
+        px = semi_a * c * ux - semi_b * s * uy
+        py = semi_a * c * uy + semi_b * s * ux
+        # the radial speed per unit radius: e . L^-1 K L e; its noise: e . L^-1 R L^-T e
+        vx = k00 * px + k01 * py
+        vy = k10 * px + k11 * py
+        # e . L^-1 v = (u1 . v) c / A + (u2 . v) s / B, u2 = (-uy, ux)
+        drift = (ux * vx + uy * vy) * c / semi_a + (-uy * vx + ux * vy) * s / semi_b
+        ax = ux * c / semi_a - uy * s / semi_b  # L^-T e, for the noise's variance
+        ay = uy * c / semi_a + ux * s / semi_b
+        noise = math.sqrt(max(ax * ax * r00 + 2.0 * ax * ay * r01 + ay * ay * r11, 0.0))
+        for i in range(REPEAT_RADII):
+            radius = math.sqrt(-2.0 * math.log(1.0 - (i + 0.5) / REPEAT_RADII))
+            v_f = front / radius
+            for h in range(4):
+                u = drift * radius + noise * REPEAT_DRIFTS[h]
+                if u >= v_f:
+                    continue
+                passes = m * v_f / (v_f - u)
+                whole = math.floor(passes)
+                w = REPEAT_DRIFT_WEIGHTS[h]
+                total += w * (1.0 - miss**whole * (1.0 - (passes - whole) * pass_find))
+                weight += w
+    if weight == 0.0:
+        return pass_find
+    return total / weight
+
+
+@numba.njit(cache=True, inline="always")
+def held_find_share(sensor, cov, speed):
+    """The factor of a coverage estimate's chance of a find when the sensor's draws hold over
+    a pass (`repeat_pass_share` of its ``find_factor`` for the belief ``cov`` at the start of
+    the coverage and the vehicle's ``speed``, m/s); 1 for independent looks, whose factor
+    enters as a sweep width."""
+    if sensor_hold_looks(sensor) <= 1:
+        return 1.0
+    return repeat_pass_share(sensor_find_factor(sensor), cov, speed, sensor.diameter)
+
+
+@numba.njit(cache=True)
+def held_draws(held, inside, fresh, hold_looks):
+    """`held_draw` for every target of a look: ``inside`` ``(n,)`` which are in the footprint,
+    ``fresh`` one uniform per target inside (target order); returns their draws."""
+    out = np.empty(fresh.shape[0])
+    k = 0
+    for i in range(inside.shape[0]):
+        if inside[i]:
+            out[k] = held_draw(held, i, fresh[k], hold_looks, True)
+            k += 1
+        else:
+            held_draw(held, i, 0.0, hold_looks, False)
+    return out
 
 
 @numba.njit(cache=True)

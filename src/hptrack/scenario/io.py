@@ -329,6 +329,8 @@ def file_data(scenario: Scenario) -> dict:
             data["sensor"].pop("detection_probability")
         if data["sensor"].get("negative_information") is False:  # the default, the paper's
             data["sensor"].pop("negative_information")
+        if data["sensor"].get("detection_correlation_time") == 0.0:  # independent looks
+            data["sensor"].pop("detection_correlation_time")
         for name, default in IDENTITY_DEFAULTS.items():  # the paper's named detections
             if data["sensor"].get(name) == default:
                 data["sensor"].pop(name)

@@ -44,7 +44,7 @@ from hptrack.models.fence import CIRCLE_SIDES, FenceSpec, in_sight, point_free, 
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import MAX_TARGETS, steps_left
 from hptrack.models.motion import ProcessNoiseForm
-from hptrack.models.sensor import detection_table
+from hptrack.models.sensor import certain, detection_table
 from hptrack.models.state import positions, speeds, velocities
 from hptrack.models.truth_motion import (
     ConstantAccelerationTruth,
@@ -107,6 +107,9 @@ NoiseStd = Annotated[Real, Field(ge=1e-6, le=1e4)]
 DEFAULT_SPEED = 30.0
 DEFAULT_DIAMETER = 100.0
 DEFAULT_NOISE_STD = float(np.sqrt(10.0))
+MAX_DETECTION_CORRELATION_TIME = 3600.0
+"""Longest ``detection_correlation_time``, s (an hour: longer holds a draw for a whole pass
+anyway)."""
 MAX_FALSE_ALARM_DENSITY = 1e-2
 """Largest ``false_alarm_density``, per m^2 per look (one false alarm per 100 m^2)."""
 Count = Annotated[int, Strict(), Field(ge=1, le=100)]
@@ -190,6 +193,10 @@ class FootprintSensorSpec(BaseModel):
     or a table of rows ``[distance from the footprint's centre (m), Pd]``, distances strictly
     increasing from 0, ``Pd`` in ``[0, 1]``, linear between rows and the last value held to the
     footprint's edge (`hptrack.models.sensor.DetectingFootprintSensor`).
+    ``detection_correlation_time`` (s, default 0: independent looks): a look's draw holds for
+    the looks within this time of the first while the target stays in the footprint, so that
+    misses come in runs, as a camera's do when a target is hidden or misclassified for a while;
+    only with ``detection_probability`` below 1 and without ``negative_information``.
 
     ``negative_information`` (default false, the paper's): a look that detects nothing updates
     the beliefs of the targets it could have seen (`hptrack.models.miss_update`), in the
@@ -211,6 +218,9 @@ class FootprintSensorSpec(BaseModel):
     measurement_noise_covariance: Matrix2 | None = None
     detection_probability: DetectionProbability = 1.0
     negative_information: Annotated[bool, Strict()] = False
+    detection_correlation_time: Annotated[
+        Real, Field(ge=0.0, le=MAX_DETECTION_CORRELATION_TIME)
+    ] = 0.0
     false_alarm_density: Annotated[Real, Field(ge=0.0, le=MAX_FALSE_ALARM_DENSITY)] = 0.0
     labelled: Annotated[bool, Strict()] = True
     association: Literal["gnn", "jpda"] = "gnn"
@@ -233,6 +243,18 @@ class FootprintSensorSpec(BaseModel):
                 "negative_information needs labelled: true (the tracker of detections without "
                 "identity does not update on misses)"
             )
+        if self.detection_correlation_time > 0.0:
+            if certain(self.detection_probability):
+                raise ValueError(
+                    f"detection_correlation_time {self.detection_correlation_time:g} s needs a "
+                    "detection_probability below 1 (a sensor that always detects has no misses "
+                    "to correlate)"
+                )
+            if self.negative_information:
+                raise ValueError(
+                    "negative_information needs detection_correlation_time 0 (its update "
+                    "takes each look as independent evidence)"
+                )
         m, n = self.confirmation
         if m > n:
             raise ValueError(f"confirmation [M, N] needs M <= N, value [{m}, {n}]")
@@ -829,6 +851,7 @@ class Scenario(BaseModel):
             fence=self.fence.spec() if self.fence else None,
             negative_information=self.sensor_spec().negative_information,
             members=members if self.n_vehicles > 1 else (),
+            detection_correlation_time=self.sensor_spec().detection_correlation_time,
         )
 
     def initial_observation(self) -> Observation:

@@ -39,8 +39,10 @@ from hptrack.models.detector import Detector
 from hptrack.models.mission import predict_covariance_on, predict_mean_on
 from hptrack.models.sensor import (
     draws_detection,
+    held_draw,
     sensor_detects,
     sensor_draws,
+    sensor_hold_looks,
     sensor_measures,
     sensor_missed,
     sensor_update,
@@ -75,24 +77,32 @@ def initial_true_states(scenario: Scenario, rng: np.random.Generator) -> np.ndar
 
 
 @numba.njit(cache=True)
-def sense(sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z, u, u_pos):
+def sense(sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z, u, u_pos, held):
     """Measure and update every target the ``sensor`` part detects from ``agent``
     (`hptrack.models.sensor`); a target it does not detect gets the sensor's ``missed``.
 
     A sensor that ``draws`` takes one uniform of ``u`` from ``u_pos`` per target inside its
-    footprint (target order) and detects it by ``sensor_detects``; the paper's detects every
-    target inside and reads no ``u``. Consumes two normals of ``e`` from ``e_pos`` per detected
-    target (target order; ``factor`` the Cholesky factor of ``R``), writes ``seen`` and the
-    per-target ``log det Sigma^xy`` into ``logdets`` (``z``: a scratch ``(2,)`` for the
-    measurement); returns the new ``e_pos``, ``U`` and the new ``u_pos``.
+    footprint (target order) and detects it by ``sensor_detects``, on that draw or, when its
+    draws hold for several looks (``hold_looks``), on the one `held_draw` keeps in ``held``
+    ``(n, 2)``; the paper's detects every target inside and reads no ``u``. Consumes two
+    normals of ``e`` from ``e_pos`` per detected target (target order; ``factor`` the Cholesky
+    factor of ``R``), writes ``seen`` and the per-target ``log det Sigma^xy`` into ``logdets``
+    (``z``: a scratch ``(2,)`` for the measurement); returns the new ``e_pos``, ``U`` and the
+    new ``u_pos``.
     """
     total = 0.0
+    draws = sensor_draws(sensor)
+    hold = sensor_hold_looks(sensor)
     for i in range(truth.shape[0]):
         x, y = position_of(truth[i])
         inside = sensor_measures(sensor, agent[0], agent[1], x, y)
-        if inside and sensor_draws(sensor):
-            inside = sensor_detects(sensor, agent[0], agent[1], x, y, u[u_pos])
-            u_pos += 1
+        if draws:
+            if inside:
+                draw = held_draw(held, i, u[u_pos], hold, True)
+                u_pos += 1
+                inside = sensor_detects(sensor, agent[0], agent[1], x, y, draw)
+            else:
+                held_draw(held, i, 0.0, hold, False)
         seen[i] = inside
         if inside:
             e0 = e[e_pos]
@@ -144,13 +154,14 @@ def world_step(
 ):
     """One simulator step in place (module docstring): `world_advance`, then sense by the
     mission's sensor (``factor``: the Cholesky factor of ``R``; ``out``: `sense`'s ``seen``,
-    ``logdets`` and ``z``; ``u``, ``u_pos``: its detection uniforms). Returns the new
+    ``logdets``, ``z`` and ``held``; ``u``, ``u_pos``: its detection uniforms). Returns the new
     ``e_pos``, ``U`` and the new ``u_pos``."""
     world_advance(mission, agent, waypoint, truth_motion, truth, z_motion, sqrt_q, means, covs)
-    seen, logdets, z = out
+    seen, logdets, z, held = out
     return sense(
-        mission.sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z, u, u_pos
-    )
+        mission.sensor, agent, truth, means, covs, factor, e, e_pos, seen, logdets, z, u, u_pos,
+        held,
+    )  # fmt: skip
 
 
 @numba.njit(cache=True)
@@ -273,6 +284,7 @@ class World:
             for r in self._records
         ]
         self._seen_by = np.zeros(mission.n_targets, dtype=bool)
+        self._held = [np.zeros((mission.n_targets, 2)) for _ in self._records]
         self.means = np.ascontiguousarray(scenario.means())
         self.covariances = np.ascontiguousarray(scenario.covariances())
         self.q = np.ascontiguousarray(mission.process_noise, dtype=float)
@@ -386,6 +398,7 @@ class World:
             self._z,
             u,
             u_pos,
+            self._held[j],
         )
         self._used(u_pos)
 
@@ -448,7 +461,7 @@ class World:
             self._factors[0],
             sensor.values,
             sensor.pos,
-            (self.seen, self.logdets, self._z),
+            (self.seen, self.logdets, self._z, self._held[0]),
             u,
             u_pos,
         )
