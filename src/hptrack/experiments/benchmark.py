@@ -103,22 +103,18 @@ class BenchmarkConfig:
             raise InputError(f"--detection-probability must be in (0, 1], got {p!r}")
         if self.blind and p == 1.0:
             raise InputError("--blind needs a --detection-probability below 1 (nothing to hide)")
-        clutter = self.false_alarm_density
-        if isinstance(clutter, bool) or not (
-            isinstance(clutter, int | float) and 0.0 <= clutter <= MAX_FALSE_ALARM_DENSITY
-        ):
-            raise InputError(
-                f"--false-alarm-density must be between 0 and {MAX_FALSE_ALARM_DENSITY:g} per m^2 "
-                f"per look, got {clutter!r}"
-            )
-        hold = self.detection_correlation_time
-        if isinstance(hold, bool) or not (
-            isinstance(hold, int | float) and 0.0 <= hold <= MAX_DETECTION_CORRELATION_TIME
-        ):
-            raise InputError(
-                f"--detection-correlation-time must be between 0 and "
-                f"{MAX_DETECTION_CORRELATION_TIME:g} s, got {hold!r}"
-            )
+        clutter = _within(
+            self.false_alarm_density,
+            "--false-alarm-density",
+            MAX_FALSE_ALARM_DENSITY,
+            "per m^2 per look",
+        )
+        hold = _within(
+            self.detection_correlation_time,
+            "--detection-correlation-time",
+            MAX_DETECTION_CORRELATION_TIME,
+            "s",
+        )
         if hold > 0.0 and p == 1.0:
             raise InputError(
                 "--detection-correlation-time needs a --detection-probability below 1 (no misses "
@@ -156,6 +152,13 @@ class BenchmarkConfig:
             for s in seeds
             for p in self.planners
         ]
+
+
+def _within(value: Any, option: str, most: float, unit: str) -> float:
+    """``value`` if it is a number in ``[0, most]``, else an `InputError` naming ``option``."""
+    if isinstance(value, bool) or not (isinstance(value, int | float) and 0.0 <= value <= most):
+        raise InputError(f"{option} must be between 0 and {most:g} {unit}, got {value!r}")
+    return float(value)
 
 
 MOTION_PARAMETERS = {
