@@ -26,18 +26,22 @@ with `register_sensor` and its compiled kernels (`SensorKernels`). Compiled code
   ``False`` for the paper's sensor, which uses no negative information);
 * ``search_missed(sensor, p_find, cov)``: what a coverage sub-task that found its target with
   the chance ``p_find`` and missed does to the covariance predicted to its end, in place
-  (nothing for the paper's sensor; the sub-task MDP's miss branch).
+  (nothing for the paper's sensor; the sub-task MDP's miss branch);
+* ``hold_looks(sensor) -> int``: the consecutive looks one draw serves while a target stays
+  inside (1, independent looks, for every sensor but a `DetectingFootprintSensor` told
+  otherwise; `held_draw`).
 
-The last five have defaults, the paper's certain detection and no negative information
-(`SensorKernels`).
+The last six have defaults, the paper's certain detection, no negative information and
+independent looks (`SensorKernels`).
 
 The models: `FootprintSensor` (the paper's): a target within ``w/2`` of the agent is measured as
 ``z = [x, y] + v``, ``v ~ N(0, R)`` (`hptrack.models.measurement`). `DetectingFootprintSensor`:
 the same footprint with a detection probability below one, ``Pd(d)`` at the distance ``d`` from
 the footprint's centre (a table, linearly interpolated, its last value held to the edge): a
 target inside is detected, and then measured as above, with probability ``Pd(d)`` at each look,
-independently (`detection_probability`); a look that does not detect it leaves its belief as it
-is, as for a target outside. The mission record holds it only when ``Pd`` is not 1 everywhere.
+independently or with each draw held over ``hold_looks`` looks (`detection_probability`,
+`hold_looks_of`); a look that does not detect it leaves its belief as it is, as for a target
+outside. The mission record holds it only when ``Pd`` is not 1 everywhere.
 `NegativeInformationSensor` (the scenario's ``negative_information: true``): the same detector
 (any ``Pd``, 1 included), whose look that detects nothing updates the belief by the miss
 (`hptrack.models.miss_update.miss_update`).

@@ -17,7 +17,9 @@ accelerations) and the measurement stream ``2`` per measured target, in target
 order. A sensor that detects with a probability below one (``sensor_draws``) has a fifth stream,
 ``SeedSequence(seed, spawn_key=(4,))`` (the fifth child of the same root, so the other four are
 unchanged): one uniform per target inside the footprint per look, in target order, the target
-detected when it is below ``Pd(d)`` (`hptrack.models.sensor.sensor_detects`). The paper's sensor
+detected when it is below ``Pd(d)`` (`hptrack.models.sensor.sensor_detects`); a sensor whose draws
+hold over several looks uses the one it holds instead (`hptrack.models.sensor.held_draw`, one
+record per UAV), so that the stream is read the same either way. The paper's sensor
 draws nothing from it. A sensor without identity (``labelled: false``) reports through
 `hptrack.models.detector.Detector` instead, every draw of its looks from a sixth stream,
 ``SeedSequence(seed, spawn_key=(5,))``, and the beliefs are kept by
