@@ -104,6 +104,11 @@ def test_a_blind_search_plans_with_the_paper_sensor_on_the_same_world(tmp_path):
         (["--detection-probability", "1.5"], "--detection-probability must be in (0, 1], got 1.5"),
         (["--detection-probability", "0"], "--detection-probability must be in (0, 1], got 0.0"),
         (["--false-alarm-density", "1e-6"], "--false-alarm-density 1e-06 needs --unlabelled"),
+        (["--detection-correlation-time", "2"], "--detection-correlation-time needs a --detec"),
+        (
+            ["--detection-probability", "0.7", "--detection-correlation-time", "-1"],
+            "--detection-correlation-time must be between 0 and 3600 s, got -1.0",
+        ),
         (
             ["--unlabelled", "--false-alarm-density", "-1"],
             "--false-alarm-density must be between 0 and 0.01 per m^2 per look, got -1.0",
@@ -129,6 +134,18 @@ def test_detections_without_identity_and_clutter_are_part_of_the_identity():
     assert scenario_for(plain.keys()[1]).sensor.false_alarm_density == 0.0
     labelled = scenario_for(config(detection_probability=0.7).keys()[1])
     assert scenario_for(clutter.keys()[1]).targets == labelled.targets  # the same worlds
+
+
+def test_held_draws_are_part_of_the_identity_and_reach_the_scenario():
+    held = config(detection_probability=0.7, detection_correlation_time=2.0)
+    assert held.setting == "homogeneous+pd:0.7+correlation:2.0"
+    blind = config(detection_probability=0.7, detection_correlation_time=2.0, blind=True)
+    assert blind.setting == "homogeneous+pd:0.7+correlation:2.0+blind"
+    scenario = scenario_for(held.keys()[1])
+    assert scenario.sensor.detection_correlation_time == 2.0
+    assert scenario.mission_spec().record.sensor.hold_looks == 4
+    told = planner_mission_for(blind.keys()[1], scenario_for(blind.keys()[1]))
+    assert isinstance(told.record.sensor, FootprintSensor)
 
 
 def test_an_unlabelled_benchmark_stores_its_tracking_metrics(tmp_path):
