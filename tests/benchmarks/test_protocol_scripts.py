@@ -152,3 +152,44 @@ def test_search_fingerprints_are_the_searches_statistics_and_repeat():
     assert (best, simulations, after) == (result.best_action, result.simulations, [])
     assert root[:2] == (result.root.actions.tolist(), result.root.visits.tolist())
     assert root[2] == result.root.values.tobytes()
+
+
+def test_the_sensing_table_flies_the_blind_search_only_below_pd_one_and_pairs_it(tmp_path):
+    """``benchmarks/sensing_table.py``: the blind variant only where the detector misses, every
+    sensor its own setting; the report's paired difference is the mean of the per-scenario
+    differences (known 10, 14; blind 13, 13: -1 +- 2) and the metrics are the rows' means."""
+    table = _script("sensing_table")
+    wanted = table.configs(
+        ("default", "blind"), (3,), 2, {"iterations": 50}, (1.0, 0.7), 1e-6, 0.0, ("labelled",)
+    )
+    assert set(wanted) == {
+        ("Pd 1, labelled", "default"),
+        ("Pd 0.7, labelled", "default"),
+        ("Pd 0.7, labelled", "blind"),
+    }
+    assert wanted["Pd 0.7, labelled", "blind"].setting == "homogeneous+pd:0.7+blind"
+    held = table.configs(("default",), (3,), 2, {"iterations": 50}, (0.7,), 1e-6, 5.0)
+    assert {c.setting for c in held.values()} == {
+        "homogeneous+pd:0.7+correlation:5.0",
+        "homogeneous+pd:0.7+correlation:5.0+unlabelled",
+        "homogeneous+pd:0.7+correlation:5.0+unlabelled+clutter:1e-06",
+    }
+
+    def row(u: float, seed: int) -> EpisodeRow:
+        key = EpisodeKey("mcts", 3, seed, "s", MctsSettings().canonical())
+        return EpisodeRow(key, u, 77.0, 1, 0.1, {"targets_never_detected": seed}, 5.0, 7.0, 1)
+
+    by = {
+        ("Pd 0.7, labelled", "default"): {(3, 0): row(10.0, 0), (3, 1): row(14.0, 1)},
+        ("Pd 0.7, labelled", "blind"): {(3, 0): row(13.0, 0), (3, 1): row(13.0, 1)},
+    }
+    table.report(by, tmp_path, "command", "50 simulations per decision")
+    paired = list(csv.DictReader((tmp_path / "paired.csv").read_text().splitlines()))
+    assert len(paired) == 1
+    assert float(paired[0]["known_minus_blind"]) == pytest.approx(-1.0)
+    assert float(paired[0]["se"]) == pytest.approx(2.0)
+    lines = (tmp_path / "rows.csv").read_text().splitlines()
+    rows = {r["planner"]: r for r in csv.DictReader(lines)}
+    assert float(rows["default"]["mean_U"]) == pytest.approx(12.0)
+    assert float(rows["default"]["never_detected"]) == pytest.approx(0.5)
+    assert float(rows["blind"]["gospa_end"]) == pytest.approx(7.0)
