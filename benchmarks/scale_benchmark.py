@@ -2,8 +2,9 @@
 alone, the default search, the paper's search, greedy and the clairvoyant reference.
 
 Homogeneous random scenarios of the paper (``--targets``, seeds ``0..N-1``), every search at
-``--time-limit`` s per decision. The variants (``--variants``, names of `VARIANTS`) run in one
-process pool side by side; episodes are stored in the results database ``--db`` as they
+``--time-limit`` s per decision, or with ``--default-effort`` at its preset's default number of
+simulations per search (no time limit). The variants (``--variants``, names of `VARIANTS`) run
+in one process pool side by side; episodes are stored in the results database ``--db`` as they
 finish (a re-run resumes; a run at another time limit is another identity). The report: mean
 ``U`` with its standard error, the share of the greedy-to-clairvoyant gap closed on the
 scenarios all three flew, the targets never detected per episode, the paired difference of
@@ -13,6 +14,8 @@ references ran).
 
     python3 benchmarks/scale_benchmark.py --targets 6,12,20 --seeds 30 --time-limit 0.05 \\
         --workers 2 --db results/scale.db --out docs/results/scale-0.05s
+    python3 benchmarks/scale_benchmark.py --targets 6,12,20 --seeds 30 --default-effort \
+        --variants revisit,improved --workers 2 --db results/scale.db --out results/effort
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from hptrack.experiments.store import ResultStore
 from hptrack.registry import planner_settings
 
 VARIANTS: dict[str, tuple[str, dict]] = {
+    "revisit": ("mcts", {"preset": "revisit"}),
     "tour_plan+fortify": ("mcts", {"rollout": "tour_plan", "fortify": True}),
     "tour_plan": ("mcts", {"rollout": "tour_plan"}),
     "tour_plan+fortify+dwell": (
@@ -42,20 +46,21 @@ VARIANTS: dict[str, tuple[str, dict]] = {
     "clairvoyant": ("clairvoyant", {}),
 }
 """The planners compared, by their names in the tables: a planner and its options (the
-searches' time limit added)."""
+searches' time limit added, if any)."""
 
 REFERENCES = ("greedy", "clairvoyant")
 """The two ends of the gap closed (``--references``: run by default)."""
 
 
 def configs(
-    names: tuple[str, ...], targets: tuple[int, ...], seeds: int, time_limit: float
+    names: tuple[str, ...], targets: tuple[int, ...], seeds: int, time_limit: float | None
 ) -> dict[str, BenchmarkConfig]:
-    """The benchmark of each variant, by its name in the table."""
+    """The benchmark of each variant, by its name in the table; ``time_limit`` None: the
+    searches at their presets' default effort."""
     out = {}
     for name in names:
         planner, options = VARIANTS[name]
-        if planner == "mcts":
+        if planner == "mcts" and time_limit is not None:
             options = {**options, "time_limit": time_limit}
         out[name] = BenchmarkConfig(
             planners=(planner,),
@@ -82,15 +87,23 @@ def gap_closed(by_variant: dict[str, dict], variant: str, n: int) -> tuple[float
     return 100.0 * (greedy - mine) / (greedy - clairvoyant), len(common)
 
 
-def report(by_variant: dict[str, dict], out: Path, command: str, time_limit: float) -> None:
+def effort_text(time_limit: float | None) -> str:
+    """How long each search ran, in words."""
+    if time_limit is None:
+        return "at its preset's default effort (simulations per search)"
+    return f"at {time_limit:g} s per decision"
+
+
+def report(by_variant: dict[str, dict], out: Path, command: str, time_limit: float | None) -> None:
     """Write ``table.md``, ``summary.json`` and ``gap.png`` from ``{variant: {(n, seed):
     row}}``."""
     counts = sorted({n for rows in by_variant.values() for n, _ in rows})
     first = next(iter(by_variant))
     lines = [
-        f"Homogeneous random scenarios (seeds from 0), every search at {time_limit:g} s per",
-        "decision. The variants: `tour_plan` is `mcts` with the revisit tour as its rollout",
-        "policy and leaf value (`-o mcts.rollout=tour_plan`), `+fortify` keeps the tour's",
+        f"Homogeneous random scenarios (seeds from 0), every search {effort_text(time_limit)}.",
+        "The variants: `tour_plan` is `mcts` with the revisit tour as its rollout",
+        "policy and leaf value (`-o mcts.rollout=tour_plan`), `revisit` the preset that stands",
+        "for it (with its own default effort), `+fortify` keeps the tour's",
         "action unless the search beats it by more than the standard error of the difference,",
         "`+dwell` adds a 10 s dwell action and keeps missed targets in the action list;",
         "`improved` is the default preset, `paper` the paper's search, `tour` the tour planner.",
@@ -179,7 +192,7 @@ def report(by_variant: dict[str, dict], out: Path, command: str, time_limit: flo
         figure(summary, out / "gap.png", time_limit)
 
 
-def figure(summary: dict, path: Path, time_limit: float) -> None:
+def figure(summary: dict, path: Path, time_limit: float | None) -> None:
     """The gap closed against n, one line per planner but the references."""
     import matplotlib
 
@@ -197,7 +210,7 @@ def figure(summary: dict, path: Path, time_limit: float) -> None:
         )
     ax.set_xlabel("targets n")
     ax.set_ylabel("greedy-to-clairvoyant gap closed, %")
-    ax.set_title(f"{time_limit:g} s per decision")
+    ax.set_title(f"every search {effort_text(time_limit)}", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -210,6 +223,11 @@ def main() -> None:
     parser.add_argument("--targets", default="6,12,20", help="numbers of targets, comma-separated")
     parser.add_argument("--seeds", type=int, default=30, help="scenarios per n (seeds 0..N-1)")
     parser.add_argument("--time-limit", type=float, default=0.05, help="s per decision")
+    parser.add_argument(
+        "--default-effort",
+        action="store_true",
+        help="every search at its preset's default simulations per search, no time limit",
+    )
     parser.add_argument(
         "--variants",
         default="tour_plan+fortify,improved,paper,tour",
@@ -236,18 +254,20 @@ def main() -> None:
     targets = tuple(int(t) for t in args.targets.split(",") if t)
     command = (
         f"python3 benchmarks/scale_benchmark.py --targets {args.targets} --seeds {args.seeds} "
-        f"--time-limit {args.time_limit:g} --variants {args.variants} "
+        + ("--default-effort " if args.default_effort else f"--time-limit {args.time_limit:g} ")
+        + f"--variants {args.variants} "
         + (f"--references '{args.references}' " if references != REFERENCES else "")
         + f"--workers {args.workers} --db {args.db} --out {args.out}"
     )
     args.db.parent.mkdir(parents=True, exist_ok=True)
     store = ResultStore(args.db)
     try:
-        variants = configs(names, targets, args.seeds, args.time_limit)
+        time_limit = None if args.default_effort else args.time_limit
+        variants = configs(names, targets, args.seeds, time_limit)
         by_variant = run_variants(variants, store, args.workers, run=not args.report_only)
     finally:
         store.close()
-    report(by_variant, args.out, command, args.time_limit)
+    report(by_variant, args.out, command, time_limit)
 
 
 if __name__ == "__main__":

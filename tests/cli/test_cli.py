@@ -440,7 +440,10 @@ def test_planners_lists_every_planner_with_each_options_default(cli):
     mcts = option_defaults("mcts")
     assert (mcts["exploration"], mcts["preset"], mcts["backup"]) == ("0.5", "improved", "max")
     assert mcts["iterations"] == "100000" and mcts["time_limit"] == "none"
-    assert preset_changes("mcts") == {"paper": {"backup": "sampled"}}
+    assert preset_changes("mcts") == {
+        "paper": {"backup": "sampled"},
+        "revisit": {"iterations": "20000", "rollout": "tour_plan"},
+    }
     assert option_defaults("coverage") == {"target": "required"}
     assert option_defaults("greedy") == {} and preset_changes("greedy") == {}
     result = cli("planners")

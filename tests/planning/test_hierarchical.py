@@ -192,8 +192,38 @@ def test_presets_resolve_to_their_options_and_the_identity_is_every_option():
         MctsSettings(rollout="most_uncertain", rollout_epsilon=0.2).canonical()
         != MctsSettings(rollout="most_uncertain").canonical()
     )
-    with pytest.raises(InputError, match="option preset must be 'paper' or 'improved'"):
+    with pytest.raises(
+        InputError, match="option preset must be 'paper', 'improved' or 'revisit', got 'fast'"
+    ):
         MctsSettings.from_options("mcts", {"preset": "fast"})
+
+
+def test_the_revisit_preset_is_the_tour_inside_the_search_at_its_own_default_effort():
+    """``preset=revisit`` is the improved search with the revisit tour as rollout policy and
+    leaf value; its default effort is a fifth of the others' (its simulations cost about five
+    times as much), and a time limit or explicit iterations replace it."""
+    revisit = MctsSettings.from_options("mcts", {"preset": "revisit"})
+    assert {k: getattr(revisit, k) for k in hierarchical.PRESETS["revisit"]} == {
+        **hierarchical.PRESETS["improved"],
+        "rollout": "tour_plan",
+    }
+    assert (revisit.iterations, revisit.time_limit) == (20_000, None)
+    timed = MctsSettings.from_options("mcts", {"preset": "revisit", "time_limit": 1.0})
+    assert (timed.iterations, timed.rollout) == (None, "tour_plan")
+    given = MctsSettings.from_options("mcts", {"preset": "revisit", "iterations": 300})
+    assert given.iterations == 300
+    # the same options under another preset are the same search, the same identity
+    spelled = MctsSettings.from_options(
+        "mcts", {"preset": "improved", "rollout": "tour_plan", "iterations": 20_000}
+    )
+    assert spelled.canonical() == revisit.canonical()
+    assert MctsSettings.from_canonical(spelled.canonical()).preset == "revisit"
+    # fortify is the revisit search's option, and still refused without the tour
+    assert MctsSettings.from_options("mcts", {"preset": "revisit", "fortify": True}).fortify
+    with pytest.raises(InputError, match="fortify=true applies only to rollout=tour_plan"):
+        MctsSettings.from_options(
+            "mcts", {"preset": "revisit", "fortify": True, "rollout": "uniform"}
+        )
 
 
 def test_paper_search_follows_the_first_find_at_low_effort_and_the_max_backup_does_not():
@@ -224,7 +254,7 @@ def test_a_stored_identity_means_the_same_search_whatever_the_default_preset(mon
     paper = MctsSettings.from_options("mcts", {"preset": "paper", "iterations": 300})
     improved = MctsSettings.from_options("mcts", {"preset": "improved", "iterations": 300})
     other = MctsSettings.from_options("mcts", {"backup": "expected", "iterations": 300})
-    for default in ("paper", "improved"):
+    for default in ("paper", "improved", "revisit"):
         monkeypatch.setattr(hierarchical, "DEFAULT_PRESET", default)
         for settings in (paper, improved, other):
             again = MctsSettings.from_canonical(settings.canonical())

@@ -73,42 +73,36 @@ TOUR_BASE = TourSettings()
 """The tour of ``rollout="tour_plan"``: the ``tour`` planner's defaults (``settle_variance``,
 ``min_find``, ``samples``), scored in the search's own MDP."""
 
-DEFAULT_ITERATIONS = 100_000
-"""Simulations per tree search when neither ``iterations`` nor ``time_limit`` is given."""
+PRESET_ITERATIONS: dict[str, int] = {"paper": 100_000, "improved": 100_000, "revisit": 20_000}
+"""Simulations per tree search when neither ``iterations`` nor ``time_limit`` is given, by
+preset: a search with the revisit tour runs about a fifth as many simulations per second, so
+its default effort is a fifth, for about the same time per decision."""
 
+
+PAPER_SEARCH: dict[str, Any] = {
+    "backup": "sampled",
+    "max_weight": 1.0,
+    "root_split": "even",
+    "common_rollouts": False,
+    "rollout": "uniform",
+    "estimator": "paper",
+    "dwell": 0.0,
+    "miss": "drop",
+    "passes": "ignore",
+    "readmit": False,
+    "commit": 0.0,
+    "fortify": False,
+}
+"""The options of the paper's search, Algorithm 1."""
 
 PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {
-        "backup": "sampled",
-        "max_weight": 1.0,
-        "root_split": "even",
-        "common_rollouts": False,
-        "rollout": "uniform",
-        "estimator": "paper",
-        "dwell": 0.0,
-        "miss": "drop",
-        "passes": "ignore",
-        "readmit": False,
-        "commit": 0.0,
-        "fortify": False,
-    },
-    "improved": {
-        "backup": "max",
-        "max_weight": 1.0,
-        "root_split": "even",
-        "common_rollouts": False,
-        "rollout": "uniform",
-        "estimator": "paper",
-        "dwell": 0.0,
-        "miss": "drop",
-        "passes": "ignore",
-        "readmit": False,
-        "commit": 0.0,
-        "fortify": False,
-    },
+    "paper": PAPER_SEARCH,
+    "improved": {**PAPER_SEARCH, "backup": "max"},
+    "revisit": {**PAPER_SEARCH, "backup": "max", "rollout": "tour_plan"},
 }
-"""The search options each preset stands for: the paper's algorithm exactly as written, and the
-improvements measured in ``docs/results/search-options.md``."""
+"""The search options each preset stands for: the paper's algorithm exactly as written, the
+improvements measured in ``docs/results/search-options.md``, and those with the revisit tour
+as rollout policy and leaf value (``docs/results/planner-scale.md``)."""
 
 DEFAULT_PRESET = "improved"
 
@@ -133,12 +127,13 @@ class MctsSettings(PlannerSettings):
     """Options of the hierarchical planner (``mcts``).
 
     Attributes:
-        iterations: simulations per tree search (reproducible on any machine); default
-            100,000 when no time limit is given.
+        iterations: simulations per tree search (reproducible on any machine); when no time
+            limit is given, 100,000 (20,000 with ``preset="revisit"``, `PRESET_ITERATIONS`).
         time_limit: wall time per tree search, s (the paper uses 30 s). With both, whichever
             comes first.
         exploration: UCB1 constant ``c`` on values normalised to the observed return range.
-        preset: ``"paper"`` (the paper's search, Algorithm 1) or ``"improved"``; it sets the
+        preset: ``"paper"`` (the paper's search, Algorithm 1), ``"improved"`` (the max
+            backup) or ``"revisit"`` (the max backup and ``rollout="tour_plan"``); it sets the
             options below that are not given (`PRESETS`).
         backup: ``"sampled"`` (the paper's running mean), ``"expected"``, ``"max"`` or
             ``"robust"`` (`hptrack.planning.tree`).
@@ -187,7 +182,7 @@ class MctsSettings(PlannerSettings):
     iterations: Iterations | None = None
     time_limit: TimeLimit | None = None
     exploration: Annotated[float, Field(gt=0.0)] = DEFAULT_EXPLORATION
-    preset: Literal["paper", "improved"] = DEFAULT_PRESET
+    preset: Literal["paper", "improved", "revisit"] = DEFAULT_PRESET
     backup: Literal["sampled", "expected", "max", "robust"] | None = None
     max_weight: Annotated[float | None, Field(ge=0.0, le=1.0)] = None
     root_split: Literal["even", "weighted"] | None = None
@@ -221,9 +216,11 @@ class MctsSettings(PlannerSettings):
     def _defaults(cls, data: Any) -> Any:
         if not isinstance(data, dict):
             return data
+        name = data.get("preset", DEFAULT_PRESET)
         if data.get("iterations") is None and data.get("time_limit") is None:
-            data = {**data, "iterations": DEFAULT_ITERATIONS}
-        preset = PRESETS.get(data.get("preset", DEFAULT_PRESET), {})
+            effort = PRESET_ITERATIONS.get(name, PRESET_ITERATIONS[DEFAULT_PRESET])
+            data = {**data, "iterations": effort}
+        preset = PRESETS.get(name, {})
         return {**data, **{k: v for k, v in preset.items() if data.get(k) is None}}
 
     @field_validator("dwell", mode="before")
