@@ -28,7 +28,7 @@ from hptrack.registry import planner_settings
 
 VARIANTS = {
     "greedy": ("greedy", None),
-    "mcts": ("mcts", {}),
+    "mcts": ("mcts", {"preset": "improved"}),
     "mcts paper": ("mcts", {"preset": "paper"}),
     "clairvoyant": ("clairvoyant", None),
     "arvi": ("arvi", None),

@@ -27,9 +27,9 @@ import numpy as np
 VARIANTS = {
     "paper": {"preset": "paper"},
     "improved": {"preset": "improved"},
-    "max": {"backup": "max"},
-    "expected": {"backup": "expected"},
-    "most_uncertain": {"rollout": "most_uncertain"},
+    "max": {"preset": "improved", "backup": "max"},
+    "expected": {"preset": "improved", "backup": "expected"},
+    "most_uncertain": {"preset": "improved", "rollout": "most_uncertain"},
 }
 """``mcts`` options of each variant (the single-option rows are the ablation)."""
 

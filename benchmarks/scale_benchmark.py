@@ -9,8 +9,8 @@ finish (a re-run resumes; a run at another time limit is another identity). The 
 ``U`` with its standard error, the share of the greedy-to-clairvoyant gap closed on the
 scenarios all three flew, the targets never detected per episode, the paired difference of
 the first variant and each other one (negative: the first is better), the searches' effort
-(simulations and wall time per search), and a figure of the gap closed against n (when the
-references ran).
+(simulations and wall time per search), and, when the references ran, the gap closed by
+planner and n as a table and a figure.
 
     python3 benchmarks/scale_benchmark.py --targets 6,12,20 --seeds 30 --time-limit 0.05 \\
         --workers 2 --db results/scale.db --out docs/results/scale-0.05s
@@ -101,12 +101,12 @@ def report(by_variant: dict[str, dict], out: Path, command: str, time_limit: flo
     first = next(iter(by_variant))
     lines = [
         f"Homogeneous random scenarios (seeds from 0), every search {effort_text(time_limit)}.",
-        "The variants: `tour_plan` is `mcts` with the revisit tour as its rollout",
-        "policy and leaf value (`-o mcts.rollout=tour_plan`), `revisit` the preset that stands",
-        "for it (with its own default effort), `+fortify` keeps the tour's",
-        "action unless the search beats it by more than the standard error of the difference,",
-        "`+dwell` adds a 10 s dwell action and keeps missed targets in the action list;",
-        "`improved` is the default preset, `paper` the paper's search, `tour` the tour planner.",
+        "The variants: `tour_plan` is `mcts` with the revisit tour as its rollout policy and leaf",
+        "value (`-o mcts.rollout=tour_plan`) and `revisit` the preset of that search (with its",
+        "own default effort), `+fortify` keeps the tour's action unless the search beats it by",
+        "more than the standard error of the difference, `+dwell` adds a 10 s dwell action and",
+        "keeps missed targets in the action list; `improved` is the preset with the paper's",
+        "random rollouts, `paper` the paper's search, `tour` the tour planner.",
         "",
         "```bash",
         command,
@@ -187,9 +187,35 @@ def report(by_variant: dict[str, dict], out: Path, command: str, time_limit: flo
                     "median_wall_s": wall,
                 }
             )
+    lines += gap_table(summary["rows"], counts)
     write_tables(out, lines, summary)
     if any(math.isfinite(r["gap_closed_percent"]) for r in summary["rows"]):
         figure(summary, out / "gap.png", time_limit)
+
+
+def gap_table(rows: list[dict], counts: list[int]) -> list[str]:
+    """The share of the gap closed, one row per planner but the references and one column per
+    n (the scenarios in brackets); no lines when the references did not run."""
+    gaps = {(r["planner"], r["n"]): r for r in rows if r["gap_scenarios"]}
+    planners = [p for p in dict.fromkeys(r["planner"] for r in rows) if p not in REFERENCES]
+    if not gaps:
+        return []
+    lines = [
+        "",
+        "The share of the greedy-to-clairvoyant gap closed, %, by n (the scenarios in brackets).",
+        "",
+        "| planner | " + " | ".join(f"n={n}" for n in counts) + " |",
+        "|---|" + "---|" * len(counts),
+    ]
+    for planner in planners:
+        cells = [
+            f"{gaps[planner, n]['gap_closed_percent']:.0f} ({gaps[planner, n]['gap_scenarios']})"
+            if (planner, n) in gaps
+            else "-"
+            for n in counts
+        ]
+        lines.append(f"| {planner} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def figure(summary: dict, path: Path, time_limit: float | None) -> None:

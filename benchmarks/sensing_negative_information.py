@@ -47,14 +47,16 @@ CHI2_99 = 9.21034037197618
 
 
 def episode(job: tuple[str, int, int, float, int]) -> dict:
-    """One row: ``(variant, n, seed, Pd, iterations)`` flown by the default search."""
+    """One row: ``(variant, n, seed, Pd, iterations)`` flown by the improved search."""
     variant, n, seed, pd, iterations = job
     sensor = FootprintSensorSpec(detection_probability=pd, negative_information=variant != "off")
     scenario = random_scenario(n, seed=seed, homogeneous=True, sensor=sensor)
     told = None
     if variant == "on_world":
         told = dataclasses.replace(scenario.mission_spec(), negative_information=False)
-    planner = make_planner("mcts", planner_settings("mcts", {"iterations": iterations}))
+    planner = make_planner(
+        "mcts", planner_settings("mcts", {"preset": "improved", "iterations": iterations})
+    )
     record = run_episode(scenario, planner, planner_mission=told)
     truth = record.true_states[-1, :, :2]
     mean = record.belief_means[-1, :, :2]

@@ -75,14 +75,14 @@ def scenario(n: int, seed: int, truth: str, told: bool = False):
 
 
 def settings_of(planner: str, iterations: int):
-    """The validated settings a planner flies with (``mcts``: the default preset at
+    """The validated settings a planner flies with (``mcts``: the improved preset at
     ``iterations`` simulations per decision)."""
     from hptrack.registry import planner_settings
 
     registered = REGISTERED.get(planner, planner)
     return planner_settings(
         registered,
-        {"iterations": iterations} if registered == "mcts" else None,
+        {"preset": "improved", "iterations": iterations} if registered == "mcts" else None,
     )
 
 

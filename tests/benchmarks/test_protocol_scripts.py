@@ -193,3 +193,39 @@ def test_the_sensing_table_flies_the_blind_search_only_below_pd_one_and_pairs_it
     assert float(rows["default"]["mean_U"]) == pytest.approx(12.0)
     assert float(rows["default"]["never_detected"]) == pytest.approx(0.5)
     assert float(rows["blind"]["gospa_end"]) == pytest.approx(7.0)
+
+
+def test_the_scale_benchmark_runs_each_search_at_its_presets_default_effort_or_a_time_limit():
+    """``benchmarks/scale_benchmark.py``: ``--default-effort`` leaves every search at its
+    preset's simulations per search (the revisit preset's own, a fifth of the others'); a time
+    limit replaces them; the gap table is the share of the greedy-to-clairvoyant gap closed."""
+    scale = _script("scale_benchmark")
+    default = scale.configs(("revisit", "improved", "greedy"), (4,), 2, None)
+    revisit, improved = (default[v].settings["mcts"] for v in ("revisit", "improved"))
+    assert (revisit.iterations, revisit.time_limit, revisit.rollout) == (20_000, None, "tour_plan")
+    assert (improved.iterations, improved.rollout) == (100_000, "uniform")
+    timed = scale.configs(("revisit",), (4,), 2, 0.5)["revisit"].settings["mcts"]
+    assert (timed.iterations, timed.time_limit) == (None, 0.5)
+    assert "default effort" in scale.effort_text(None) and scale.effort_text(1.0) == (
+        "at 1 s per decision"
+    )
+
+    def row(u):
+        key = EpisodeKey("mcts", 4, 0, "s", "{}")
+        return EpisodeRow(key, u, 0.0, 0, 0.0, {"targets_never_detected": 0})
+
+    by_variant = {  # U: greedy 100, clairvoyant 60; revisit 70 (75 % of the gap), tour 90
+        "revisit": {(4, 0): row(70.0), (4, 1): row(70.0)},
+        "tour": {(4, 0): row(90.0)},
+        "greedy": {(4, 0): row(100.0), (4, 1): row(100.0)},
+        "clairvoyant": {(4, 0): row(60.0), (4, 1): row(60.0)},
+    }
+    assert scale.gap_closed(by_variant, "revisit", 4) == (75.0, 2)
+    assert scale.gap_closed(by_variant, "tour", 4) == (25.0, 1)
+    rows = [
+        {"planner": p, "n": 4, "gap_closed_percent": g, "gap_scenarios": k}
+        for p, g, k in (("revisit", 75.0, 2), ("tour", 25.0, 1), ("greedy", 0.0, 2))
+    ]
+    lines = scale.gap_table(rows, [4, 6])
+    assert lines[-2:] == ["| revisit | 75 (2) | - |", "| tour | 25 (1) | - |"]
+    assert scale.gap_table([{**r, "gap_scenarios": 0} for r in rows], [4]) == []

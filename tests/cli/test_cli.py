@@ -438,9 +438,15 @@ def test_planners_lists_every_planner_with_each_options_default(cli):
     from hptrack.cli.app import option_defaults, preset_changes
 
     mcts = option_defaults("mcts")
-    assert (mcts["exploration"], mcts["preset"], mcts["backup"]) == ("0.5", "improved", "max")
-    assert mcts["iterations"] == "100000" and mcts["time_limit"] == "none"
+    assert (mcts["exploration"], mcts["preset"], mcts["backup"]) == ("0.5", "revisit", "max")
+    assert mcts["iterations"] == "20000" and mcts["time_limit"] == "none"
+    assert mcts["rollout"] == "tour_plan"
     assert preset_changes("mcts") == {
+        "paper": {"iterations": "100000", "backup": "sampled", "rollout": "uniform"},
+        "improved": {"iterations": "100000", "rollout": "uniform"},
+    }
+    assert option_defaults("team-mcts")["preset"] == "improved"  # the teams keep their own
+    assert preset_changes("team-mcts") == {
         "paper": {"backup": "sampled"},
         "revisit": {"iterations": "20000", "rollout": "tour_plan"},
     }

@@ -32,7 +32,7 @@ def test_python_quick_start_runs(tmp_path):
     assert out.returncode == 0, out.stderr
     lines = out.stdout.splitlines()
     assert lines[0].startswith("t1 ")  # the first decision: pursue t1
-    assert lines[1] == "U = 42.405"  # the same mission as `hptrack simulate --random ...`
+    assert lines[1] == "U = 43.431"  # the same mission as `hptrack simulate --random ...`
     assert lines[2].startswith("{'mcts': ") and "'greedy': " in lines[2]  # in the order asked
 
 

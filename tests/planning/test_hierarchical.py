@@ -112,15 +112,15 @@ def test_max_weight_without_the_max_backup_is_refused():
 
 def test_settings_default_effort_and_identity():
     default = MctsSettings()
-    assert (default.iterations, default.time_limit) == (100_000, None)
-    assert MctsSettings.from_options("mcts", {"iterations": "100000"}) == default
+    assert (default.iterations, default.time_limit) == (20_000, None)
+    assert MctsSettings.from_options("mcts", {"iterations": "20000"}) == default
     timed = MctsSettings(time_limit=1.0)
     assert (timed.iterations, timed.time_limit) == (None, 1.0)
-    assert default.preset == "improved"  # the default since the quality-against-time benchmark
+    assert default.preset == "revisit"  # the default since the default-effort scale benchmark
     assert default.canonical() == (
         '{"backup":"max","commit":0.0,"common_rollouts":false,"dwell":0.0,"estimator":"paper",'
-        '"exploration":0.5,"fortify":false,"iterations":100000,"max_weight":1.0,"miss":"drop",'
-        '"passes":"ignore","readmit":false,"rollout":"uniform","rollout_epsilon":0.1,'
+        '"exploration":0.5,"fortify":false,"iterations":20000,"max_weight":1.0,"miss":"drop",'
+        '"passes":"ignore","readmit":false,"rollout":"tour_plan","rollout_epsilon":0.1,'
         '"root_split":"even","threads":1,"time_limit":null}'
     )
     assert default.digest() != timed.digest()

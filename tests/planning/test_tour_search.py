@@ -235,7 +235,8 @@ def test_fortify_needs_the_tour_rollout():
         match="planner 'mcts': option fortify=true applies only to rollout=tour_plan, "
         "got rollout=uniform",
     ):
-        MctsSettings.from_options("mcts", {"fortify": True})
+        MctsSettings.from_options("mcts", {"fortify": True, "rollout": "uniform"})
+    assert MctsSettings.from_options("mcts", {"fortify": True}).rollout == "tour_plan"
 
 
 def test_a_mission_with_the_tour_inside_the_search_is_deterministic_and_logs_the_tour():

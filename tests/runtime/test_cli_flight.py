@@ -125,12 +125,18 @@ def test_fly_without_a_vehicle_says_what_it_waits_for_then_gives_a_hint_and_no_l
     assert not log.exists()  # no empty log left behind
 
 
-def test_fly_re_admits_missed_targets_unless_told_otherwise_or_flying_the_paper():
+def test_fly_re_admits_missed_targets_unless_told_otherwise_or_flying_the_paper(monkeypatch):
     from hptrack.cli.flight import FLY_ITERATIONS, flight_planner_settings
+    from hptrack.planning import hierarchical
 
+    monkeypatch.setattr(hierarchical, "DEFAULT_PRESET", "revisit")  # fly keeps its own preset
     flown = flight_planner_settings("mcts", None, None, None)
     assert flown.readmit is True and flown.iterations == FLY_ITERATIONS
-    assert flown.preset == "improved" and flown.miss == "drop"
+    assert flown.preset == "improved" and flown.miss == "drop" and flown.rollout == "uniform"
+    revisit = flight_planner_settings("mcts", ["preset=revisit"], None, None)
+    assert (revisit.rollout, revisit.readmit, revisit.iterations) == ("tour_plan", True, 2000)
+    team = flight_planner_settings("team-mcts", None, None, None)
+    assert (team.preset, team.readmit) == ("improved", True)
     assert flight_planner_settings("mcts", ["readmit=false"], None, None).readmit is False
     assert flight_planner_settings("mcts", ["mcts.readmit=false"], None, None).readmit is False
     paper = flight_planner_settings("mcts", ["preset=paper"], 500, None)

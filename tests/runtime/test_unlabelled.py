@@ -43,15 +43,20 @@ def _with_sensor(**fields):
 
 
 @pytest.mark.parametrize(
-    ("seed", "fields"),
-    [(1, {}), (3, {}), (3, {"association": "jpda", "false_alarm_density": 1e-3})],
+    ("seed", "fields", "preset"),
+    [
+        (1, {}, "revisit"),
+        (3, {}, "improved"),
+        (3, {"association": "jpda", "false_alarm_density": 1e-3}, "improved"),
+    ],
 )
-def test_a_simulated_flight_without_identity_is_the_simulators_mission(seed, fields):
+def test_a_simulated_flight_without_identity_is_the_simulators_mission(seed, fields, preset):
     # the same detector's reports at every tau and no planner delay: the controller's tracker
     # makes the simulator's associations (each report to the same belief with the same
-    # weight, GNN's or JPDA's, the same claims) and ends with the same U; these seeds have claims
+    # weight, GNN's or JPDA's, the same claims) and ends with the same U; these seeds and
+    # searches have claims
     unlabelled = _with_sensor(**fields)
-    options = {"iterations": 300}
+    options = {"preset": preset, "iterations": 300}
     want = run_episode(unlabelled, make_planner("mcts", options), seed=seed)
     got = run_simulated(unlabelled, make_planner("mcts", options), seed=seed)
     assert got.controller.end["reason"] == "budget" and not got.controller.rejected

@@ -99,3 +99,25 @@ def test_a_uav_follows_the_target_it_found_though_another_claims_it():
         )
         record = run_episode(scenario, planner)
         assert record.info["link"]["lost"] > 0
+
+
+@pytest.mark.parametrize("name", ["team-mcts", "team-cbba"])
+def test_a_teams_searches_keep_their_preset_whatever_the_single_uav_default(name, monkeypatch):
+    """Every UAV's search in a team defaults to `TEAM_PRESET` (the preset the team tables were
+    measured with), not to the one-UAV default; a named preset still wins."""
+    from hptrack.planning import hierarchical
+    from hptrack.registry import planner_settings
+    from hptrack.teams.sequential import TEAM_PRESET
+
+    monkeypatch.setattr(hierarchical, "DEFAULT_PRESET", "revisit")
+    assert hierarchical.MctsSettings().rollout == "tour_plan"
+    team = planner_settings(name, {})
+    assert (team.preset, team.rollout, team.iterations) == (TEAM_PRESET, "uniform", 100_000)
+    assert (
+        team.member_settings().canonical()
+        == hierarchical.MctsSettings(preset=TEAM_PRESET).canonical()
+    )
+    named = planner_settings(name, {"preset": "revisit"})
+    assert (named.rollout, named.iterations) == ("tour_plan", 20_000)
+    member = named.member_settings()
+    assert hierarchical.MctsSettings.from_canonical(member.canonical()).preset == "revisit"

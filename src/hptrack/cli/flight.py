@@ -51,9 +51,10 @@ EXIT_PILOT = 4
 took over)."""
 
 
-FLIGHT_MCTS_OPTIONS = {"readmit": True}
-"""``mcts`` options that ``fly`` sets unless given (or ``preset=paper`` is): a vehicle never
-idles while targets are unmeasured."""
+FLIGHT_MCTS_OPTIONS = {"preset": "improved", "readmit": "true"}
+"""``mcts`` options, as ``-o`` text, that ``fly`` sets unless given (or ``preset=paper`` is):
+the preset its flights were measured with at `FLY_ITERATIONS` (the revisit tour inside a
+flight's searches is not measured), and a vehicle never idles while targets are unmeasured."""
 SEARCH_PLANNERS = ("mcts", "team-mcts", "team-cbba")
 """The planners that ``fly`` flies with `FLY_ITERATIONS` and `FLIGHT_MCTS_OPTIONS` (each
 UAV's search, for a team)."""
@@ -76,7 +77,7 @@ def flight_planner_settings(
         if given.get("preset") != "paper":
             options = FLIGHT_MCTS_OPTIONS.items()
             prefix = "mcts." if planner == "mcts" else ""  # one planner runs: a bare key
-            extra = [f"{prefix}{k}={json.dumps(v)}" for k, v in options if k not in given]
+            extra = [f"{prefix}{k}={v}" for k, v in options if k not in given]
             pairs = [*extra, *(pairs or [])]
     return planner_settings_for((planner,), pairs, iterations, time_limit)[planner]
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import replace
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
@@ -75,8 +75,9 @@ TOUR_BASE = TourSettings()
 
 PRESET_ITERATIONS: dict[str, int] = {"paper": 100_000, "improved": 100_000, "revisit": 20_000}
 """Simulations per tree search when neither ``iterations`` nor ``time_limit`` is given, by
-preset: a search with the revisit tour runs about a fifth as many simulations per second, so
-its default effort is a fifth, for about the same time per decision."""
+preset: a search with the revisit tour runs about a fifth as many simulations per second at
+n = 12 and 20, so its default effort is a fifth; at these efforts its decisions take less time
+than the improved search's and score better (``docs/results/planner-scale.md``)."""
 
 
 PAPER_SEARCH: dict[str, Any] = {
@@ -104,7 +105,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 improvements measured in ``docs/results/search-options.md``, and those with the revisit tour
 as rollout policy and leaf value (``docs/results/planner-scale.md``)."""
 
-DEFAULT_PRESET = "improved"
+DEFAULT_PRESET = "revisit"
 
 
 DwellLength = Annotated[float, Field(ge=0.0, le=1e6)]
@@ -210,13 +211,16 @@ class MctsSettings(PlannerSettings):
     fortify: bool | None = None
 
     effort_fields = {"iterations": "iterations", "time_limit": "time_limit"}
+    default_preset: ClassVar[str | None] = None
+    """The preset when none is named; ``None``: `DEFAULT_PRESET`."""
 
     @model_validator(mode="before")
     @classmethod
     def _defaults(cls, data: Any) -> Any:
         if not isinstance(data, dict):
             return data
-        name = data.get("preset", DEFAULT_PRESET)
+        name = data.get("preset", cls.default_preset or DEFAULT_PRESET)
+        data = {**data, "preset": name}
         if data.get("iterations") is None and data.get("time_limit") is None:
             effort = PRESET_ITERATIONS.get(name, PRESET_ITERATIONS[DEFAULT_PRESET])
             data = {**data, "iterations": effort}
@@ -267,7 +271,7 @@ class MctsSettings(PlannerSettings):
                 for name, options in PRESETS.items()
                 if all(values[k] == v for k, v in options.items())
             ),
-            DEFAULT_PRESET,
+            cls.default_preset or DEFAULT_PRESET,
         )
         return cls.model_validate({**values, "preset": preset})
 

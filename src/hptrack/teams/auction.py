@@ -14,7 +14,7 @@ planner's generator; CBBA still ends conflict-free when it converges.
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, ClassVar
 
 import numpy as np
 from pydantic import Field
@@ -24,7 +24,7 @@ from hptrack.planning.cbba import Allocation, cbba
 from hptrack.planning.hierarchical import HierarchicalPlanner, MctsSettings
 from hptrack.planning.team_value import team_path_value
 from hptrack.teams.link import NO_CLAIM
-from hptrack.teams.sequential import MAX_SHARE_PERIOD_S, claim_of, member_view
+from hptrack.teams.sequential import MAX_SHARE_PERIOD_S, TEAM_PRESET, claim_of, member_view
 
 MAX_ROUNDS = 200
 """Most consensus rounds of one auction."""
@@ -42,6 +42,7 @@ class TeamCbbaSettings(MctsSettings):
     reallocate_period: Annotated[float, Field(gt=0.0, le=MAX_SHARE_PERIOD_S)] = 30.0
     max_bundle: Annotated[int | None, Field(ge=1)] = None
     drop_rate: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.0
+    default_preset: ClassVar[str | None] = TEAM_PRESET
 
     def member_settings(self) -> MctsSettings:
         """One UAV's search settings."""

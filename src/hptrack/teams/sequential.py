@@ -32,6 +32,10 @@ from hptrack.teams.link import NO_CLAIM, Link
 MAX_SHARE_PERIOD_S = 3600.0
 """Longest time between two shares of a limited link, s."""
 
+TEAM_PRESET = "improved"
+"""The preset of every UAV's search in ``team-mcts`` and ``team-cbba`` when none is named: the
+team tables were measured with it (the revisit tour inside a team's searches is not)."""
+
 
 class LinkSettings(PlannerSettings):
     """The team's link (`hptrack.teams.link`).
@@ -50,6 +54,8 @@ class LinkSettings(PlannerSettings):
 class TeamMctsSettings(LinkSettings, MctsSettings):
     """Options of ``team-mcts``: every UAV's search (`MctsSettings`, the same for each) and the
     link (`LinkSettings`)."""
+
+    default_preset: ClassVar[str | None] = TEAM_PRESET
 
     def member_settings(self) -> MctsSettings:
         """One UAV's search settings."""
