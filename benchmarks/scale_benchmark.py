@@ -14,7 +14,7 @@ planner and n as a table and a figure.
 
     python3 benchmarks/scale_benchmark.py --targets 6,12,20 --seeds 30 --time-limit 0.05 \\
         --workers 2 --db results/scale.db --out docs/results/scale-0.05s
-    python3 benchmarks/scale_benchmark.py --targets 6,12,20 --seeds 30 --default-effort \
+    python3 benchmarks/scale_benchmark.py --targets 6,12,20 --seeds 30 --default-effort \\
         --variants revisit,improved --workers 2 --db results/scale.db --out results/effort
 """
 
