@@ -229,3 +229,60 @@ def test_the_scale_benchmark_runs_each_search_at_its_presets_default_effort_or_a
     lines = scale.gap_table(rows, [4, 6])
     assert lines[-2:] == ["| revisit | 75 (2) | - |", "| tour | 25 (1) | - |"]
     assert scale.gap_table([{**r, "gap_scenarios": 0} for r in rows], [4]) == []
+
+
+def test_the_target_mix_splits_u_and_the_gap_by_the_kind_each_target_ends_in(tmp_path):
+    """``benchmarks/target_mix.py``: a target's kind by its last detection; on hand-made
+    episodes, the counts, the mean ``log det`` of each kind and the gap to the clairvoyant
+    split by kind; a flown episode's targets add up to its U and its never-measured U."""
+    mix = _script("target_mix")
+
+    def entry(logdets, lasts):
+        return {
+            "budget_s": 100.0,
+            "logdet": logdets,
+            "never_logdet": [30.0] * len(logdets),
+            "last_detection_s": lasts,
+        }
+
+    outcome = mix.TargetOutcome(1.0, 30.0, 74.9)
+    assert mix.kind(outcome, 100.0, 0.25) == "lost"
+    assert mix.kind(mix.TargetOutcome(1.0, 30.0, 75.0), 100.0, 0.25) == "kept"
+    assert mix.kind(mix.TargetOutcome(30.0, 30.0, None), 100.0, 0.25) == "never"
+    episodes = {  # two scenarios; the planner leaves target 0 never, 1 lost, 2 kept
+        "search": {
+            0: entry([30.0, 12.0, 5.0], [None, 10.0, 99.0]),
+            1: entry([30.0, 14.0, 7.0], [None, 20.0, 80.0]),
+        },
+        "clairvoyant": {
+            0: entry([6.0, 6.0, 5.0], [90.0, 95.0, 99.0]),
+            1: entry([8.0, 6.0, 5.0], [90.0, 95.0, 99.0]),
+        },
+    }
+    search, reference = mix.summarise(episodes, 0.25)
+    assert (search["never_per_episode"], search["lost_per_episode"]) == (1.0, 1.0)
+    assert (search["never_mean_logdet"], search["lost_mean_logdet"]) == (30.0, 13.0)
+    assert search["kept_mean_logdet"] == 6.0 and search["mean_U"] == 49.0
+    assert search["never_gap"] == pytest.approx((23.0, 1.0))  # 24 and 22
+    assert search["lost_gap"] == pytest.approx((7.0, 1.0))  # 6 and 8
+    assert search["kept_gap"] == pytest.approx((1.0, 1.0))  # 0 and 2
+    assert reference["kept_per_episode"] == 3.0 and reference["never_gap"] is None
+
+    variants = mix._scale_variants()
+    key = mix.variant_key("greedy", 3, 0, variants)
+    assert mix.variant_key("revisit@500", 3, 0, variants).planner_settings != (
+        mix.variant_key("revisit", 3, 0, variants).planner_settings
+    )
+    cache = tmp_path / "mix.jsonl"
+    flown = mix.run([key], cache, workers=1)[key]
+    scenario = mix.scenario_for(key)
+    record = mix.run_episode(scenario, mix.planner_for(key), belief_stride=scenario.n_steps)
+    assert sum(flown["logdet"]) == pytest.approx(record.uncertainty, abs=1e-9)
+    assert sum(flown["never_logdet"]) == pytest.approx(scenario.never_observed_uncertainty())
+    never = [i for i, last in enumerate(flown["last_detection_s"]) if last is None]
+    assert never == [i for i in range(3) if not record.detections[:, i].any()]
+    for i in never:
+        assert flown["logdet"][i] == pytest.approx(flown["never_logdet"][i], abs=1e-9)
+    assert (
+        mix.run([key], cache, workers=1)[key] == flown and len(cache.read_text().splitlines()) == 1
+    )
