@@ -101,12 +101,14 @@ def test_interrupted_dask_run_releases_its_claims_and_resumes(scheduler, tmp_pat
 
 
 def _killed_client(address, path):
-    """A benchmark client that dies (SIGKILL, no clean-up) after two stored episodes."""
+    """A benchmark client that dies (SIGKILL, no clean-up) after its first stored episode: the
+    other of the two it claimed at the start (two workers) is still in flight, so its claim is
+    left behind whatever the order in which they finish."""
     import os
     import signal
 
     def die(row, finished, total):
-        if finished == 2:
+        if finished == 1:
             os.kill(os.getpid(), signal.SIGKILL)
 
     store = ResultStore(path)
@@ -122,7 +124,7 @@ def test_killed_client_resumes_on_the_scheduler_with_the_local_values(scheduler,
     process.start()
     process.join(timeout=120)
     assert process.exitcode == -9
-    assert len(ResultStore(path).rows()) == 2
+    assert len(ResultStore(path).rows()) == 1
     assert _claims(path) >= 1  # the dead client's episode in flight is still claimed
     result = cli(
         "benchmark",
@@ -137,7 +139,7 @@ def test_killed_client_resumes_on_the_scheduler_with_the_local_values(scheduler,
         "stationary",
     )
     assert result.code == 0, result.err
-    assert "4 episodes run now, 6 of 6" in result.out
+    assert "5 episodes run now, 6 of 6" in result.out
     rows = ResultStore(path).rows()
     assert len(rows) == len({r.key for r in rows}) == len(CONFIG.keys())
     assert _claims(path) == 0
