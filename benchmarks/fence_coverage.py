@@ -3,7 +3,10 @@ against its Monte Carlo (the paper's experiment of Table I with a fence).
 
 For each random case of the paper's distributions (`draw_case`) and departure delay, a no-fly
 circle is laid at a random offset from where the coverage starts, of a random radius (both in
-units of the belief's largest position standard deviation there): the spiral's waypoints inside
+units of the belief's largest position standard deviation there), at a random angle
+(``--placement belief``) or on the straight path back to the agent's start (``--placement
+path``: the zone lies across the intercept, and clips the spiral when it holds the belief's
+centre or comes within the spiral's first turns of it): the spiral's waypoints inside
 it are flown around by the fenced vehicle, and the belief mass it can neither fly over nor see
 is lost. Each case is planned and simulated three ways on the same sampled trajectories: in open
 space, and fenced with the estimate corrected by the share of the searched ellipse the footprint
@@ -11,6 +14,8 @@ can see (`hptrack.models.mission.visible_find`) and without the correction (the 
 estimate on the fenced flight). Writes ``table.md`` and ``summary.json``::
 
     python3 benchmarks/fence_coverage.py --cases 300 --runs 2000 --out docs/results/fence-coverage
+    python3 benchmarks/fence_coverage.py --cases 150 --runs 2000 --placement path \
+        --out docs/results/fence-coverage-path
 """
 
 from __future__ import annotations
@@ -31,7 +36,14 @@ from hptrack.models.state import positions
 DELAYS_S = (0.0, 100.0, 200.0)
 
 
-def fenced_case(index: int, seed: int, delay_s: float, runs: int) -> dict:
+PLACEMENTS = ("belief", "path")
+"""Where the circle goes: at a random angle about the coverage's start (``belief``), or on the
+straight path from the agent's start to it (``path``: the zone lies across the intercept)."""
+
+
+def fenced_case(
+    index: int, seed: int, delay_s: float, runs: int, placement: str = "belief"
+) -> dict:
     """One case and delay: estimates and simulated chances of a find, open and fenced."""
     case = draw_case(index, seed)
     open_space = MissionSpec()
@@ -43,8 +55,10 @@ def fenced_case(index: int, seed: int, delay_s: float, runs: int) -> dict:
     angle = rng.uniform(0.0, 2.0 * math.pi)
     offset = rng.uniform(0.0, 1.5) * sigma
     radius = max(rng.uniform(0.5, 1.5) * sigma, 10.0)
-    centre = start + offset * np.array([math.cos(angle), math.sin(angle)])
     agent = np.zeros(2)
+    if placement == "path":
+        angle = math.atan2(agent[1] - start[1], agent[0] - start[0])
+    centre = start + offset * np.array([math.cos(angle), math.sin(angle)])
     if math.dist(centre, agent) <= radius + 1.0:  # keep the agent's start free
         centre = agent + (radius + 1.0) * (centre - agent) / max(math.dist(centre, agent), 1e-9)
     fenced = replace(open_space, fence=FenceSpec(circles=((*centre.tolist(), radius),)))
@@ -61,6 +75,8 @@ def fenced_case(index: int, seed: int, delay_s: float, runs: int) -> dict:
         "sigma": sigma,
         "radius_sigma": radius / sigma,
         "offset_sigma": float(math.dist(centre, start)) / sigma,
+        "centre": centre.tolist(),
+        "coverage_start": start.tolist(),
         "open_est": plain.estimate.p_find,
         "open_emp": simulated(plain, open_space),
         "fenced_est": plan.estimate.p_find,
@@ -125,6 +141,12 @@ def main() -> None:
     parser.add_argument("--cases", type=int, default=300)
     parser.add_argument("--runs", type=int, default=2000)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--placement",
+        choices=PLACEMENTS,
+        default="belief",
+        help="the circle about the coverage's start at a random angle, or across the intercept",
+    )
     parser.add_argument("--out", type=Path, default=Path("docs/results/fence-coverage"))
     parser.add_argument(
         "--tables-only", action="store_true", help="rewrite the tables from OUT/cases.json"
@@ -134,7 +156,7 @@ def main() -> None:
         rows = json.loads((args.out / "cases.json").read_text())
     else:
         rows = [
-            fenced_case(i, args.seed, delay, args.runs)
+            fenced_case(i, args.seed, delay, args.runs, args.placement)
             for i in range(args.cases)
             for delay in DELAYS_S
         ]
@@ -142,7 +164,16 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "table.md").write_text(text)
     (args.out / "summary.json").write_text(
-        json.dumps({"cases": args.cases, "runs": args.runs, "seed": args.seed, **summary}, indent=2)
+        json.dumps(
+            {
+                "cases": args.cases,
+                "runs": args.runs,
+                "seed": args.seed,
+                "placement": args.placement,
+                **summary,
+            },
+            indent=2,
+        )
         + "\n"
     )
     (args.out / "cases.json").write_text(json.dumps(rows) + "\n")

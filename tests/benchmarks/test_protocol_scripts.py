@@ -286,3 +286,18 @@ def test_the_target_mix_splits_u_and_the_gap_by_the_kind_each_target_ends_in(tmp
     assert (
         mix.run([key], cache, workers=1)[key] == flown and len(cache.read_text().splitlines()) == 1
     )
+
+
+def test_fence_coverage_lays_the_circle_across_the_intercept_on_request():
+    """``benchmarks/fence_coverage.py --placement path``: the circle's centre lies on the straight
+    flight from the agent's start (the origin) to where the coverage starts, with the same offset
+    and radius as the random-angle placement of the same case."""
+    coverage = _script("fence_coverage")
+    anywhere = coverage.fenced_case(3, 0, 0.0, 20)
+    across = coverage.fenced_case(3, 0, 0.0, 20, "path")
+    start, centre = np.array(across["coverage_start"]), np.array(across["centre"])
+    assert abs(start[0] * centre[1] - start[1] * centre[0]) <= 1e-6 * np.dot(start, start)
+    assert 0.0 <= np.dot(centre, start) <= np.dot(start, start)
+    assert across["radius_sigma"] == anywhere["radius_sigma"]
+    assert across["offset_sigma"] == pytest.approx(anywhere["offset_sigma"])
+    assert anywhere["centre"] != across["centre"]
