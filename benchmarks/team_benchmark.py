@@ -6,7 +6,10 @@ team starting at the scenario's start (`hptrack.scenario.random.random_scenario`
 so that a scenario's targets are the same for every team size. Planners: ``team-mcts`` and
 ``team-cbba`` at ``--time-limit`` s per UAV and decision, ``team-greedy`` and
 ``team-clairvoyant`` (a team of one of each is its planner of one UAV); with ``--links``, also
-``team-mcts`` over a limited link (claims shared every 60 s; half of the messages lost).
+``team-mcts`` over a limited link (claims shared every 60 s; half of the messages lost); with
+``--revisit``, also ``team-mcts`` at the revisit preset (the revisit tour inside every UAV's
+search) beside the team planners' own (improved); ``--no-references`` leaves out the greedy
+and clairvoyant teams (no gap closed then).
 Episodes are stored in ``--db`` as they finish (a re-run resumes). The report: mean ``U`` with
 its standard error, the share of the gap from the greedy team to the clairvoyant team closed,
 the targets never detected, the paired differences team-mcts - team-cbba and team-mcts -
@@ -19,6 +22,7 @@ team-clairvoyant.
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 import numpy as np
@@ -35,8 +39,18 @@ LINKS = {
 """The limited links of ``--links`` (`hptrack.teams.link`)."""
 
 
+REVISIT = "team-mcts, revisit"
+"""The name of ``team-mcts`` at the revisit preset (``--revisit``)."""
+
+
 def configs(
-    targets: tuple[int, ...], seeds: int, team: int, time_limit: float, links: bool
+    targets: tuple[int, ...],
+    seeds: int,
+    team: int,
+    time_limit: float,
+    links: bool,
+    revisit: bool = False,
+    references: bool = True,
 ) -> dict[str, BenchmarkConfig]:
     """The benchmark of each variant of a team of ``team``, by its name in the table."""
 
@@ -51,14 +65,14 @@ def configs(
         )
 
     effort = {"time_limit": time_limit}
-    out = {
-        "team-greedy": one("team-greedy", None),
-        "team-mcts": one("team-mcts", effort),
-        "team-cbba": one("team-cbba", effort),
-    }
+    out = {"team-greedy": one("team-greedy", None)} if references else {}
+    out |= {"team-mcts": one("team-mcts", effort), "team-cbba": one("team-cbba", effort)}
+    if revisit:
+        out[REVISIT] = one("team-mcts", {**effort, "preset": "revisit"})
     if links and team > 1:
         out |= {name: one("team-mcts", {**effort, **link}) for name, link in LINKS.items()}
-    out["team-clairvoyant"] = one("team-clairvoyant", None)
+    if references:
+        out["team-clairvoyant"] = one("team-clairvoyant", None)
     return out
 
 
@@ -91,21 +105,25 @@ def report(by_team: dict[int, dict[str, dict]], out: Path, command: str) -> None
     summary: dict = {"command": command, "rows": [], "paired": []}
     for n in counts:
         for m, variants in sorted(by_team.items()):
-            greedy, clair = variants["team-greedy"], variants["team-clairvoyant"]
+            greedy, clair = variants.get("team-greedy", {}), variants.get("team-clairvoyant", {})
             for variant, rows in variants.items():
                 seeds = sorted(s for k, s in rows if k == n)
                 if not seeds:
                     continue
                 u = np.array([rows[n, s].uncertainty for s in seeds])
                 common = [s for s in seeds if (n, s) in greedy and (n, s) in clair]
-                ends = [np.mean([ref[n, s].uncertainty for s in common]) for ref in (greedy, clair)]
-                mine = np.mean([rows[n, s].uncertainty for s in common])
-                gap = 100.0 * (ends[0] - mine) / (ends[0] - ends[1]) if common else float("nan")
+                gap = math.nan
+                if common:
+                    ends = [
+                        np.mean([ref[n, s].uncertainty for s in common]) for ref in (greedy, clair)
+                    ]
+                    mine = np.mean([rows[n, s].uncertainty for s in common])
+                    gap = 100.0 * (ends[0] - mine) / (ends[0] - ends[1])
                 never = np.mean([rows[n, s].info["targets_never_detected"] for s in seeds])
                 mean, se = mean_se(u)
                 lines.append(
                     f"| {n} | {m} | {variant} | {len(seeds)} | {mean:.2f} +- {se:.2f} | "
-                    f"{gap:.0f} ({len(common)}) | {never:.2f} |"
+                    f"{f'{gap:.0f} ({len(common)})' if common else '-'} | {never:.2f} |"
                 )
                 summary["rows"].append(
                     {
@@ -131,7 +149,7 @@ def report(by_team: dict[int, dict[str, dict]], out: Path, command: str) -> None
     ]
     for n in counts:
         for m, variants in sorted(by_team.items()):
-            for other in ("team-cbba", "team-clairvoyant", *LINKS):
+            for other in ("team-cbba", REVISIT, "team-clairvoyant", *LINKS):
                 if other not in variants:
                     continue
                 count, mean, se = paired(variants["team-mcts"], variants[other], n)
@@ -153,6 +171,14 @@ def main() -> None:
     parser.add_argument("--teams", default="1,2,3", help="team sizes, comma-separated")
     parser.add_argument("--time-limit", type=float, default=0.05, help="s per UAV and decision")
     parser.add_argument("--links", action="store_true", help="also team-mcts over limited links")
+    parser.add_argument(
+        "--revisit", action="store_true", help="also team-mcts at the revisit preset"
+    )
+    parser.add_argument(
+        "--no-references",
+        action="store_true",
+        help="leave out the greedy and clairvoyant teams (no gap closed)",
+    )
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--db", type=Path, default=Path("results/teams.db"))
     parser.add_argument("--out", type=Path, default=Path("results/teams"))
@@ -168,6 +194,8 @@ def main() -> None:
         f"python3 benchmarks/team_benchmark.py --targets {args.targets} --seeds {args.seeds} "
         f"--teams {args.teams} --time-limit {args.time_limit:g}"
         + (" --links" if args.links else "")
+        + (" --revisit" if args.revisit else "")
+        + (" --no-references" if args.no_references else "")
         + f" --workers {args.workers} --db {args.db} --out {args.out}"
     )
     args.db.parent.mkdir(parents=True, exist_ok=True)
@@ -175,7 +203,15 @@ def main() -> None:
     try:
         by_team = {
             m: run_variants(
-                configs(counts(args.targets), args.seeds, m, args.time_limit, args.links),
+                configs(
+                    counts(args.targets),
+                    args.seeds,
+                    m,
+                    args.time_limit,
+                    args.links,
+                    args.revisit,
+                    not args.no_references,
+                ),
                 store,
                 args.workers,
                 run=not args.report_only,

@@ -301,3 +301,33 @@ def test_fence_coverage_lays_the_circle_across_the_intercept_on_request():
     assert across["radius_sigma"] == anywhere["radius_sigma"]
     assert across["offset_sigma"] == pytest.approx(anywhere["offset_sigma"])
     assert anywhere["centre"] != across["centre"]
+
+
+def test_the_team_benchmark_adds_the_revisit_search_and_may_leave_out_the_references(tmp_path):
+    """``benchmarks/team_benchmark.py --revisit --no-references``: team-mcts at the revisit
+    preset beside its own, no greedy or clairvoyant team; the report pairs the two searches
+    and has no gap closed."""
+    team = _script("team_benchmark")
+    plain = team.configs((4,), 2, 2, 0.05, False)
+    assert list(plain) == ["team-greedy", "team-mcts", "team-cbba", "team-clairvoyant"]
+    both = team.configs((4,), 2, 2, 0.05, False, revisit=True, references=False)
+    assert list(both) == ["team-mcts", "team-cbba", team.REVISIT]
+    mine, theirs = (both[v].settings["team-mcts"] for v in ("team-mcts", team.REVISIT))
+    assert (mine.rollout, theirs.rollout) == ("uniform", "tour_plan")
+    assert mine.time_limit == theirs.time_limit == 0.05
+
+    def row(u):
+        key = EpisodeKey("team-mcts", 4, 0, "s", "{}")
+        return EpisodeRow(key, u, 0.0, 0, 0.0, {"targets_never_detected": 1})
+
+    by_team = {
+        2: {
+            "team-mcts": {(4, 0): row(50.0), (4, 1): row(54.0)},
+            "team-cbba": {(4, 0): row(60.0), (4, 1): row(60.0)},
+            team.REVISIT: {(4, 0): row(49.0), (4, 1): row(51.0)},
+        }
+    }
+    team.report(by_team, tmp_path, "cmd")
+    text = (tmp_path / "table.md").read_text()
+    assert "| 4 | 2 | team-mcts | 2 | 52.00 +- 2.00 | - | 1.00 |" in text
+    assert f"| 4 | 2 | team-mcts - {team.REVISIT} | 2 | +2.00 +- 1.00 |" in text
