@@ -1,4 +1,4 @@
-"""hptrack: hierarchical planning for long-horizon multi-target tracking with one UAV.
+"""hptrack: hierarchical planning for long-horizon multi-target tracking with a UAV or a team.
 
 Implements Yuan, Moon, Cao and Scherer, "Hierarchical Planning for Long-Horizon Multi-Target
 Tracking Under Target Motion Uncertainty" (arXiv:2510.10421). SI units throughout: metres,

@@ -137,6 +137,19 @@ def test_simulate_and_benchmark_default_to_the_heterogeneous_setting(cli):
         assert "default heterogeneous" in text
 
 
+def test_the_command_list_gives_each_summary_as_one_paragraph(cli):
+    """``hptrack --help``: a command's summary is its docstring's first paragraph with the
+    docstring's line breaks removed (so a line is never cut off mid-sentence)."""
+    from hptrack.cli.app import app
+
+    for info in app.registered_commands:
+        assert info.short_help and "\n" not in info.short_help, info.name
+    lines = cli("--help").out.splitlines()
+    text = " ".join(re.sub("[│╭╮╰╯─]", " ", cli("--help").out).split())
+    assert "MAPE of P_find and E[T_find] per delay, for the paper's estimator" in text
+    assert not any(line.rstrip(" │").endswith("per delay,") for line in lines)
+
+
 def one_line_refusal(result, *needles):
     assert result.code == 2, (result.code, result.out, result.err)
     assert "Traceback" not in result.err + result.out

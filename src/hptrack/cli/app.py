@@ -8,6 +8,7 @@ its traceback, a line asking to report it, and exit code 1.
 from __future__ import annotations
 
 import errno
+import inspect
 import math
 import sys
 import traceback
@@ -53,7 +54,7 @@ from hptrack.sim.metrics import gospa_cutoff
 matplotlib.use("Agg")
 
 app = typer.Typer(
-    help="Hierarchical planning for long-horizon multi-target tracking with one UAV.",
+    help="Hierarchical planning for long-horizon multi-target tracking with a UAV or a team.",
     no_args_is_help=True,
     add_completion=False,
 )
@@ -393,6 +394,20 @@ def _register_commands() -> None:
     flight.register(app)
     learn.register(app)
     warm_up.register(app)
+    _one_line_summaries(app)
+
+
+def _one_line_summaries(typer_app: typer.Typer) -> None:
+    """Give every command of ``typer_app`` (and of its groups) its docstring's first paragraph
+    on one line as the summary in the command lists (Typer's rich help keeps the docstring's
+    line breaks there)."""
+    for info in typer_app.registered_commands:
+        if info.short_help is None and info.callback is not None and info.callback.__doc__:
+            first = inspect.cleandoc(info.callback.__doc__).split("\n\n")[0]
+            info.short_help = " ".join(first.split())
+    for group in typer_app.registered_groups:
+        if group.typer_instance is not None:
+            _one_line_summaries(group.typer_instance)
 
 
 _register_commands()
