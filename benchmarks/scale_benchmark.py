@@ -42,11 +42,14 @@ VARIANTS: dict[str, tuple[str, dict]] = {
     "improved": ("mcts", {"preset": "improved"}),
     "paper": ("mcts", {"preset": "paper"}),
     "tour": ("tour", {}),
+    "tour-find0.5": ("tour", {"min_find": 0.5}),
+    "tour-find0": ("tour", {"min_find": 0.0}),
     "greedy": ("greedy", {}),
     "clairvoyant": ("clairvoyant", {}),
 }
 """The planners compared, by their names in the tables: a planner and its options (the
-searches' time limit added, if any)."""
+searches' time limit added, if any); ``tour-findP`` is the tour that lets a target go only when
+its chance of a find on arrival is below ``P`` (0.9 by default)."""
 
 REFERENCES = ("greedy", "clairvoyant")
 """The two ends of the gap closed (``--references``: run by default)."""
