@@ -53,6 +53,16 @@ def _rows(path: Path) -> list:
         store.close()
 
 
+def _subtasks(row, kind: str) -> list:
+    """The sub-tasks of ``kind`` (``"pursue"``, ``"follow"``...) in a stored episode's log, in
+    any shape it was written in (`hptrack.subtasks.read_subtasks`)."""
+    from hptrack.subtasks import read_subtasks
+
+    ids = [str(i) for i in range(row.key.n_targets)]
+    entries = (row.info or {}).get("subtasks", [])
+    return [e for e in read_subtasks(entries, ids) if e.kind == kind]
+
+
 def follows(db: Path) -> None:
     from hptrack.experiments.benchmark import scenario_for
 
@@ -60,9 +70,9 @@ def follows(db: Path) -> None:
     for r in _rows(db):
         group = (r.key.setting, r.key.n_targets, r.key.planner_settings)
         totals[group] += 1
-        entries = [e for e in (r.info or {}).get("subtasks", []) if "follow" in e]
+        entries = _subtasks(r, "follow")
         limit = EARLY * scenario_for(r.key).n_steps
-        counts[group] += bool(entries and entries[0]["start_step"] < limit)
+        counts[group] += bool(entries and entries[0].start_step < limit)
     for group in sorted(totals):
         print(
             f"{group[0]} n={group[1]} {group[2]}: {counts[group]} of {totals[group]} "
@@ -283,12 +293,12 @@ def model_accuracy(db: Path) -> None:
         if not _matches(r.key.planner_settings, ["backup=max"]):
             continue
         tau = scenario_for(r.key).time_step
-        for e in (r.info or {}).get("subtasks", []):
-            if "target_index" in e and "outcome" in e:
-                found = e["outcome"] == "found"
-                predicted = e["intercept_time"] + (e["expected_time"] if found else e["t_cutoff"])
+        for e in _subtasks(r, "pursue"):
+            if e.outcome is not None:
+                found = e.outcome == "found"
+                predicted = e.intercept_time + (e.expected_time if found else e.t_cutoff)
                 flown[r.key.n_targets].append(
-                    (found, (e["end_step"] - e["start_step"]) * tau, predicted, e["p_find"])
+                    (found, (e.end_step - e.start_step) * tau, predicted, e.p_find)
                 )
     for n in sorted(flown):
         rows = np.array(flown[n])
@@ -315,11 +325,10 @@ def lost(db: Path, where: list[str]) -> None:
         if r.key.setting != "homogeneous" or not _matches(r.key.planner_settings, where):
             continue
         tried, found = set(), set()
-        for e in (r.info or {}).get("subtasks", []):
-            if "target_index" in e:
-                tried.add(e["target_index"])
-                if e.get("outcome") == "found":
-                    found.add(e["target_index"])
+        for e in _subtasks(r, "pursue"):
+            tried.add(e.target)
+            if e.outcome == "found":
+                found.add(e.target)
         n = r.key.n_targets
         groups[(n, r.key.planner_settings)].append(
             (r.uncertainty, n - len(tried), len(tried - found), r.never_observed / n)

@@ -60,9 +60,18 @@ def _store(tmp_path: Path, rows: list[tuple[int, str, float, list[dict]]]) -> Pa
     return path
 
 
-def test_lost_counts_targets_never_found_and_their_share(tmp_path, diagnostics, capsys):
+def _today(entries: list[dict]) -> list[dict]:
+    """The same sub-task log in the shape planners write today (`Subtask.to_json`)."""
+    from hptrack.subtasks import read_subtasks
+
+    return [e.to_json() for e in read_subtasks(entries, ["0", "1", "2"])]
+
+
+@pytest.mark.parametrize("shape", [list, _today], ids=["older", "today"])
+def test_lost_counts_targets_never_found_and_their_share(tmp_path, diagnostics, capsys, shape):
     # seed 0: target 0 found, 1 only missed, 2 never pursued; seed 1: all three found
-    # (target 1 after a miss). Each target left alone is worth 75 / 3 = 25 of U.
+    # (target 1 after a miss). Each target left alone is worth 75 / 3 = 25 of U. The logs
+    # read the same in the shape written before `Subtask.to_json` and in today's.
     plain = _settings()
     db = _store(
         tmp_path,
@@ -71,22 +80,26 @@ def test_lost_counts_targets_never_found_and_their_share(tmp_path, diagnostics, 
                 0,
                 plain,
                 60.0,
-                [
-                    _pursuit(0, 0, 20, "found"),
-                    _pursuit(1, 20, 120, "missed"),
-                    {"follow": 0, "start_step": 120},
-                ],
+                shape(
+                    [
+                        _pursuit(0, 0, 20, "found"),
+                        _pursuit(1, 20, 120, "missed"),
+                        {"follow": 0, "start_step": 120},
+                    ]
+                ),
             ),
             (
                 1,
                 plain,
                 36.0,
-                [
-                    _pursuit(0, 0, 20, "found"),
-                    _pursuit(1, 20, 120, "missed"),
-                    _pursuit(2, 120, 140, "found"),
-                    _pursuit(1, 140, 160, "found"),
-                ],
+                shape(
+                    [
+                        _pursuit(0, 0, 20, "found"),
+                        _pursuit(1, 20, 120, "missed"),
+                        _pursuit(2, 120, 140, "found"),
+                        _pursuit(1, 140, 160, "found"),
+                    ]
+                ),
             ),
             (0, _settings(dwell=20.0), 99.0, []),  # another search, filtered out below
         ],
