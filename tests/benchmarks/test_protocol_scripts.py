@@ -195,6 +195,38 @@ def test_the_sensing_table_flies_the_blind_search_only_below_pd_one_and_pairs_it
     assert float(rows["blind"]["gospa_end"]) == pytest.approx(7.0)
 
 
+def test_the_sensing_table_pairs_each_search_with_its_own_blind_twin(tmp_path):
+    """``benchmarks/sensing_table.py``: with the revisit search and its blind twin beside the
+    default pair, each known search is paired with its own twin, and the table names it."""
+    table = _script("sensing_table")
+    wanted = table.configs(
+        ("revisit", "blind-revisit"), (3,), 2, {}, (0.7,), 1e-6, 0.0, ("labelled",)
+    )
+    known, blind = (wanted["Pd 0.7, labelled", v] for v in ("revisit", "blind-revisit"))
+    assert known.settings["mcts"] == blind.settings["mcts"]
+    assert (known.settings["mcts"].rollout, known.blind, blind.blind) == ("tour_plan", False, True)
+
+    def row(u: float, seed: int) -> EpisodeRow:
+        key = EpisodeKey("mcts", 3, seed, "s", MctsSettings().canonical())
+        return EpisodeRow(key, u, 77.0, 1, 0.1, {"targets_never_detected": 0}, 5.0, 7.0, 1)
+
+    sensor = "Pd 0.7, labelled"
+    by = {
+        (sensor, "default"): {(3, 0): row(10.0, 0), (3, 1): row(14.0, 1)},
+        (sensor, "blind"): {(3, 0): row(13.0, 0), (3, 1): row(13.0, 1)},
+        (sensor, "revisit"): {(3, 0): row(9.0, 0), (3, 1): row(9.0, 1)},
+        (sensor, "blind-revisit"): {(3, 0): row(12.0, 0), (3, 1): row(14.0, 1)},
+    }
+    table.report(by, tmp_path, "command", "its default effort")
+    paired = list(csv.DictReader((tmp_path / "paired.csv").read_text().splitlines()))
+    assert [(p["search"], float(p["known_minus_blind"])) for p in paired] == [
+        ("default", -1.0),
+        ("revisit", -4.0),
+    ]
+    text = (tmp_path / "table.md").read_text()
+    assert "| 3 | Pd 0.7, labelled | revisit | 2 | -4.00 | 1.00 | 4.0 |" in text
+
+
 def test_the_scale_benchmark_runs_each_search_at_its_presets_default_effort_or_a_time_limit():
     """``benchmarks/scale_benchmark.py``: ``--default-effort`` leaves every search at its
     preset's simulations per search (the revisit preset's own, a fifth of the others'); a time

@@ -141,3 +141,21 @@ def test_it_flies_through_simulate_and_is_listed(cli):
     listed = cli("planners")
     assert listed.code == 0
     assert "tour" in listed.out and "min_find" in listed.out and "settle_variance" in listed.out
+
+
+def test_a_detector_that_misses_leaves_the_tour_its_targets():
+    """Under a detector with ``Pd = 0.7`` per pass (draws held over the pass), no target's
+    chance of a find can reach ``min_find = 0.9``; the threshold is a share of one pass's
+    chance of a detection, so the tour still pursues (it used to pursue nothing and score the
+    never-observed U) and finds targets."""
+    from hptrack.scenario.model import FootprintSensorSpec
+
+    sensor = FootprintSensorSpec(detection_probability=0.7, detection_correlation_time=1000.0)
+    scenario = random_scenario(4, seed=0, homogeneous=True, sensor=sensor)
+    record = run_episode(scenario, make_planner("tour"), belief_stride=scenario.n_steps)
+    pursued = [
+        s for s in read_subtasks(record.info["subtasks"], scenario.target_ids) if s.kind == "pursue"
+    ]
+    assert len({s.target for s in pursued}) >= 2
+    assert record.detections.any(axis=0).sum() >= 2
+    assert record.uncertainty < scenario.never_observed_uncertainty() - 20.0

@@ -3,7 +3,8 @@ MDP (`hptrack.planning.subtask_mdp`), re-planned at every sub-task's end (issue 
 
 A *tour* is a cyclic order of the targets it keeps. Flown in the MDP from the current state, it
 pursues the next kept target in the order (skipping the one just found, and letting go of any
-whose chance of a find on arrival, ``p_max``, has fallen below ``min_find``); after a find it
+whose chance of a find on arrival, ``p_max``, has fallen below ``min_find`` times one pass's
+chance of a detection, 1 for the paper's sensor); after a find it
 dwells on the target, one dwell of ``dwell`` s at a time, while the target's velocity variance
 is above ``settle_variance`` (a target whose velocity is pinned grows slowly and is cheap to find
 at the next revisit); when nothing is left to pursue it follows the target just found to the
@@ -41,6 +42,7 @@ from pydantic import Field
 
 from hptrack.interface import CurrentPlan, MissionSpec, Observation, one_vehicle
 from hptrack.models.mission import follow_tables, mean_position_on, state_size
+from hptrack.models.sensor import sensor_find_factor
 from hptrack.models.state import positions, velocity_variance_of
 from hptrack.planning.rollout import register_policy
 from hptrack.planning.subtask_flight import SubtaskFlight
@@ -76,8 +78,9 @@ class TourSettings(PlannerSettings):
             velocity variance is above ``settle_variance``).
         settle_variance: mean of the two velocity variances, (m/s)^2, below which a found
             target is left.
-        min_find: a kept target whose chance of a find on arrival is below this is let go
-            (passed over) for that lap.
+        min_find: a kept target whose chance of a find on arrival is below this share of one
+            pass's chance of a detection (the sensor's find factor: 1 for the paper's sensor)
+            is let go (passed over) for that lap.
         samples: outcome sequences each candidate tour is scored on.
         miss: ``"keep"``: a missed target stays in the action list, its belief grown;
             ``"drop"``: it leaves it until measured by chance (the paper's rule).
@@ -213,17 +216,20 @@ def tour_dwells(env, state, settle):
 def next_pursuit(env, state, order, at, min_find, gone, work):
     """The tour's next pursuit: the first target of the cyclic ``order`` from position ``at``
     that is not the one just found, not ``gone``, available, and found on arrival with chance
-    ``p_max >= min_find``; every target passed over for its low chance is marked ``gone``.
-    Returns ``(target, p_max, find steps, miss steps, position after it)``; target ``-1``:
-    none left."""
+    ``p_max >= min_find eta`` (``eta`` the sensor's find factor, one pass's chance of a
+    detection: 1 for the paper's sensor, so that a detector that misses does not make every
+    target too unlikely to pursue); every target passed over for its low chance is marked
+    ``gone``. Returns ``(target, p_max, find steps, miss steps, position after it)``; target
+    ``-1``: none left."""
     m = order.shape[0]
     last = state[0][I_LAST]
+    threshold = min_find * sensor_find_factor(env.mission.sensor)
     for k in range(m):
         a = order[(at + k) % m]
         if a == last or gone[a] or not is_available(env, state, a):
             continue
         p, find_steps, miss_steps = expand_action(env, state, a, work)
-        if p >= min_find:
+        if p >= threshold:
             return a, p, find_steps, miss_steps, (at + k + 1) % m
         gone[a] = True
     return -1, 0.0, 0, 0, at
