@@ -259,8 +259,8 @@ def report(by_n: dict[int, list[dict]], command: str, final_share: float, out: P
                 + " | ".join(f"{m:+.2f} +- {se:.2f}" for m, se in parts)
                 + f" | {whole:+.2f} |"
             )
-    summary = {"command": command, "final_share": final_share, "rows": by_n}
-    write_tables(out, lines, {**summary, "rows": {str(n): r for n, r in by_n.items()}})
+    rows = {str(n): r for n, r in by_n.items()}
+    write_tables(out, lines, {"command": command, "final_share": final_share, "rows": rows})
 
 
 def main() -> None:

@@ -34,7 +34,8 @@ MAX_SHARE_PERIOD_S = 3600.0
 
 TEAM_PRESET = "improved"
 """The preset of every UAV's search in ``team-mcts`` and ``team-cbba`` when none is named: the
-team tables were measured with it (the revisit tour inside a team's searches is not)."""
+team tables were measured with it, and the revisit tour inside a team's searches measured worse
+with three UAVs (``docs/results/teams.md``)."""
 
 
 class LinkSettings(PlannerSettings):
