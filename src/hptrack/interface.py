@@ -143,6 +143,9 @@ class MissionSpec:
         detection_correlation_time: s, how long one detection draw holds while a target
             stays in the footprint (misses correlated over consecutive looks); 0, independent
             looks, by default.
+        false_alarm_density: the false detections a look reports per m^2 of its footprint
+            (Poisson; 0, the paper's sensor, by default); only a planner option that models
+            false finds uses it (``mcts``'s ``false_finds="model"``).
     """
 
     time_step: float = 0.5
@@ -160,6 +163,7 @@ class MissionSpec:
     negative_information: bool = False
     members: tuple[TeamMember, ...] = ()
     detection_correlation_time: float = 0.0
+    false_alarm_density: float = 0.0
     record: Mission = field(init=False, repr=False)
     """The mission's constants as the compiled kernels take them (built and validated once,
     with the spec)."""
@@ -194,6 +198,7 @@ class MissionSpec:
             self.fence,
             self.negative_information,
             self.detection_correlation_time,
+            self.false_alarm_density,
         )
         object.__setattr__(self, "measurement_noise", record.sensor.measurement_noise)
         object.__setattr__(self, "process_noise", record.process_noise)

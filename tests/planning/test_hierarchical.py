@@ -119,9 +119,9 @@ def test_settings_default_effort_and_identity():
     assert default.preset == "revisit"  # the default since the default-effort scale benchmark
     assert default.canonical() == (
         '{"backup":"max","commit":0.0,"common_rollouts":false,"dwell":0.0,"estimator":"paper",'
-        '"exploration":0.5,"fortify":false,"iterations":20000,"max_weight":1.0,"miss":"drop",'
-        '"passes":"ignore","readmit":false,"rollout":"tour_plan","rollout_epsilon":0.1,'
-        '"root_split":"even","threads":1,"time_limit":null}'
+        '"exploration":0.5,"false_finds":"ignore","fortify":false,"iterations":20000,'
+        '"max_weight":1.0,"miss":"drop","passes":"ignore","readmit":false,"rollout":"tour_plan",'
+        '"rollout_epsilon":0.1,"root_split":"even","threads":1,"time_limit":null}'
     )
     assert default.digest() != timed.digest()
     assert MctsSettings.from_options("mcts", default.as_json()) == default

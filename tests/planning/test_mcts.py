@@ -10,7 +10,14 @@ import pytest
 from hptrack.models.mission import mission_record
 from hptrack.planning import PlanningProblem, search
 from hptrack.planning.search import SearchOptions, run_simulations
-from hptrack.planning.subtask_mdp import FIND, MISS, apply_outcome, expand_action, new_work
+from hptrack.planning.subtask_mdp import (
+    FIND,
+    MISS,
+    SubtaskOptions,
+    apply_outcome,
+    expand_action,
+    new_work,
+)
 from hptrack.planning.subtask_optimum import action_values
 from hptrack.planning.tree import grow_tree, new_tree
 
@@ -168,3 +175,25 @@ def test_values_are_minus_uncertainty_at_the_end():
     exact = expectimax(problem)
     assert result.root.actions.tolist() == [0]
     assert result.root.values[0] == pytest.approx(exact[0], abs=0.5)
+
+
+def test_replanning_under_false_finds_plans_only_what_the_world_reports():
+    """With false finds modelled the current action has three outcomes, but the world reports
+    a false find as a find: the root's simulations go to the find and the miss only, evenly,
+    and no plan is made after the false find."""
+    problem = two_targets(current_action=0)
+    problem = replace(problem, mission=problem.mission._replace(false_alarm_density=1e-6))
+    result = search(problem, subtask=SubtaskOptions(false_finds="model"), iterations=3000, seed=1)
+    assert len(result.after) == 3 and result.after[2] is None
+    after_find, after_miss = result.after[:2]
+    assert after_find.actions.tolist() == [0, 1] and after_miss.actions.tolist() == [1]
+    # the first simulation rolls out; the rest alternate between the two outcomes
+    assert abs(int(after_find.visits.sum()) - int(after_miss.visits.sum())) <= 2
+    first = search(replace(problem, current_action=None), iterations=3000, seed=1)
+    modelled = search(
+        replace(problem, current_action=None),
+        subtask=SubtaskOptions(false_finds="model"),
+        iterations=3000,
+        seed=1,
+    )
+    assert first.root.values.tolist() != modelled.root.values.tolist()  # the outcome counts

@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from hptrack.coverage.estimator import coverage_outcome
+from hptrack.coverage.false_finds import false_find_split, take_rate
 from hptrack.models.measurement import PositionMeasurementModel
 from hptrack.models.mission import mission_record
 from hptrack.models.motion import ConstantVelocityModel
 from hptrack.planning.subtask_mdp import (
+    FALSE_FIND,
     FIND,
     I_LAST,
     I_MASK,
@@ -20,11 +22,13 @@ from hptrack.planning.subtask_mdp import (
     apply_outcome,
     dwell_steps,
     expand_action,
+    expand_outcomes,
     intercept_of,
     is_available,
     n_actions,
     new_memo,
     new_work,
+    outcomes_of,
     terminal_value,
 )
 
@@ -428,3 +432,58 @@ def test_negative_information_scales_the_covariance_a_miss_leaves(pd):
     apply_outcome(env, state, 0, MISS, expand_action(env, state, 0, work)[2], work)
     np.testing.assert_array_equal(cov[0], prior())
     assert step[0] == 0
+
+
+def _cluttered(n: int, density: float = 1e-6):
+    return mission_record(TAU, 900.0, SPEED, W, R, np.full(n, 3e-4), false_alarm_density=density)
+
+
+def test_false_finds_split_a_pursuit_into_three_outcomes_only_when_modelled():
+    """With the mission's clutter and ``false_finds="model"`` a pursuit's find and miss lose
+    the chance of a false alarm taken first (`false_find_split` at the take rate of the belief
+    predicted to the spiral's start); a follow has no false find; ``"ignore"`` or no clutter
+    leave the paper's two outcomes exactly."""
+    means = np.array([[900.0, 0, 1, 1], [0, 900.0, 0, 0]])
+    covs = np.array([prior(), prior()])
+    problem = PlanningProblem(_cluttered(2), np.zeros(2), means, covs, 900.0)
+    work = new_work()
+    plain = problem.env(SubtaskOptions())
+    modelled = problem.env(SubtaskOptions(false_finds="model"))
+    assert (outcomes_of(plain), outcomes_of(modelled)) == (2, 3)
+    quiet = PlanningProblem(mission(2), np.zeros(2), means, covs, 900.0)
+    assert outcomes_of(quiet.env(SubtaskOptions(false_finds="model"))) == 2
+    state = problem.root_state()
+    p_find, find_steps, miss_steps = expand_action(plain, state, 0, work)
+    p, payload = np.empty(3), np.empty(3, dtype=np.int64)
+    expand_outcomes(modelled, state, 0, p, payload, work)
+    ic = intercept_of(modelled, state[1], 0, 0)
+    cov = predict(prior(), 3e-4, ic)
+    rate = take_rate(1e-6, W / 2, cov[0, 0], cov[0, 1], cov[1, 1], R[0, 0], R[0, 1], R[1, 1])
+    assert rate > 0.0
+    split = false_find_split(p_find, find_steps - ic, miss_steps - ic, rate)
+    np.testing.assert_allclose(p, [split[0], split[1], split[2]], rtol=1e-9)
+    assert p.sum() == pytest.approx(1.0) and p[FIND] < p_find and p[FALSE_FIND] > 0.0
+    assert payload[FIND] == find_steps and payload[MISS] == miss_steps
+    assert payload[FALSE_FIND] == max(1, ic + math.floor(split[3] + 0.5))
+    two_p, two_payload = np.empty(2), np.empty(2, dtype=np.int64)
+    expand_outcomes(modelled, state, 0, two_p, two_payload, work)
+    assert two_p.tolist() == [p_find, 1.0 - p_find]  # no room for the third: the paper's
+    with pytest.raises(ValueError, match="false_finds must be one of"):
+        problem.env(SubtaskOptions(false_finds="maybe"))
+
+
+def test_a_false_find_ends_the_search_having_learnt_nothing():
+    """After a false find the target's belief is as before (its base unchanged), it leaves
+    the action list (``miss="drop"``) or stays (``"keep"``), and nothing is the last found."""
+    means = np.array([[900.0, 0, 1, 1], [0, 900.0, 0, 0]])
+    problem = PlanningProblem(_cluttered(2), np.zeros(2), means, np.array([prior()] * 2), 900.0)
+    work = new_work()
+    for miss, mask in (("drop", 0b10), ("keep", 0b11)):
+        env = problem.env(SubtaskOptions(false_finds="model", miss=miss))
+        state = problem.root_state()
+        si, _, cov, step = state
+        p, payload = np.empty(3), np.empty(3, dtype=np.int64)
+        expand_outcomes(env, state, 0, p, payload, work)
+        apply_outcome(env, state, 0, FALSE_FIND, payload[FALSE_FIND], work)
+        assert (si[I_STEP], si[I_MASK], si[I_LAST], step[0]) == (payload[FALSE_FIND], mask, -1, 0)
+        np.testing.assert_array_equal(cov[0], prior())

@@ -303,10 +303,12 @@ def scenario_for(key: EpisodeKey) -> Scenario:
 
 def planner_mission_for(key: EpisodeKey, scenario: Scenario) -> MissionSpec | None:
     """The mission a benchmark episode's planner is told: the scenario's own (``None``), or
-    under ``"+blind"`` the same with the paper's certain sensor."""
+    under ``"+blind"`` the same with the paper's certain sensor (``Pd = 1``, no false alarms)."""
     if not _setting_parts(key.setting)[3]:
         return None
-    return dataclasses.replace(scenario.mission_spec(), detection_probability=1.0)
+    return dataclasses.replace(
+        scenario.mission_spec(), detection_probability=1.0, false_alarm_density=0.0
+    )
 
 
 def planner_for(key: EpisodeKey):

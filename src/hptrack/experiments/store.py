@@ -42,7 +42,7 @@ from hptrack.jsonout import json_text
 from hptrack.settings import digest_of
 from hptrack.sim.record import EpisodeRow
 
-SCHEMA_VERSION = 8
+SCHEMA_VERSION = 9
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS episodes (
     planner TEXT NOT NULL,
@@ -183,6 +183,7 @@ MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
     5: _adding({"mcts": {"readmit": False, "commit": 0.0}}),  # re-admission, commitment
     6: _add_metrics,
     7: _adding({name: {"fortify": False} for name in ("mcts", "team-mcts", "team-cbba")}),
+    8: _adding({name: {"false_finds": "ignore"} for name in ("mcts", "team-mcts", "team-cbba")}),
 }
 """Layout version -> the step that makes a database of that layout one of the next."""
 

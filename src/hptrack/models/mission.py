@@ -82,6 +82,10 @@ class Mission(NamedTuple):
         vehicle: the vehicle part (`hptrack.models.vehicle`; the paper's
             `HolonomicVehicle`: speed ``v_a`` and step length ``v_a tau``;
             `FencedHolonomicVehicle` when a fence is given).
+        false_alarm_density: ``lambda``, the false detections a look reports per m^2 of its
+            footprint (Poisson; 0, the paper's sensor, by default). The paper's planner does not
+            use it; a search that models false finds does
+            (`hptrack.coverage.false_finds`).
     """
 
     time_step: float
@@ -90,6 +94,7 @@ class Mission(NamedTuple):
     motion: tuple
     sensor: SensorPart
     vehicle: VehiclePart
+    false_alarm_density: float = 0.0
 
 
 def mission_record(
@@ -105,6 +110,7 @@ def mission_record(
     fence: FenceSpec | None = None,
     negative_information: bool = False,
     detection_correlation_time: float = 0.0,
+    false_alarm_density: float = 0.0,
 ) -> Mission:
     """The validated `Mission` (``continuous_noise``: the continuous form of ``Q``, else
     the paper's printed one; ``motion``: a registered belief motion, default constant velocity
@@ -115,12 +121,13 @@ def mission_record(
     ``negative_information``: a `NegativeInformationSensor` of that detector instead, whose
     looks that see nothing update the beliefs; ``detection_correlation_time``: s, how long a
     detector's draw holds while a target stays in the footprint, 0 for independent looks,
-    `hptrack.models.sensor.hold_looks_of`).
+    `hptrack.models.sensor.hold_looks_of`; ``false_alarm_density``: false detections per m^2
+    per look, `Mission.false_alarm_density`).
 
     Raises:
         ValueError: a constant not positive and finite, ``R`` not symmetric positive definite,
             a ``q`` negative or not finite, more than `MAX_TARGETS` targets, a bad detection
-            probability.
+            probability, a false alarm density negative or not finite.
     """
     for name, value in (
         ("time_step", time_step),
@@ -156,6 +163,9 @@ def mission_record(
         raise ValueError(f"detection_correlation_time must be >= 0 s, got {correlation!r}")
     if correlation > 0.0 and negative_information:
         raise ValueError("negative_information needs independent looks (correlation time 0)")
+    clutter = float(false_alarm_density)
+    if not (math.isfinite(clutter) and clutter >= 0.0):
+        raise ValueError(f"false_alarm_density must be >= 0 per m^2, got {false_alarm_density!r}")
     step = float(agent_speed) * tau
     if negative_information:
         sensor = negative_information_sensor(
@@ -171,6 +181,7 @@ def mission_record(
         motion=motion,
         sensor=sensor,
         vehicle=vehicle_part(float(agent_speed), tau, fence),
+        false_alarm_density=clutter,
     )
 
 

@@ -90,6 +90,7 @@ PAPER_SEARCH: dict[str, Any] = {
     "dwell": 0.0,
     "miss": "drop",
     "passes": "ignore",
+    "false_finds": "ignore",
     "readmit": False,
     "commit": 0.0,
     "fortify": False,
@@ -163,6 +164,10 @@ class MctsSettings(PlannerSettings):
         passes: ``"ignore"`` (the paper): the MDP credits a sub-task with its own target
             only; ``"credit"``: also with the other targets its flight passes over
             (`hptrack.planning.subtask_mdp`).
+        false_finds: ``"ignore"`` (the paper): a pursuit ends in a find or a miss;
+            ``"model"``: with the mission's false alarms (``sensor.false_alarm_density``), also
+            in a false find, the tracker taking a false alarm for the target
+            (`hptrack.coverage.false_finds`).
         readmit: with ``miss="drop"``, when no target is left to pursue and none is being
             followed, the missed targets re-enter the action list with the beliefs the misses
             left (predicted to now) and the planner searches again, instead of the vehicle
@@ -205,6 +210,7 @@ class MctsSettings(PlannerSettings):
     dwell: DwellLength | list[DwellLength] | None = None
     miss: Literal["drop", "keep"] | None = None
     passes: Literal["ignore", "credit"] | None = None
+    false_finds: Literal["ignore", "model"] | None = None
     readmit: bool | None = None
     commit: Annotated[float | None, Field(ge=0.0, le=1e6)] = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1

@@ -5,13 +5,15 @@ An MDP is a class of ``env`` (a ``NamedTuple`` of its constant data) registered 
 ``mdp_*(env, ...)``, dispatched at compile time on ``env``'s class, so that the search compiles
 one version per MDP. An MDP declares its number of actions to the search, at most
 `hptrack.planning.tree.MAX_ACTIONS` (the search refuses more), and how many chance outcomes
-an action has (`outcome_count`): the tree sizes its per-outcome arrays from it.
+an action has (`outcome_count`): the tree sizes its per-outcome arrays from it. Some outcomes
+may be the model's only, reported by the world as another (`observed_count`: the first ones are
+those the world tells apart); a re-planning search plans only for those.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from numba.extending import overload
 
@@ -19,15 +21,17 @@ from hptrack._dispatch import registered
 
 
 class MdpKernels(NamedTuple):
-    """The compiled kernels of an MDP (signatures in `hptrack.planning.search`) and its
-    number of chance outcomes per action: an integer, or a function of ``env`` returning one."""
+    """The compiled kernels of an MDP (signatures in `hptrack.planning.search`), its
+    number of chance outcomes per action (an integer, or a function of ``env`` returning one)
+    and how many of the first ones the world tells apart (``None``: all)."""
 
     copy_state: Callable
     is_available: Callable
     expand: Callable
     apply: Callable
     value: Callable
-    n_outcomes: int | Callable[[tuple], int] = 2
+    n_outcomes: int | Callable[[Any], int] = 2
+    n_observed: int | None = None
 
 
 _MDPS: dict[type, MdpKernels] = {}
@@ -52,6 +56,14 @@ def outcome_count(env: tuple) -> int:
     if count < 1:
         raise ValueError(f"the MDP declares {count} outcomes; the search takes at least 1")
     return int(count)
+
+
+def observed_count(env: tuple) -> int:
+    """How many of the first outcomes of ``env``'s actions the world tells apart (at most
+    `outcome_count`)."""
+    count = outcome_count(env)
+    declared = _MDPS[type(env)].n_observed
+    return count if declared is None else min(int(declared), count)
 
 
 def _kernel(env, field: str):

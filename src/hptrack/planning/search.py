@@ -15,7 +15,9 @@ is a class of ``env`` (a ``NamedTuple`` of the MDP's constant data) registered w
 
 An MDP declares its number of actions, at most `hptrack.planning.tree.MAX_ACTIONS` (the search
 refuses more), and the number of chance outcomes of an action
-(`hptrack.planning.mdp.outcome_count`; the sub-task MDP's two are the find and the miss).
+(`hptrack.planning.mdp.outcome_count`; the sub-task MDP's are the find and the miss, and the
+false find when it models one), of which the first `hptrack.planning.mdp.observed_count` are
+told apart by the world.
 
 The search's options are one record, `SearchOptions`, under the planner settings' names.
 Its rollout policy is a class of ``policy`` (a ``NamedTuple`` of its parameters, possibly empty)
@@ -75,6 +77,7 @@ from hptrack.planning.mdp import (
     mdp_expand,
     mdp_is_available,
     mdp_value,
+    observed_count,
     outcome_count,
 )
 from hptrack.planning.rollout import UniformRandom, choose_action
@@ -283,6 +286,7 @@ def run_simulations(
     exploration, policy = options.exploration, options.rollout
     paired = pairs_outcomes(options.backup)
     weighted = options.root_split == "weighted"
+    observed = tree.counts[3]
     candidates = np.empty(n_actions, dtype=np.int64)
     common = np.empty(1, dtype=np.uint64)
     p_scratch = np.empty(tree.a_p.shape[1])
@@ -345,8 +349,8 @@ def run_simulations(
                 a = np.int64(tree.a_action[x])
                 mdp_expand(env, state, a, tree.a_p[x], tree.a_payload[x], work)
             outcome = -1
-            if s == 0 and fixed >= 0 and _uncertain(tree.a_p[x]):
-                outcome = _root_outcome(tree.counts[2], tree.a_p[x], weighted)
+            if s == 0 and fixed >= 0 and _uncertain(tree.a_p[x, :observed]):
+                outcome = _root_outcome(tree.counts[2], tree.a_p[x, :observed], weighted)
             elif paired and tree.a_visits[x] > 0:
                 outcome = _first_unvisited(tree, x)
             if outcome < 0:
@@ -424,9 +428,11 @@ def run_search(
     fixed: int = -1,
     start: float | None = None,
     n_outcomes: int = 2,
+    n_observed: int | None = None,
 ) -> SearchResult:
     """The ``TreeSearch`` loop of Algorithm 1 around a compiled ``simulate(tree, count)`` on a
-    tree for actions of ``n_outcomes`` chance outcomes.
+    tree for actions of ``n_outcomes`` chance outcomes (the first ``n_observed``, default all,
+    told apart by the world: a re-planning root shares its simulations among those).
 
     Simulations run in chunks; between chunks the tree grows when full and the wall clock is
     checked (from ``start``, a ``time.perf_counter()`` reading, default now). With both limits,
@@ -434,7 +440,7 @@ def run_search(
     """
     check_limits(iterations, time_limit)
     start = time.perf_counter() if start is None else start
-    tree = new_tree(seed_value(seed), n_outcomes=n_outcomes)
+    tree = new_tree(seed_value(seed), n_outcomes=n_outcomes, n_observed=n_observed)
     done = 0
     chunk = 64
     while True:
@@ -500,13 +506,16 @@ def search_mdp(
             f"the MDP declares {n_actions} actions; the search takes 1 to {MAX_ACTIONS}"
         )
     n_outcomes = outcome_count(env)
+    n_observed = observed_count(env)
     options = checked_options(options)
     state = tuple(np.array(a, copy=True) for a in root)
 
     def simulate(tree: Tree, count: int) -> int:
         return kernel(tree, env, root, state, work, options, n_actions, max_depth, fixed, count)
 
-    return run_search(simulate, n_actions, iterations, time_limit, seed, fixed, start, n_outcomes)
+    return run_search(
+        simulate, n_actions, iterations, time_limit, seed, fixed, start, n_outcomes, n_observed
+    )
 
 
 def merged(results: list[SearchResult], fixed: int) -> SearchResult:

@@ -70,6 +70,17 @@ spiral covered (`hptrack.models.miss_update.search_miss_scale`: ``a = -ln(1 - p_
 detected there with ``p_find / (1 - e^-a)``), and that is its base from then on, so
 ``miss="keep"`` re-pursues it with the belief the miss left (and ``"drop"`` scores it so).
 
+**False finds** (``false_finds="model"``, beyond the paper; only with the mission's clutter,
+`hptrack.models.mission.Mission.false_alarm_density`): a pursuit has a third outcome, the
+tracker taking a false alarm for the target before the search finds it or gives up
+(`hptrack.coverage.false_finds`: the find and the miss each lose the chance of a take first).
+It lasts the intercept and the mean search before the take, the target's belief is left as it
+was (the update went to a false alarm, so nothing was learnt) and the target leaves the action
+list as after a miss. The world reports a false find as a find: the search's plans after it
+are never flown, and a re-planning search shares its simulations among the find and the miss
+only (`OBSERVED`). The tour and the exact solver (`hptrack.planning.tour`,
+`hptrack.planning.subtask_optimum`) plan with the find and the miss.
+
 At the end of the budget, or when no action is available, the value of the state is ``-U``
 with ``U = sum_i log det Sigma^xy_i`` at step ``N``
 (Sec. III).
@@ -84,6 +95,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numba
 import numpy as np
 
+from hptrack.coverage.false_finds import false_find_split, take_rate
 from hptrack.coverage.passes import pass_probability
 from hptrack.models.beliefs import logdet_xy
 from hptrack.models.mission import (
@@ -124,9 +136,14 @@ WORD_BITS = 63
 """Targets per word of the action list: target ``a`` is bit ``a % 63`` of word ``a // 63``, an
 ``int64`` without its sign bit (so a word is never negative)."""
 
-OUTCOMES = ("find", "miss")
-"""A sub-task's chance outcomes, by index (the search's outcome ``o``)."""
-FIND, MISS = 0, 1
+OUTCOMES = ("find", "miss", "false find")
+"""A sub-task's chance outcomes, by index (the search's outcome ``o``). The false find is an
+outcome only when the MDP models false finds (`SubtaskEnv.false_alarm_density` above 0); the
+world reports it as a find, so the plans made after it are never flown (`OBSERVED`)."""
+FIND, MISS, FALSE_FIND = 0, 1, 2
+OBSERVED = 2
+"""The outcomes the world tells apart (find and miss): a re-planning search shares its
+simulations among these."""
 
 WORK_SLOTS = 5
 """Number of 4x4 scratch matrices the kernels need (`new_work`)."""
@@ -148,12 +165,16 @@ class SubtaskOptions(NamedTuple):
             the search may pursue it again.
         passes: ``"ignore"`` (the paper): a sub-task measures its own target only;
             ``"credit"``: also the other targets its flight passes over (module docstring).
+        false_finds: ``"ignore"`` (the paper): a pursuit ends in a find or a miss;
+            ``"model"``: under the mission's clutter (`Mission.false_alarm_density`) also in a
+            false find (module docstring).
     """
 
     estimator: str = "paper"
     dwell: float | tuple[float, ...] = 0.0
     miss: str = "drop"
     passes: str = "ignore"
+    false_finds: str = "ignore"
 
 
 PAPER_SUBTASK = SubtaskOptions()
@@ -190,6 +211,8 @@ class SubtaskEnv(NamedTuple):
         credit_passes: other targets a sub-task's flight passes over are measured
             (``passes="credit"``).
         memo: the estimator results of this search.
+        false_alarm_density: ``lambda`` of the false finds modelled, per m^2 per look
+            (``false_finds="model"``: the mission's; 0: no false find outcome).
     """
 
     mission: Mission
@@ -201,6 +224,7 @@ class SubtaskEnv(NamedTuple):
     keep_missed: bool
     credit_passes: bool
     memo: Memo
+    false_alarm_density: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -318,6 +342,10 @@ class PlanningProblem:
             raise ValueError(f"miss must be one of {MISS_RULES}, got {options.miss!r}")
         if options.passes not in PASS_RULES:
             raise ValueError(f"passes must be one of {PASS_RULES}, got {options.passes!r}")
+        if options.false_finds not in FALSE_FIND_RULES:
+            raise ValueError(
+                f"false_finds must be one of {FALSE_FIND_RULES}, got {options.false_finds!r}"
+            )
         n_steps = self.n_steps
         stays = stay_steps(self.mission.time_step, options.dwell)
         if self.current_action is not None and self.current_action >= self.n_targets + len(stays):
@@ -334,6 +362,7 @@ class PlanningProblem:
             options.miss == "keep",
             options.passes == "credit",
             new_memo(self.n_targets, n_steps),
+            self.mission.false_alarm_density if options.false_finds == "model" else 0.0,
         )
 
     def root_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -349,6 +378,9 @@ class PlanningProblem:
 
 MISS_RULES = ("drop", "keep")
 """What a miss does to the missed target (`SubtaskOptions.miss`)."""
+
+FALSE_FIND_RULES = ("ignore", "model")
+"""Whether a pursuit may end in a false find (`SubtaskOptions.false_finds`)."""
 
 PASS_RULES = ("ignore", "credit")
 """What a sub-task's flight does to the other targets it passes over
@@ -580,7 +612,11 @@ def expand_action(env, state, a, work):
 @numba.njit(cache=True)
 def expand_outcomes(env, state, a, p, payload, work):
     """`expand_action` as the search asks of an MDP: ``p`` and ``payload`` of outcome
-    `FIND` then `MISS` (the miss's probability ``1 - p_find``)."""
+    `FIND` then `MISS` (the miss's probability ``1 - p_find``), and `FALSE_FIND` when ``p``
+    has room for it (`expand_false_finds`)."""
+    if p.shape[0] > FALSE_FIND:
+        expand_false_finds(env, state, a, p, payload, work)
+        return
     p_find, find_steps, miss_steps = expand_action(env, state, a, work)
     p[FIND] = p_find
     p[MISS] = 1.0 - p_find
@@ -589,17 +625,60 @@ def expand_outcomes(env, state, a, p, payload, work):
 
 
 @numba.njit(cache=True)
+def expand_false_finds(env, state, a, p, payload, work):
+    """`expand_outcomes` with the false find: a pursuit's find and miss split by the false
+    alarms its search takes (`hptrack.coverage.false_finds`, at the rate of the belief
+    predicted to the spiral's start), the false find lasting the intercept and the mean search
+    before the first take. Following and dwelling measure the target just found: no false
+    find."""
+    si, sf, base_cov, base_step = state
+    t = si[I_STEP]
+    p[FALSE_FIND] = 0.0
+    if a == si[I_LAST] or is_dwell(env, a):
+        p_find, find_steps, miss_steps = expand_action(env, state, a, work)
+        p[FIND], p[MISS] = p_find, 1.0 - p_find
+        payload[FIND], payload[MISS], payload[FALSE_FIND] = find_steps, miss_steps, miss_steps
+        return
+    mission = env.mission
+    ic = intercept_of(env, sf, a, t)
+    p_find, find_steps, miss_steps = estimate_pursuit(env.estimator, env, state, a, t, ic, work[0])
+    cov = work[1]
+    predict_covariance_on(
+        mission, base_cov[a], mission.process_noise[a], t + ic - base_step[a], cov
+    )
+    r = mission.sensor.measurement_noise
+    rate = take_rate(
+        env.false_alarm_density,
+        footprint_radius(mission.sensor),
+        cov[0, 0],
+        cov[0, 1],
+        cov[1, 1],
+        r[0, 0],
+        r[0, 1],
+        r[1, 1],
+    )
+    p_true, p_miss, p_false, looks = false_find_split(
+        p_find, max(find_steps - ic, 0), miss_steps - ic, rate
+    )
+    p[FIND], p[MISS], p[FALSE_FIND] = p_true, p_miss, p_false
+    payload[FIND], payload[MISS] = find_steps, miss_steps
+    payload[FALSE_FIND] = max(1, ic + int(math.floor(looks + 0.5)))
+
+
+@numba.njit(cache=True)
 def apply_outcome(env, state, a, outcome, payload, work):
     """Move the state through the sub-task "pursue ``a``" lasting ``payload`` steps, after
-    ``outcome`` (`FIND` or `MISS`).
+    ``outcome`` (`FIND`, `MISS` or `FALSE_FIND`).
 
     Found: ``a``'s covariance becomes the posterior of a measurement at the end step (or, when
     following or dwelling, the covariance measured at every step to the end). Missed: ``a``
     leaves the action list (``miss="drop"``); with a sensor that ``informs``
     (``negative_information``), its covariance predicted to the end step takes the sensor's
     ``search_missed`` of the pursuit's ``p_find`` there. The agent ends at the pursued target's
-    estimated position; other beliefs are implicit (they grow from their base). ``work`` is
-    ``(>= 5, d, d)`` scratch.
+    estimated position; other beliefs are implicit (they grow from their base). A false find
+    ends the search with nothing learnt about ``a`` (the tracker's update went to a false
+    alarm): ``a`` leaves the action list as after a miss, but no look that saw nothing updates
+    it. ``work`` is ``(>= 5, d, d)`` scratch.
     """
     mission = env.mission
     si, sf, base_cov, base_step = state
@@ -713,9 +792,20 @@ def terminal_value(env, state):
     return -total
 
 
+def outcomes_of(env: SubtaskEnv) -> int:
+    """The outcomes of ``env``'s actions: find and miss, and the false find when modelled."""
+    return len(OUTCOMES) if env.false_alarm_density > 0.0 else OBSERVED
+
+
 register_mdp(
     SubtaskEnv,
     MdpKernels(
-        copy_state, is_available, expand_outcomes, apply_outcome, terminal_value, len(OUTCOMES)
+        copy_state,
+        is_available,
+        expand_outcomes,
+        apply_outcome,
+        terminal_value,
+        outcomes_of,
+        OBSERVED,
     ),
 )

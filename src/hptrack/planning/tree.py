@@ -37,7 +37,8 @@ TERMINAL = -3
 class Tree(NamedTuple):
     """The search tree as arrays (state nodes ``s_*``, action nodes ``a_*``).
 
-    ``counts`` holds ``[state nodes, action nodes, simulations run]``; ``value_range`` the
+    ``counts`` holds ``[state nodes, action nodes, simulations run, outcomes the world tells
+    apart]`` (`hptrack.planning.mdp.observed_count`); ``value_range`` the
     smallest and largest return seen; ``rng`` the random stream's state and the seed it started
     from (the seed of the search's derived streams, `hptrack.planning.stream.substream`).
     """
@@ -88,9 +89,12 @@ PER_OUTCOME = ("a_p", "a_payload", "a_child", "a_out_visits", "a_out_value")
 """The action-node arrays with one column per chance outcome."""
 
 
-def new_tree(seed: int, capacity: int = 1024, n_outcomes: int = 2) -> Tree:
+def new_tree(
+    seed: int, capacity: int = 1024, n_outcomes: int = 2, n_observed: int | None = None
+) -> Tree:
     """An empty tree holding only the root (state node 0), with the random stream seeded, for
-    an MDP whose actions have ``n_outcomes`` chance outcomes."""
+    an MDP whose actions have ``n_outcomes`` chance outcomes, the first ``n_observed`` (default
+    all) told apart by the world."""
     arrays = {
         name: np.full(
             (capacity, n_outcomes) if name in PER_OUTCOME else capacity, fill, dtype=dtype
@@ -99,7 +103,9 @@ def new_tree(seed: int, capacity: int = 1024, n_outcomes: int = 2) -> Tree:
     }
     return Tree(
         **arrays,
-        counts=np.array([1, 0, 0], dtype=np.int64),
+        counts=np.array(
+            [1, 0, 0, n_outcomes if n_observed is None else n_observed], dtype=np.int64
+        ),
         value_range=np.array([np.inf, -np.inf]),
         rng=np.array([seed, seed], dtype=np.uint64),
     )

@@ -852,6 +852,7 @@ class Scenario(BaseModel):
             negative_information=self.sensor_spec().negative_information,
             members=members if self.n_vehicles > 1 else (),
             detection_correlation_time=self.sensor_spec().detection_correlation_time,
+            false_alarm_density=self.sensor_spec().false_alarm_density,
         )
 
     def initial_observation(self) -> Observation:
