@@ -363,3 +363,38 @@ def test_the_team_benchmark_adds_the_revisit_search_and_may_leave_out_the_refere
     text = (tmp_path / "table.md").read_text()
     assert "| 4 | 2 | team-mcts | 2 | 52.00 +- 2.00 | - | 1.00 |" in text
     assert f"| 4 | 2 | team-mcts - {team.REVISIT} | 2 | +2.00 +- 1.00 |" in text
+
+
+def test_the_false_finds_benchmark_pairs_the_search_with_its_false_find_twin(tmp_path):
+    """``benchmarks/false_finds.py``: the two searches differ in ``false_finds`` only, on one
+    cluttered setting per Pd; the paired rows are the means of the per-scenario differences
+    (U 10, 14 against 13, 13: -1 +- 2; tracks lost 0, 2 against 1, 1: 0 +- 1)."""
+    ff = _script("false_finds")
+    wanted = ff.configs((3,), 2, (1.0, 0.7), 1e-6)
+    assert {c.setting for c in wanted.values()} == {
+        "homogeneous+unlabelled+clutter:1e-06",
+        "homogeneous+pd:0.7+unlabelled+clutter:1e-06",
+    }
+    base, mine = (wanted["Pd 1, unlabelled, clutter 1e-06", v] for v in ("revisit", "false-finds"))
+    assert (base.settings["mcts"].false_finds, mine.settings["mcts"].false_finds) == (
+        "ignore",
+        "model",
+    )
+    assert (
+        base.settings["mcts"].model_copy(update={"false_finds": "model"}) == mine.settings["mcts"]
+    )
+
+    def row(u: float, seed: int, lost: int) -> EpisodeRow:
+        key = EpisodeKey("mcts", 3, seed, "s", MctsSettings().canonical())
+        return EpisodeRow(key, u, 77.0, 1, 0.1, {"targets_never_detected": 0}, 5.0, 7.0, lost)
+
+    sensor = "Pd 1, unlabelled, clutter 1e-06"
+    by = {
+        (sensor, "revisit"): {(3, 0): row(13.0, 0, 1), (3, 1): row(13.0, 1, 1)},
+        (sensor, "false-finds"): {(3, 0): row(10.0, 0, 0), (3, 1): row(14.0, 1, 2)},
+    }
+    ff.report(by, tmp_path, "command")
+    (paired,) = json.loads((tmp_path / "summary.json").read_text())["paired"]
+    assert (paired["U_diff"], paired["U_se"]) == pytest.approx((-1.0, 2.0))
+    assert (paired["track_loss_diff"], paired["track_loss_se"]) == pytest.approx((0.0, 1.0))
+    assert paired["gospa_end_diff"] == 0.0
