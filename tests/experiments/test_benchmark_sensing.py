@@ -157,9 +157,21 @@ def test_an_unlabelled_benchmark_stores_its_tracking_metrics(tmp_path):
     assert all(r.gospa_mean is not None and r.track_loss is not None for r in rows)
 
 
-def test_a_config_refuses_blindness_without_misses():
+def test_a_config_refuses_blindness_without_misses_or_clutter():
     with pytest.raises(InputError, match="--blind"):
         config(blind=True)
+    with pytest.raises(InputError, match="--blind"):
+        config(blind=True, labelled=False)
+
+
+def test_a_blind_planner_on_a_cluttered_world_is_told_no_false_alarms():
+    blind = config(labelled=False, false_alarm_density=1e-6, blind=True)
+    assert blind.setting == "homogeneous+blind+unlabelled+clutter:1e-06"
+    key = blind.keys()[1]
+    scenario = scenario_for(key)
+    assert scenario.mission_spec().false_alarm_density == 1e-6
+    told = planner_mission_for(key, scenario)
+    assert (told.detection_probability, told.false_alarm_density) == (1.0, 0.0)
 
 
 def test_the_library_benchmark_takes_the_sensing_options():

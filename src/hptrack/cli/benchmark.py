@@ -81,8 +81,9 @@ def benchmark(
         bool,
         typer.Option(
             "--blind",
-            help="Tell the planners the paper's certain sensor (Pd = 1) while the world's "
-            "detector misses (needs --detection-probability below 1).",
+            help="Tell the planners the paper's certain sensor (Pd = 1, no false alarms) while "
+            "the world's detector misses or reports false alarms (needs --detection-probability "
+            "below 1 or --false-alarm-density above 0).",
         ),
     ] = False,
     unlabelled: Annotated[

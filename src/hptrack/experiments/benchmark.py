@@ -60,8 +60,9 @@ class BenchmarkConfig:
             paper's constant velocity), e.g. ``"ornstein_uhlenbeck:0.01"``.
         detection_probability: the scenarios' sensor's chance of detecting a target inside its
             footprint at each look (1: the paper's sensor).
-        blind: the planners are told the paper's sensor (``Pd = 1``) while the world's detector
-            misses (`hptrack.sim.episode.run_episode`'s ``planner_mission``).
+        blind: the planners are told the paper's sensor (``Pd = 1``, no false alarms) while the
+            world's detector misses or reports false alarms
+            (`hptrack.sim.episode.run_episode`'s ``planner_mission``).
         labelled: every detection names its target (the paper's sensor); false: detections are
             positions only, associated by the tracker (``sensor.labelled``, GNN).
         false_alarm_density: the sensor's false alarms per m^2 per look inside its footprint
@@ -101,14 +102,17 @@ class BenchmarkConfig:
         p = self.detection_probability
         if isinstance(p, bool) or not (isinstance(p, int | float) and 0.0 < p <= 1.0):
             raise InputError(f"--detection-probability must be in (0, 1], got {p!r}")
-        if self.blind and p == 1.0:
-            raise InputError("--blind needs a --detection-probability below 1 (nothing to hide)")
         clutter = _within(
             self.false_alarm_density,
             "--false-alarm-density",
             MAX_FALSE_ALARM_DENSITY,
             "per m^2 per look",
         )
+        if self.blind and p == 1.0 and clutter == 0.0:
+            raise InputError(
+                "--blind needs a --detection-probability below 1 or a --false-alarm-density "
+                "above 0 (nothing to hide)"
+            )
         hold = _within(
             self.detection_correlation_time,
             "--detection-correlation-time",
