@@ -10,9 +10,10 @@ identity (GNN) with ``--clutter`` false alarms per m^2 per look at each detectio
 resumes).
 
 The report (``OUT/table.md``, ``OUT/summary.json``): per n, sensor and search the mean ``U``,
-GOSPA over the mission and at its end (m), tracks lost and targets never detected per
-episode; and the paired differences, ``false-finds`` minus ``revisit``, of ``U``, the end GOSPA
-and the tracks lost.
+GOSPA over the mission and at its end (m), tracks lost, targets never detected and the false
+alarms a belief took per episode (the tracking summary of each episode's ``info``; "-" where a
+stored row predates it); and the paired differences, ``false-finds`` minus ``revisit``, of
+``U``, the end GOSPA and the tracks lost.
 
     python3 benchmarks/false_finds.py --targets 6,12 --seeds 30 --workers 2 \\
         --db results/false-finds.db --out docs/results/false-finds
@@ -65,6 +66,13 @@ def configs(
     return out
 
 
+def false_alarms_taken(rows: list) -> float | None:
+    """The false alarms a belief took per episode over ``rows`` (``None``: a row does not hold
+    its tracking summary)."""
+    taken = [r.info.get("tracking", {}).get("false_alarms_taken") for r in rows]
+    return None if any(t is None for t in taken) else float(np.mean(taken))
+
+
 def report(by: dict[tuple[str, str], dict], out: Path, command: str) -> None:
     """Write ``table.md`` and ``summary.json`` from ``{(sensor, search): {(n, seed): row}}``."""
     counts = sorted({n for rows in by.values() for n, _ in rows})
@@ -78,11 +86,12 @@ def report(by: dict[tuple[str, str], dict], out: Path, command: str) -> None:
         "```",
         "",
         "Mean U +- standard error; GOSPA (p = 2, alpha = 2, c = the footprint radius, m) over the",
-        "mission and at its end; tracks lost and targets never detected per episode.",
+        "mission and at its end; tracks lost, targets never detected and false alarms a belief",
+        "took per episode.",
         "",
         "| n | sensor | search | episodes | mean U | GOSPA, mean | GOSPA, end | tracks lost | "
-        "never detected |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "never detected | false alarms taken |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     summary: dict = {"command": command, "rows": [], "paired": []}
     for n in counts:
@@ -101,11 +110,14 @@ def report(by: dict[tuple[str, str], dict], out: Path, command: str) -> None:
                 **{m: float(np.mean([r.metric(m) for r in mine])) for m in PAIRED[1:]},
                 "gospa_mean": float(np.mean([r.metric("gospa_mean") for r in mine])),
                 "never_detected": float(np.mean([r.metric("never_detected") for r in mine])),
+                "false_alarms_taken": false_alarms_taken(mine),
             }
+            taken = record["false_alarms_taken"]
             lines.append(
                 f"| {n} | {sensor} | {search} | {len(mine)} | {mean:.2f} +- {se:.2f} | "
                 f"{record['gospa_mean']:.1f} | {record['gospa_end']:.1f} | "
-                f"{record['track_loss']:.2f} | {record['never_detected']:.2f} |"
+                f"{record['track_loss']:.2f} | {record['never_detected']:.2f} | "
+                f"{'-' if taken is None else f'{taken:.2f}'} |"
             )
             summary["rows"].append(record)
     lines += [

@@ -384,16 +384,23 @@ def test_the_false_finds_benchmark_pairs_the_search_with_its_false_find_twin(tmp
         base.settings["mcts"].model_copy(update={"false_finds": "model"}) == mine.settings["mcts"]
     )
 
-    def row(u: float, seed: int, lost: int) -> EpisodeRow:
+    def row(u: float, seed: int, lost: int, taken: int | None = None) -> EpisodeRow:
         key = EpisodeKey("mcts", 3, seed, "s", MctsSettings().canonical())
-        return EpisodeRow(key, u, 77.0, 1, 0.1, {"targets_never_detected": 0}, 5.0, 7.0, lost)
+        info: dict = {"targets_never_detected": 0}
+        if taken is not None:  # a row stored with its tracking summary
+            info["tracking"] = {"false_alarms_taken": taken}
+        return EpisodeRow(key, u, 77.0, 1, 0.1, info, 5.0, 7.0, lost)
 
     sensor = "Pd 1, unlabelled, clutter 1e-06"
     by = {
-        (sensor, "revisit"): {(3, 0): row(13.0, 0, 1), (3, 1): row(13.0, 1, 1)},
-        (sensor, "false-finds"): {(3, 0): row(10.0, 0, 0), (3, 1): row(14.0, 1, 2)},
+        (sensor, "revisit"): {(3, 0): row(13.0, 0, 1), (3, 1): row(13.0, 1, 1, 5)},
+        (sensor, "false-finds"): {(3, 0): row(10.0, 0, 0, 2), (3, 1): row(14.0, 1, 2, 4)},
     }
     ff.report(by, tmp_path, "command")
+    text = (tmp_path / "table.md").read_text()
+    assert "| 3 | Pd 1, unlabelled, clutter 1e-06 | revisit | 2 | 13.00 +- 0.00 |" in text
+    assert text.count(" | 0.00 | - |") == 1  # one revisit row predates the summary
+    assert " | 0.00 | 3.00 |" in text  # the false-finds rows took 2 and 4
     (paired,) = json.loads((tmp_path / "summary.json").read_text())["paired"]
     assert (paired["U_diff"], paired["U_se"]) == pytest.approx((-1.0, 2.0))
     assert (paired["track_loss_diff"], paired["track_loss_se"]) == pytest.approx((0.0, 1.0))

@@ -155,6 +155,9 @@ def test_an_unlabelled_benchmark_stores_its_tracking_metrics(tmp_path):
     store.close()
     assert {r.key.setting for r in rows} == {"homogeneous+unlabelled+clutter:0.0001"}
     assert all(r.gospa_mean is not None and r.track_loss is not None for r in rows)
+    tracking = [r.info["tracking"] for r in rows]  # the episode's tracking summary
+    assert all(t["false_alarms_taken"] <= t["false_alarms"] <= t["reports"] for t in tracking)
+    assert sum(t["false_alarms"] for t in tracking) > 0  # 1e-4 per m^2: a busy clutter
 
 
 def test_a_config_refuses_blindness_without_misses_or_clutter():

@@ -351,7 +351,9 @@ def warm_up(key: EpisodeKey) -> None:
 
 def run_one(key: EpisodeKey) -> EpisodeRow:
     """Fly one benchmark episode (a top-level function, so worker processes can run it); its
-    wall time is that of the mission alone, after `warm_up`."""
+    wall time is that of the mission alone, after `warm_up`. Its ``info`` adds the targets
+    never detected and, for detections without identity, the tracking summary
+    (`hptrack.sim.record.EpisodeRecord.tracking_summary`)."""
     warm_up(key)
     scenario = scenario_for(key)
     planner = planner_for(key)
@@ -366,7 +368,11 @@ def run_one(key: EpisodeKey) -> EpisodeRow:
         scenario.never_observed_uncertainty(),
         int(record.detections.sum()),
         wall,
-        {**record.info, "targets_never_detected": metrics["targets_never_detected"]},
+        {
+            **record.info,
+            "targets_never_detected": metrics["targets_never_detected"],
+            **record.tracking_summary(),
+        },
         metrics["gospa_mean"],
         metrics["gospa_end"],
         metrics["track_loss"],
