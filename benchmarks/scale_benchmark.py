@@ -41,6 +41,8 @@ VARIANTS: dict[str, tuple[str, dict]] = {
     ),
     "improved": ("mcts", {"preset": "improved"}),
     "paper": ("mcts", {"preset": "paper"}),
+    "revisit+limit30+keep": ("mcts", {"preset": "revisit", "coverage_limit": 30.0, "miss": "keep"}),
+    "revisit+limit60+keep": ("mcts", {"preset": "revisit", "coverage_limit": 60.0, "miss": "keep"}),
     "tour": ("tour", {}),
     "tour-find0.5": ("tour", {"min_find": 0.5}),
     "tour-find0": ("tour", {"min_find": 0.0}),
@@ -49,7 +51,9 @@ VARIANTS: dict[str, tuple[str, dict]] = {
 }
 """The planners compared, by their names in the tables: a planner and its options (the
 searches' time limit added, if any); ``tour-findP`` is the tour that lets a target go only when
-its chance of a find on arrival is below ``P`` (0.9 by default)."""
+its chance of a find on arrival is below ``P`` (0.9 by default); ``revisit+limitS+keep`` the
+default search whose pursuits' spirals end after ``S`` s at the latest and whose missed targets
+stay in the action list."""
 
 REFERENCES = ("greedy", "clairvoyant")
 """The two ends of the gap closed (``--references``: run by default)."""

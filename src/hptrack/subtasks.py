@@ -166,7 +166,8 @@ class Subtask:
         t_cutoff: a pursuit's ``t_cutoff``, s from the start of its coverage.
         p_find: a pursuit's estimated chance of finding the target, ``p_max``.
         expected_time: a pursuit's ``E[T_find]``, s from the start of its coverage.
-        budget_limited: whether the budget's end cut a pursuit's estimate short.
+        budget_limited: whether the budget's end (or a coverage limit) cut a pursuit's
+            estimate short.
         end_step: the step it ended at (``None`` while flown, and for a follow or hover).
         outcome: how it ended: ``"found"`` or ``"missed"`` (a pursuit; the sub-task
             environment also says ``"budget"``, ``"followed"`` and ``"infeasible"``).

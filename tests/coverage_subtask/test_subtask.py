@@ -133,3 +133,36 @@ def test_estimate_agrees_with_2000_simulated_trajectories(case):
     config = ValidationConfig(cases=3, runs=2000, seed=2024)
     for row in case_rows(draw_case(case, 2024), config)[0]:
         assert abs(row["est_p_find"] - row["emp_p_find"]) <= 0.1, row
+
+
+def test_a_coverage_limit_ends_the_spiral_early_with_its_estimate_truncated_there():
+    """A limit of half the coverage's ``t_cutoff``: the spiral ends there (the same path up to
+    it), with the paper's estimate of a coverage truncated there as at the budget's end; a
+    budget that ends first still binds, and a limit beyond ``t_cutoff`` changes nothing."""
+    full = CoverageSubtask(np.zeros(2), MEAN, COV, 3e-4, MISSION, 900.0, target_index=1)
+    n, cutoff = full.intercept.steps, full.estimate.cutoff_steps
+    limit = cutoff // 2
+    short = CoverageSubtask(
+        np.zeros(2), MEAN, COV, 3e-4, MISSION, 900.0, target_index=1, coverage_steps=limit
+    )
+    assert (short.estimate.cutoff_steps, short.end_step) == (limit, n + limit)
+    truncated = estimate_coverage(short.start_covariance, 3e-4, MISSION, limit * 0.5)
+    assert short.p_find == truncated.p_find < full.p_find
+    assert short.expected_time == truncated.expected_time < full.expected_time
+    assert short.sharp_estimate.p_find < full.sharp_estimate.p_find
+    np.testing.assert_array_equal(
+        short.planned_positions(), full.planned_positions()[: n + limit + 1]
+    )
+    budget = (n + 10) * 0.5
+    late = CoverageSubtask(np.zeros(2), MEAN, COV, 3e-4, MISSION, budget, coverage_steps=limit)
+    assert late.end_step == n + 10
+    beyond = CoverageSubtask(
+        np.zeros(2), MEAN, COV, 3e-4, MISSION, 900.0, target_index=1, coverage_steps=cutoff + 5
+    )
+    assert (beyond.end_step, beyond.p_find, beyond.expected_time) == (
+        full.end_step,
+        full.p_find,
+        full.expected_time,
+    )
+    with pytest.raises(ValueError, match="coverage_steps must be at least 1, got 0"):
+        CoverageSubtask(np.zeros(2), MEAN, COV, 3e-4, MISSION, 900.0, coverage_steps=0)

@@ -64,7 +64,7 @@ def test_a_layout_2_database_is_migrated_with_every_result(layout_2):
     store.close()
     assert _raw(layout_2) == before  # every result unchanged, only identities rewritten
     with sqlite3.connect(layout_2) as db:
-        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 9
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 10
     for r in rows:
         assert (r.gospa_mean, r.gospa_end, r.track_loss) == (None, None, None)
         text = r.key.planner_settings

@@ -92,6 +92,7 @@ def test_mcts_beats_greedy_on_twenty_three_target_scenarios():
         ("dwell", -5, "planner 'mcts': option dwell must be >= 0, got -5"),
         ("readmit", "maybe", "planner 'mcts': option readmit must be true or false, got 'maybe'"),
         ("commit", -1, "planner 'mcts': option commit must be >= 0, got -1"),
+        ("coverage_limit", -5, "planner 'mcts': option coverage_limit must be >= 0, got -5"),
     ],
 )
 def test_invalid_settings_are_refused_naming_planner_option_and_value(option, value, message):
@@ -118,10 +119,11 @@ def test_settings_default_effort_and_identity():
     assert (timed.iterations, timed.time_limit) == (None, 1.0)
     assert default.preset == "revisit"  # the default since the default-effort scale benchmark
     assert default.canonical() == (
-        '{"backup":"max","commit":0.0,"common_rollouts":false,"dwell":0.0,"estimator":"paper",'
-        '"exploration":0.5,"false_finds":"ignore","fortify":false,"iterations":20000,'
-        '"max_weight":1.0,"miss":"drop","passes":"ignore","readmit":false,"rollout":"tour_plan",'
-        '"rollout_epsilon":0.1,"root_split":"even","threads":1,"time_limit":null}'
+        '{"backup":"max","commit":0.0,"common_rollouts":false,"coverage_limit":0.0,"dwell":0.0,'
+        '"estimator":"paper","exploration":0.5,"false_finds":"ignore","fortify":false,'
+        '"iterations":20000,"max_weight":1.0,"miss":"drop","passes":"ignore","readmit":false,'
+        '"rollout":"tour_plan","rollout_epsilon":0.1,"root_split":"even","threads":1,'
+        '"time_limit":null}'
     )
     assert default.digest() != timed.digest()
     assert MctsSettings.from_options("mcts", default.as_json()) == default
@@ -365,6 +367,25 @@ def test_a_kept_miss_leaves_the_target_available_to_the_planner():
             again = [e for e in later if e.kind == "pursue" and e.target == entry.target]
             if miss == "drop" and not record.detections[entry.end_step :, entry.target].any():
                 assert not again
+
+
+def test_a_coverage_limit_ends_every_pursuit_in_flight_by_its_length():
+    """``coverage_limit=20``: every pursuit flown ends at its intercept plus 20 s of spiral at
+    the latest, and plans it so (``t_cutoff``); without it some pursuit runs longer."""
+    scenario = random_scenario(6, seed=3, homogeneous=True)
+    tau = scenario.time_step
+
+    def pursuits(**options):
+        record = run_episode(scenario, mcts(iterations=300, preset="improved", **options))
+        log = read_subtasks(record.info["subtasks"], record.target_ids)
+        return [e for e in log if e.kind == "pursue" and e.end_step is not None]
+
+    assert any(e.t_cutoff > 20.0 for e in pursuits())
+    limited = pursuits(coverage_limit=20.0)
+    assert limited
+    for entry in limited:
+        assert entry.t_cutoff <= 20.0
+        assert (entry.end_step - entry.start_step) * tau <= entry.intercept_time + 20.0
 
 
 def _wrong_priors():

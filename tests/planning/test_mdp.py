@@ -20,6 +20,7 @@ from hptrack.planning.subtask_mdp import (
     PlanningProblem,
     SubtaskOptions,
     apply_outcome,
+    coverage_steps,
     dwell_steps,
     expand_action,
     expand_outcomes,
@@ -116,6 +117,37 @@ def test_interception_and_budget_truncation_by_hand():
         assert got[a][1:] == (ic + round(expected), ic + k)
     assert got[0][2] == 187
     assert got[1][2] == 200
+
+
+def test_a_coverage_limit_truncates_a_pursuit_as_the_budget_does():
+    """The two targets above with the whole budget: their cutoffs (120 and 136 coverage steps)
+    against a 30 s limit (60 steps): both coverages end after 60 steps, each chance of a find
+    and finding time that of a coverage truncated there (Sec. IV-B by hand), under either
+    estimator; a limit beyond both cutoffs changes nothing."""
+    covs = [prior(), prior(2000.0, 2000.0, 0.0, (0.5, 0.5))]
+    problem = make_problem([[1000, 0, 0, 0], [1000, 0, 3, 0]], covs)
+    state = problem.root_state()
+    limited = problem.env(SubtaskOptions(coverage_limit=30.0))
+    assert limited.coverage_steps == 60 and problem.env().coverage_steps == -1
+    for a, ic in ((0, 67), (1, 75)):
+        k, p, expected = hand_estimate(predict(covs[a], 3e-4, ic), 3e-4, 60)
+        assert k == 60
+        got = expand_action(limited, state, a, new_work())
+        assert got[0] == pytest.approx(p, rel=1e-12)
+        assert got[1:] == (ic + round(expected), ic + 60)
+        sharp = problem.env(SubtaskOptions(estimator="sharp", coverage_limit=30.0))
+        assert expand_action(sharp, state, a, new_work())[2] == ic + 60
+        unlimited = expand_action(problem.env(), state, a, new_work())
+        assert unlimited[2] == ic + (120, 136)[a]
+        beyond = problem.env(SubtaskOptions(coverage_limit=100.0))
+        assert expand_action(beyond, state, a, new_work()) == unlimited
+
+
+def test_coverage_limits_in_whole_steps():
+    assert [coverage_steps(TAU, s) for s in (0.0, 30.0, 0.1, 10.26)] == [-1, 60, 1, 21]
+    for bad in (-1.0, math.inf, math.nan):
+        with pytest.raises(ValueError, match="coverage_limit must be a non-negative finite"):
+            coverage_steps(TAU, bad)
 
 
 def test_unavailable_actions():

@@ -53,6 +53,9 @@ class CoverageSubtask:
             ``t_cutoff`` whatever the budget (the estimator-accuracy experiment).
         target_index: the target's index in observations (to see its detections).
         start_step: the step of the observation the sub-task is planned from.
+        coverage_steps: the longest spiral, in steps: the coverage ends at ``t_cutoff`` or
+            after this many steps, whichever comes first, its estimate truncated there as at
+            the budget's end; ``None`` (the paper): ``t_cutoff`` alone.
 
     Raises:
         ValueError: bad belief or inputs, or a target not slower than the agent.
@@ -68,6 +71,7 @@ class CoverageSubtask:
         remaining_budget: float | None,
         target_index: int = 0,
         start_step: int = 0,
+        coverage_steps: int | None = None,
     ) -> None:
         self.mission = mission
         self.target_index = int(target_index)
@@ -83,6 +87,8 @@ class CoverageSubtask:
             raise ValueError(f"mean must be {d} finite numbers (a state), got {mean!r}")
         if remaining_budget is not None and math.isnan(remaining_budget):
             raise ValueError("remaining_budget is NaN")
+        if coverage_steps is not None and coverage_steps < 1:
+            raise ValueError(f"coverage_steps must be at least 1, got {coverage_steps}")
         m = mission
         self.mean = mean.copy()
         self.remaining_budget = remaining_budget
@@ -93,11 +99,12 @@ class CoverageSubtask:
             mean[None, :], np.asarray(covariance, dtype=float)[None], self.q, n * m.time_step
         )
         self.start_covariance = covs[0]
-        self.estimate: CoverageEstimate = estimate_coverage(
-            self.start_covariance,
-            self.q,
-            m,
+        self.coverage_time = _coverage_time(
             None if remaining_budget is None else remaining_budget - n * m.time_step,
+            None if coverage_steps is None else coverage_steps * m.time_step,
+        )
+        self.estimate: CoverageEstimate = estimate_coverage(
+            self.start_covariance, self.q, m, self.coverage_time
         )
         self.straight = flies_straight(m.record.vehicle)
         if not self.straight:
@@ -130,9 +137,14 @@ class CoverageSubtask:
 
     @classmethod
     def from_observation(
-        cls, observation: Observation, target_index: int, mission: MissionSpec
+        cls,
+        observation: Observation,
+        target_index: int,
+        mission: MissionSpec,
+        coverage_steps: int | None = None,
     ) -> CoverageSubtask:
-        """Plan a sub-task on target ``target_index`` from the current observation."""
+        """Plan a sub-task on target ``target_index`` from the current observation (with the
+        longest spiral ``coverage_steps``, steps; ``None``: the paper's ``t_cutoff``)."""
         i = int(target_index)
         return cls(
             observation.agent_position,
@@ -143,6 +155,7 @@ class CoverageSubtask:
             observation.remaining_budget,
             i,
             observation.step,
+            coverage_steps,
         )
 
     # --- the planned estimate ---------------------------------------------------------------
@@ -154,10 +167,7 @@ class CoverageSubtask:
         approach = approach_step_to(
             m.record, self.agent_position[0], self.agent_position[1], mean, n
         )
-        remaining = (
-            None if self.remaining_budget is None else self.remaining_budget - n * m.time_step
-        )
-        sharp = estimate_sharp(self.start_covariance, self.q, m, n, approach, remaining)
+        sharp = estimate_sharp(self.start_covariance, self.q, m, n, approach, self.coverage_time)
         if self.straight:
             return sharp
         cutoff = self.estimate.cutoff_steps
@@ -255,3 +265,11 @@ class CoverageSubtask:
             or observation.step >= self.end_step
             or observation.remaining_budget <= 0.0
         )
+
+
+def _coverage_time(budget_left: float | None, limit: float | None) -> float | None:
+    """The time a coverage may last, s: the budget left when it starts, or the coverage
+    limit when that is shorter (``None``: neither)."""
+    if limit is None:
+        return budget_left
+    return limit if budget_left is None else min(budget_left, limit)

@@ -42,7 +42,7 @@ from hptrack.jsonout import json_text
 from hptrack.settings import digest_of
 from hptrack.sim.record import EpisodeRow
 
-SCHEMA_VERSION = 9
+SCHEMA_VERSION = 10
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS episodes (
     planner TEXT NOT NULL,
@@ -184,6 +184,7 @@ MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
     6: _add_metrics,
     7: _adding({name: {"fortify": False} for name in ("mcts", "team-mcts", "team-cbba")}),
     8: _adding({name: {"false_finds": "ignore"} for name in ("mcts", "team-mcts", "team-cbba")}),
+    9: _adding({name: {"coverage_limit": 0.0} for name in ("mcts", "team-mcts", "team-cbba")}),
 }
 """Layout version -> the step that makes a database of that layout one of the next."""
 

@@ -48,6 +48,7 @@ from hptrack.planning.subtask_mdp import (
     SubtaskOptions,
     action_table,
     apply_outcome,
+    coverage_steps,
     new_work,
 )
 from hptrack.planning.subtask_rollout import (
@@ -91,6 +92,7 @@ PAPER_SEARCH: dict[str, Any] = {
     "miss": "drop",
     "passes": "ignore",
     "false_finds": "ignore",
+    "coverage_limit": 0.0,
     "readmit": False,
     "commit": 0.0,
     "fortify": False,
@@ -168,6 +170,10 @@ class MctsSettings(PlannerSettings):
             ``"model"``: with the mission's false alarms (``sensor.false_alarm_density``), also
             in a false find, the tracker taking a false alarm for the target
             (`hptrack.coverage.false_finds`).
+        coverage_limit: s; a pursuit's spiral ends at ``t_cutoff`` or after this long,
+            whichever comes first, in the search's estimates and in flight (a short look at a
+            broad belief instead of a search of it to ``t_cutoff``); 0 (the paper): at
+            ``t_cutoff``.
         readmit: with ``miss="drop"``, when no target is left to pursue and none is being
             followed, the missed targets re-enter the action list with the beliefs the misses
             left (predicted to now) and the planner searches again, instead of the vehicle
@@ -211,6 +217,7 @@ class MctsSettings(PlannerSettings):
     miss: Literal["drop", "keep"] | None = None
     passes: Literal["ignore", "credit"] | None = None
     false_finds: Literal["ignore", "model"] | None = None
+    coverage_limit: Annotated[float | None, Field(ge=0.0, le=1e6)] = None
     readmit: bool | None = None
     commit: Annotated[float | None, Field(ge=0.0, le=1e6)] = None
     threads: Annotated[int, Field(ge=1, le=64)] = 1
@@ -448,7 +455,7 @@ class HierarchicalPlanner:
         if index is None:
             index = last_found  # nothing to do: follow the target just found, or hover
         action = self._table.action(index, last_found) or HOVER
-        flight = SubtaskFlight(action, observation, self._mission)
+        flight = SubtaskFlight(action, observation, self._mission, self._coverage_steps)
         self._flight = flight
         after_find = after_miss = None
         if action.kind == "pursue":
@@ -521,6 +528,8 @@ class HierarchicalPlanner:
         self._rng = rng
         self._available = np.ones(mission.n_targets, dtype=bool)
         self._table = action_table(mission.n_targets, mission.time_step, self.subtask_options)
+        steps = coverage_steps(mission.time_step, self.subtask_options.coverage_limit)
+        self._coverage_steps = None if steps < 0 else steps
         self._flight: SubtaskFlight | None = None
         self._plan: tuple[int | None, int | None] = (None, None)
         self._log: list[Subtask] = []

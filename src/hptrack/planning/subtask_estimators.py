@@ -14,7 +14,9 @@ disk) once per estimator class.
   rounded ``E[T_find]``, a miss the intercept plus ``t_cutoff``. The result of a target never
   found since the root depends only on its start step, so it is memoised per search;
   where a fence keeps the vehicle from covering part of the searched ellipse, the chance of a
-  find loses that part (`hptrack.models.mission.visible_find`, both estimators);
+  find loses that part (`hptrack.models.mission.visible_find`, both estimators), and under a
+  coverage limit (``coverage_limit``) the coverage is truncated there as at the budget's end
+  (`coverage_room`, both estimators);
 * ``"sharp"`` (`SharpEstimator`): `hptrack.coverage.sharp_estimator.sharp_coverage_outcome`,
   which counts detections on the intercept flight and the footprint's reach; a find lasts the
   estimated duration from departure. Its estimate depends on the approach: not memoised.
@@ -76,6 +78,15 @@ class SharpEstimator(NamedTuple):
 
 
 @numba.njit(cache=True)
+def coverage_room(env, steps):
+    """The coverage steps a pursuit may fly when ``steps`` are left in the budget after its
+    intercept: ``steps``, or fewer under the env's ``coverage_steps``."""
+    if env.coverage_steps < 0:
+        return steps
+    return min(steps, env.coverage_steps)
+
+
+@numba.njit(cache=True)
 def paper_outcome(estimator, env, state, a, t, ic, work):
     """`PaperEstimator`'s outcome of pursuing ``a`` (module docstring)."""
     mission, memo = env.mission, env.memo
@@ -87,7 +98,7 @@ def paper_outcome(estimator, env, state, a, t, ic, work):
     else:
         q = mission.process_noise[a]
         predict_covariance_on(mission, base_cov[a], q, start - base_step[a], work)
-        k, p, expected = coverage_outcome(mission, work, q, left - ic)
+        k, p, expected = coverage_outcome(mission, work, q, coverage_room(env, left - ic))
         cutoff = int(k)
         p = visible_find(mission, env.means[a], start * mission.time_step, work, q, p, cutoff)
         if base_step[a] == 0:
@@ -108,7 +119,8 @@ def sharp_outcome(estimator, env, state, a, t, ic, work):
     dx, dy = approach_step_to(mission, sf[0], sf[1], env.means[a], ic, t * mission.time_step)
     q = mission.process_noise[a]
     predict_covariance_on(mission, base_cov[a], q, t + ic - base_step[a], work)
-    cutoff, p, expected = sharp_coverage_outcome(mission, work, q, env.n_steps - t - ic, ic, dx, dy)
+    room = coverage_room(env, env.n_steps - t - ic)
+    cutoff, p, expected = sharp_coverage_outcome(mission, work, q, room, ic, dx, dy)
     p = visible_find(mission, env.means[a], (t + ic) * mission.time_step, work, q, p, cutoff)
     return p, max(1, int(math.floor(expected + 0.5))), max(1, ic + int(cutoff))
 

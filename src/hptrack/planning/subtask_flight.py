@@ -57,6 +57,8 @@ class SubtaskFlight:
         action: what to fly (a dwell's ``parameter`` is its length in steps).
         observation: the observation it starts from.
         mission: the mission facts.
+        coverage_steps: a pursuit's longest spiral, steps (the MDP's ``coverage_steps``);
+            ``None`` (the paper): ``t_cutoff`` alone.
 
     Attributes:
         coverage: a pursuit's coverage sub-task (its plan and estimate), else ``None``.
@@ -64,7 +66,11 @@ class SubtaskFlight:
     """
 
     def __init__(
-        self, action: SubtaskAction, observation: Observation, mission: MissionSpec
+        self,
+        action: SubtaskAction,
+        observation: Observation,
+        mission: MissionSpec,
+        coverage_steps: int | None = None,
     ) -> None:
         self.action = action
         self.mission = mission
@@ -72,7 +78,9 @@ class SubtaskFlight:
         self.coverage: CoverageSubtask | None = None
         if action.kind == "pursue":
             assert action.target is not None  # a pursuit has a target
-            self.coverage = CoverageSubtask.from_observation(observation, action.target, mission)
+            self.coverage = CoverageSubtask.from_observation(
+                observation, action.target, mission, coverage_steps
+            )
             self.record = self.coverage.record()
         else:
             self.record = Subtask(action.kind, action.target, self.start_step, action.parameter)

@@ -168,6 +168,10 @@ class SubtaskOptions(NamedTuple):
         false_finds: ``"ignore"`` (the paper): a pursuit ends in a find or a miss;
             ``"model"``: under the mission's clutter (`Mission.false_alarm_density`) also in a
             false find (module docstring).
+        coverage_limit: the longest spiral a pursuit flies, s (rounded to whole steps, at
+            least one, `coverage_steps`): its coverage ends at ``t_cutoff`` or after this
+            long, whichever comes first, and the estimate is truncated there as at the
+            budget's end; 0 (the paper): ``t_cutoff`` alone.
     """
 
     estimator: str = "paper"
@@ -175,6 +179,7 @@ class SubtaskOptions(NamedTuple):
     miss: str = "drop"
     passes: str = "ignore"
     false_finds: str = "ignore"
+    coverage_limit: float = 0.0
 
 
 PAPER_SUBTASK = SubtaskOptions()
@@ -213,6 +218,8 @@ class SubtaskEnv(NamedTuple):
         memo: the estimator results of this search.
         false_alarm_density: ``lambda`` of the false finds modelled, per m^2 per look
             (``false_finds="model"``: the mission's; 0: no false find outcome).
+        coverage_steps: the longest coverage of a pursuit in steps (``coverage_limit``);
+            -1: none (the paper's ``t_cutoff`` alone).
     """
 
     mission: Mission
@@ -225,6 +232,7 @@ class SubtaskEnv(NamedTuple):
     credit_passes: bool
     memo: Memo
     false_alarm_density: float = 0.0
+    coverage_steps: int = -1
 
 
 @dataclass(frozen=True, eq=False)
@@ -335,7 +343,7 @@ class PlanningProblem:
         """The compiled kernels' view of the problem with ``options``, with a fresh memo.
 
         Raises:
-            ValueError: an unknown estimator or miss rule, or a negative dwell.
+            ValueError: an unknown estimator or miss rule, or a negative dwell or coverage limit.
         """
         estimator = estimator_of(options.estimator)
         if options.miss not in MISS_RULES:
@@ -363,6 +371,7 @@ class PlanningProblem:
             options.passes == "credit",
             new_memo(self.n_targets, n_steps),
             self.mission.false_alarm_density if options.false_finds == "model" else 0.0,
+            coverage_steps(self.mission.time_step, options.coverage_limit),
         )
 
     def root_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -404,6 +413,18 @@ def dwell_steps(time_step: float, dwell: float) -> int:
     if dwell == 0.0:
         return 0
     return max(1, int(math.floor(dwell / time_step + 0.5)))
+
+
+def coverage_steps(time_step: float, limit: float) -> int:
+    """Whole steps of a pursuit's longest coverage of ``limit`` s (nearest, at least one; -1
+    for no limit, 0 s: the paper's ``t_cutoff`` alone).
+
+    Raises:
+        ValueError: a negative or non-finite limit.
+    """
+    if not (math.isfinite(limit) and limit >= 0.0):
+        raise ValueError(f"coverage_limit must be a non-negative finite number, got {limit!r}")
+    return -1 if limit == 0.0 else max(1, int(math.floor(limit / time_step + 0.5)))
 
 
 def dwell_lengths(dwell: float | tuple[float, ...]) -> tuple[float, ...]:
