@@ -72,6 +72,22 @@ def test_two_pursuits_are_worth_the_formula_from_the_estimators_outputs():
     assert value(0, ()) == 0.0
 
 
+def test_a_coverage_limit_shortens_the_bids_pursuits():
+    """The auction's bids see the members' coverage limit: a 1 s spiral finds less than one
+    run to ``t_cutoff``; a limit beyond every cutoff changes nothing."""
+    mission = spec(measurement_noise=np.eye(2))
+    means = np.array([[600.0, 0.0, 0.0, 0.0], [600.0, 400.0, -1.0, 2.0]])
+    covs = np.stack([PRIOR, PRIOR])
+
+    def value(limit: float) -> float:
+        path_value = team_path_value(
+            [mission], np.zeros((1, 2)), means, covs, mission.budget, coverage_limit=limit
+        )
+        return path_value(0, (0, 1))
+
+    assert 0.0 < value(1.0) < value(0.0) == value(1e5)
+
+
 def test_each_uav_flies_with_its_own_position_speed_and_sensor():
     slow = spec(agent_speed=15.0)
     fast = spec(agent_speed=30.0)

@@ -141,6 +141,7 @@ def team_path_value(
     covariances: np.ndarray,
     remaining_budget: float,
     estimator: str = "paper",
+    coverage_limit: float = 0.0,
 ) -> TeamPathValue:
     """The `TeamPathValue` of a team at one decision.
 
@@ -153,6 +154,8 @@ def team_path_value(
         remaining_budget: time left, s.
         estimator: the sub-task MDP's estimator (`hptrack.planning.subtask_estimators`),
             ``"paper"`` (Sec. IV-B) by default.
+        coverage_limit: the longest spiral of a pursuit, s (`SubtaskOptions.coverage_limit`;
+            0: the paper's ``t_cutoff`` alone).
 
     Raises:
         ValueError: shapes that do not match, a budget not positive, an unknown estimator.
@@ -162,7 +165,7 @@ def team_path_value(
         raise ValueError(
             f"agent_positions must be ({len(missions)}, 2) finite numbers, got {positions.shape}"
         )
-    options = SubtaskOptions(estimator=estimator)
+    options = SubtaskOptions(estimator=estimator, coverage_limit=coverage_limit)
     envs = []
     for spec, position in zip(missions, positions, strict=True):
         record = spec.record

@@ -86,6 +86,7 @@ class TeamCbbaPlanner:
             observation.covariances,
             observation.remaining_budget,
             self._member_settings.estimator or "paper",
+            self._member_settings.coverage_limit or 0.0,
         )
         allocation: Allocation = cbba(
             m,
