@@ -406,13 +406,22 @@ def n_actions(n_targets: int, options: SubtaskOptions) -> int:
     return n_targets + len(dwell_lengths(options.dwell))
 
 
+def _whole_steps(time_step: float, seconds: float, name: str) -> int:
+    """Whole steps nearest to ``seconds`` s, at least one (0 for 0 s).
+
+    Raises:
+        ValueError: a negative or non-finite duration, named ``name``.
+    """
+    if not (math.isfinite(seconds) and seconds >= 0.0):
+        raise ValueError(f"{name} must be a non-negative finite number, got {seconds!r}")
+    if seconds == 0.0:
+        return 0
+    return max(1, int(math.floor(seconds / time_step + 0.5)))
+
+
 def dwell_steps(time_step: float, dwell: float) -> int:
     """Whole steps of a dwell of ``dwell`` s (nearest, at least one; 0 for no dwell)."""
-    if not (math.isfinite(dwell) and dwell >= 0.0):
-        raise ValueError(f"dwell must be a non-negative finite number, got {dwell!r}")
-    if dwell == 0.0:
-        return 0
-    return max(1, int(math.floor(dwell / time_step + 0.5)))
+    return _whole_steps(time_step, dwell, "dwell")
 
 
 def coverage_steps(time_step: float, limit: float) -> int:
@@ -422,9 +431,7 @@ def coverage_steps(time_step: float, limit: float) -> int:
     Raises:
         ValueError: a negative or non-finite limit.
     """
-    if not (math.isfinite(limit) and limit >= 0.0):
-        raise ValueError(f"coverage_limit must be a non-negative finite number, got {limit!r}")
-    return -1 if limit == 0.0 else max(1, int(math.floor(limit / time_step + 0.5)))
+    return _whole_steps(time_step, limit, "coverage_limit") or -1
 
 
 def dwell_lengths(dwell: float | tuple[float, ...]) -> tuple[float, ...]:
