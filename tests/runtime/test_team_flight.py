@@ -1,6 +1,6 @@
-"""A team in flight (issue 31, item 4): the separation rule on toy geometry, the team's
-controller on the simulated runner (per-vehicle legs, the separation kept on a head-on course,
-the replay with 0 mismatches) and the command line's refusals."""
+"""A team in flight: the separation rule on toy geometry, the team's controller on the
+simulated runner (per-vehicle legs, the separation kept on a head-on course, every reference
+kept inside a fence, the replay with 0 mismatches) and the command line's refusals."""
 
 import json
 from pathlib import Path
@@ -88,6 +88,31 @@ def test_a_head_on_team_keeps_the_separation_and_the_first_flies_straight():
     path = run.record.agent_paths
     assert path.shape == (31, 2, 2) and np.all(path[:, :, 1] == 0.0)
     assert np.allclose(path[-1], [[40.0, 0.0], [52.0, 0.0]], rtol=0.0, atol=1e-9)
+
+
+def test_a_fenced_team_sends_every_vehicle_s_reference_inside_the_fence():
+    # a no-fly circle on the head-on course: neither vehicle's reference enters it (margin kept)
+    scenario = _team(
+        agents=[
+            {"position": [-40.0, 0.0], "speed": 8.0, "sensor_diameter": 20.0},
+            {"position": [40.0, 0.0], "speed": 8.0, "sensor_diameter": 20.0},
+        ],
+        budget=15.0,
+        fence={"exclusions": [{"circle": [0.0, 3.0, 6.0]}], "margin": 2.0},
+    )
+    run = run_simulated(scenario, _Swap(), seed=1)
+    records = run.controller.log.records
+    fences = [r for r in records if r["kind"] == "fence"]
+    assert {r["vehicle"] for r in fences} == {0, 1}
+    outer = 8.0 / np.cos(np.pi / 32)  # the circle of radius 6 + 2 m is flown as a 32-gon
+    for r in fences:  # projected onto it
+        assert np.hypot(*(np.asarray(r["reference"]) - [0.0, 3.0])) < outer
+        assert 8.0 - 1e-9 <= np.hypot(*(np.asarray(r["projected"]) - [0.0, 3.0])) <= outer
+    assert run.controller.fence_projections == len(fences)
+    assert run.controller.status()["fence"]["vehicle_free"] is True
+    # the vehicles lag their references round the circle, inside the margin, never in the zone
+    paths = run.record.agent_paths.reshape(-1, 2)
+    assert 6.0 < np.hypot(*(paths - [0.0, 3.0]).T).min() < 8.0
 
 
 def test_a_simulated_team_flight_replays_with_no_mismatch(tmp_path):
@@ -188,3 +213,30 @@ def test_targets_sim_puts_another_vehicle_in_the_first_ones_frame_by_their_gps()
     other = _Telemetry(geodetic=local_to_geodetic(*first.geodetic, 20.0, -30.0))
     assert np.allclose(team_position(first, other), [-20.0, 25.0], rtol=0.0, atol=1e-6)
     assert team_position(first, _Telemetry()) is None
+
+
+def test_a_team_flies_one_fence_and_refuses_vehicles_whose_fences_differ(monkeypatch):
+    pytest.importorskip("mavsdk")
+    import asyncio
+
+    from hptrack.runtime import team_flight
+
+    spec = _team(fence={"exclusions": [{"circle": [0.0, 3.0, 6.0]}], "margin": 2.0}).fence.spec()
+    shifted = spec._replace(circles=((0.0, 3.5, 6.0),))
+    origins = []
+
+    async def sync(member, system, fence, origin):  # what each vehicle holds
+        origins.append(origin)
+        return system
+
+    class Member:
+        def __init__(self, index):
+            self.index = index
+
+    monkeypatch.setattr(team_flight, "sync_fence", sync)
+    members, origin = [Member(0), Member(1)], (47.0, 8.0)
+    same = asyncio.run(team_flight._sync_fences(members, [spec, spec], spec, origin))
+    assert same == spec and origins == [origin, origin]  # the first vehicle's origin for both
+    assert asyncio.run(team_flight._sync_fences(members, [None, None], None, origin)) is None
+    with pytest.raises(InputError, match=r"vehicle 1's fence differs from vehicle 0's: exclusion"):
+        asyncio.run(team_flight._sync_fences(members, [spec, shifted], spec, origin))

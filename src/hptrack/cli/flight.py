@@ -496,7 +496,7 @@ def fly(
             },
         )
 
-    def build_team(limits: list[VehicleLimits]) -> TeamController:
+    def build_team(limits: list[VehicleLimits], fence: FenceSpec | None) -> TeamController:
         data = file_data(scenario)
         details = []
         for j, (vehicle_limits, agent) in enumerate(zip(limits, data["agents"], strict=True)):
@@ -508,7 +508,9 @@ def fly(
             data["vehicle"].pop("speed", None)
         for line in details:
             on_message(line)
-        flown = parse_scenario(data, f"{scenario_path} with the vehicles' speeds")
+        if fence is not None and fence != scenario_fence:  # the vehicles'
+            data["fence"] = fence_block(fence)
+        flown = parse_scenario(data, f"{scenario_path} with the vehicles' speeds and fence")
         on_message(f"mission log: {log_path}")
         return TeamController(
             flown,
@@ -547,7 +549,9 @@ def fly(
         if view is not None:
             view.start()
         if team:
-            result = run_team_flight(build_team, log, options, connections, on_status, on_message)
+            result = run_team_flight(
+                build_team, log, options, connections, on_status, on_message, scenario_fence
+            )
         else:
             result = run_flight(
                 build,

@@ -512,19 +512,20 @@ class MissionController:
         return mode, detail, hold
 
     def _inside(
-        self, t: float, reference: np.ndarray, velocity: np.ndarray
+        self, t: float, reference: np.ndarray, velocity: np.ndarray, vehicle: int | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """The reference (m) and feed-forward (m/s) to send at ``t`` s: as they are where the
         fence's free space (shrunk by its margin) holds the reference, else the reference
         projected onto the free space (`nearest_free`) with no feed-forward, logged as a
-        ``fence`` record."""
+        ``fence`` record (with the ``vehicle`` of a team)."""
         if self._fence is None or point_free(self._fence, reference[0], reference[1]):
             return reference, velocity
         projected = np.array(nearest_free(self._fence, reference[0], reference[1]))
         self.fence_projections += 1
-        self.journal.write(
-            {"kind": "fence", "t": t, "reference": reference, "projected": projected}
-        )
+        record = {"kind": "fence", "t": t, "reference": reference, "projected": projected}
+        if vehicle is not None:
+            record["vehicle"] = vehicle
+        self.journal.write(record)
         return projected, np.zeros(2)
 
     def _fly(self, waypoint: np.ndarray, t: float) -> None:
@@ -663,7 +664,7 @@ class MissionController:
                     "margin_m": self.scenario.fence.margin,
                     "vehicle_free": None
                     if self._odom is None
-                    else bool(point_free(self._fence, *self._odom[1])),
+                    else all(point_free(self._fence, *p) for p in np.atleast_2d(self._odom[1])),
                     "projections": self.fence_projections,
                 },
             }

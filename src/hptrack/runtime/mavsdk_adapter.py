@@ -886,12 +886,19 @@ def _zones(data: GeofenceData) -> list[GeoZone]:
     return [z for z in zones if z.inclusion] + [z for z in zones if not z.inclusion]
 
 
-async def sync_fence(flight: _Flight, system: Any, fence: FenceSpec | None) -> FenceSpec | None:
+async def sync_fence(
+    flight: _Flight,
+    system: Any,
+    fence: FenceSpec | None,
+    origin: tuple[float, float] | None = None,
+) -> FenceSpec | None:
     """Put the scenario's ``fence`` on the vehicle (upload, download, compare within
     `FENCE_TOLERANCE_M`) or, with ``fence_from_vehicle``, take the vehicle's (the scenario's
     margin kept); set ``GF_ACTION``; log a ``geofence`` record. Returns the fence to fly (the
     scenario's itself once the vehicle holds it), or ``None`` (no fence in the scenario: the
-    vehicle's is left alone).
+    vehicle's is left alone). The fence's metres are from ``origin`` (latitude, longitude,
+    degrees; a team's frame, the first vehicle's), by default the vehicle's own
+    ``GPS_GLOBAL_ORIGIN``.
 
     Raises:
         InputError: the vehicle's fence differs from the scenario's, or cannot be flown.
@@ -900,14 +907,15 @@ async def sync_fence(flight: _Flight, system: Any, fence: FenceSpec | None) -> F
     options = flight.options
     if fence is None and not options.fence_from_vehicle:
         return None
-    try:
-        origin_msg = await TelemetryAsync(system).get_gps_global_origin()
-    except TelemetryError as err:
-        raise FlightError(
-            f"the vehicle gave no GPS_GLOBAL_ORIGIN ({err}): the fence cannot be placed; "
-            "nothing was flown"
-        ) from None
-    origin = (float(origin_msg.latitude_deg), float(origin_msg.longitude_deg))
+    if origin is None:
+        try:
+            origin_msg = await TelemetryAsync(system).get_gps_global_origin()
+        except TelemetryError as err:
+            raise FlightError(
+                f"the vehicle gave no GPS_GLOBAL_ORIGIN ({err}): the fence cannot be placed; "
+                "nothing was flown"
+            ) from None
+        origin = (float(origin_msg.latitude_deg), float(origin_msg.longitude_deg))
     geofence = GeofenceAsync(system)
     margin = fence.margin if fence is not None else 0.0
     try:
@@ -980,6 +988,16 @@ async def say_fence_margin(flight: _Flight, system: Any, speed: float, margin: f
         lag_m=lag,
         speed_m_s=speed,
         mpc_xy_p=gain,
+    )
+
+
+def say_fence_projections(flight: _Flight, controller: MissionController) -> None:
+    """Say (and log) how many setpoints the controller projected into the fence's free
+    space."""
+    flight.say(
+        f"{controller.fence_projections} setpoints projected into the fence's free space",
+        kind="geofence",
+        projections=controller.fence_projections,
     )
 
 
@@ -1094,12 +1112,7 @@ async def fly_mission(
                 max_gap_s=flight.max_gap_s,
             )
             if flown_fence is not None:
-                flight.say(
-                    f"{controller.fence_projections} setpoints projected into the fence's free "
-                    "space",
-                    kind="geofence",
-                    projections=controller.fence_projections,
-                )
+                say_fence_projections(flight, controller)
             intake.stop()
             _say_intake(flight, intake, drops_before, kernel_drops(sock))
             action, confirmed = await flight.safe_end(system, reason, detail)

@@ -20,8 +20,13 @@ records the smallest pairwise distance between the vehicles' latest odometry
 the references of any ``setpoint`` call and the yields, which a replay derives again and
 checks.
 
+Fence: every vehicle's reference, once kept apart, is kept inside the fence's free space (the
+fence shrunk by its margin) as one vehicle's is (`MissionController._inside`: projected onto it
+and logged, with the vehicle's index); the separation is not checked again after a projection,
+and the smallest distance between the references sent says what it left.
+
 Team flights take detections that name their target (``sensor.labelled``, the default) without
-``negative_information`` or a fence (`team_flight_problem`).
+``negative_information`` (`team_flight_problem`).
 """
 
 from __future__ import annotations
@@ -57,8 +62,6 @@ def team_flight_problem(scenario: Scenario) -> str | None:
         return "a team flies detections that name their target (sensor.labelled: true)"
     if sensor.negative_information:
         return "a team flies without sensor.negative_information (no miss updates in flight)"
-    if scenario.fence is not None:
-        return "a team flies without a fence: block (the fence is flown by one vehicle)"
     noises = {
         scenario.sensor_spec(j).noise_covariance().tobytes() for j in range(scenario.n_vehicles)
     }
@@ -276,6 +279,8 @@ class TeamController(MissionController):
             goals = self._waypoint.copy()
         here = refs if self._odom is None else self._odom[1]
         refs, vels, yields = separate(refs, vels, here, self.separation_m)
+        for j in range(m):
+            refs[j], vels[j] = self._inside(t, refs[j], vels[j], vehicle=j)
         self.min_reference_separation_m = min(
             self.min_reference_separation_m, pairwise_minimum(refs)
         )

@@ -5,11 +5,14 @@ MAVSDK connects one ``System`` per vehicle).
 
 The sequence is the single vehicle's (`hptrack.runtime.mavsdk_adapter`), done for each vehicle:
 connect (each connection locks onto its first autopilot), wait for every local position, read
-every vehicle's limits (the caller plans each vehicle with its own speed), hand the planner its
-first tick, take every vehicle off at once (if asked; a take-off that fails holds the others),
-wait for the first plan, then start offboard on each vehicle in turn. Mission time 0 is the
-moment the last one reports OFFBOARD. Then each setpoint period streams every vehicle's
-reference (kept apart by the separation rule) to its own vehicle. Every vehicle's messages and
+every vehicle's limits (the caller plans each vehicle with its own speed), put the fence on
+every vehicle (the scenario's, its metres from the first vehicle's GPS origin, so that every
+vehicle holds the same zones; with ``--fence-from-vehicle`` every vehicle's, which must be the
+first's), hand the planner its first tick, take every vehicle off at once (if asked; a take-off
+that fails holds the others), wait for the first plan, then start offboard on each vehicle in
+turn. Mission time 0 is the moment the last one reports OFFBOARD. Then each setpoint period
+streams every vehicle's reference (kept apart by the separation rule, then kept inside the
+fence) to its own vehicle. Every vehicle's messages and
 records carry its index (``vehicle j: ...``, ``"vehicle": j``).
 
 The safe ends are the single vehicle's, for the team: the budget, Ctrl-C, a vehicle's lost
@@ -46,7 +49,9 @@ from mavsdk.asyncio.plugins.offboard import (
 from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync, TelemetryError
 
 from hptrack.interface import InputError
+from hptrack.models.fence import FenceSpec
 from hptrack.runtime.frames import enu_to_ned, geodetic_to_local
+from hptrack.runtime.geofence import fence_difference
 from hptrack.runtime.intake import DetectionIntake
 from hptrack.runtime.links import connection_problem
 from hptrack.runtime.log import ABORT, MISSION_START_MESSAGE, MissionLog
@@ -65,6 +70,9 @@ from hptrack.runtime.mavsdk_adapter import (
     open_detections,
     plain_error,
     read_limits,
+    say_fence_margin,
+    say_fence_projections,
+    sync_fence,
     wait_for_first_plan,
 )
 from hptrack.runtime.network import kernel_drops, udp_address
@@ -183,12 +191,15 @@ async def _start_offboard_all(
     return offboards
 
 
-async def _frame_offsets(members: list[_Member], systems: list[Any]) -> None:
+async def _frame_offsets(
+    members: list[_Member], systems: list[Any]
+) -> list[tuple[float, float] | None]:
     """Put every vehicle's local frame into the first's: each vehicle's ``GPS_GLOBAL_ORIGIN``
     (the origin of its local frame) as east-north metres from the first's
     (`hptrack.runtime.frames.geodetic_to_local`); a vehicle that gives none is taken to share
     the first's frame, and said so. PX4 SITL instances each set their origin where they start;
-    the stubs of ``vehicle-sim --instances`` share one."""
+    the stubs of ``vehicle-sim --instances`` share one. Returns every vehicle's origin
+    (latitude, longitude, degrees; ``None``: it gave none)."""
     origins: list[tuple[float, float] | None] = []
     for member, system in zip(members, systems, strict=True):
         try:
@@ -210,6 +221,36 @@ async def _frame_offsets(members: list[_Member], systems: list[Any]) -> None:
             offset=member.offset,
             origin=origin,
         )
+    return origins
+
+
+async def _sync_fences(
+    members: list[_Member],
+    systems: list[Any],
+    fence: FenceSpec | None,
+    origin: tuple[float, float] | None,
+) -> FenceSpec | None:
+    """The fence the team flies, put on every vehicle (`sync_fence` for each, the fence's
+    metres from ``origin``, the first vehicle's ``GPS_GLOBAL_ORIGIN``, so that every vehicle
+    holds the same zones on the ground); with ``fence_from_vehicle`` every vehicle's fence,
+    which must be the first's. ``None``: no fence (the vehicles' are left alone).
+
+    Raises:
+        InputError: a vehicle's fence differs from the scenario's or from the first's.
+    """
+    flown: FenceSpec | None = None
+    for member, system in zip(members, systems, strict=True):
+        held = await sync_fence(member, system, fence, origin)
+        if flown is None or held is None:
+            flown = held
+            continue
+        difference = fence_difference(flown, held)
+        if difference is not None:
+            raise InputError(
+                f"--fence-from-vehicle: vehicle {member.index}'s fence differs from vehicle "
+                f"0's: {difference}; nothing was flown"
+            )
+    return flown
 
 
 def _team_status(members: list[_Member], controller: TeamController, t: float) -> dict:
@@ -357,17 +398,19 @@ async def _safe_end_all(
 
 
 async def fly_team_mission(
-    build: Callable[[list[VehicleLimits]], TeamController],
+    build: Callable[[list[VehicleLimits], FenceSpec | None], TeamController],
     log: MissionLog,
     options: FlightOptions,
     connections: list[str],
     on_status: Callable[[dict], None] = lambda status: None,
     on_message: Callable[[str], None] = lambda text: None,
     stop: asyncio.Event | None = None,
+    fence: FenceSpec | None = None,
 ) -> FlightResult:
-    """Fly the team mission of the controller ``build`` makes from every vehicle's limits, on
-    the vehicles at ``connections`` (one URL per UAV, in the order of ``agents:``), logging to
-    ``log`` (module docstring).
+    """Fly the team mission of the controller ``build`` makes from every vehicle's limits and
+    the fence flown (`_sync_fences` with the scenario's ``fence``), on the vehicles at
+    ``connections`` (one URL per UAV, in the order of ``agents:``), logging to ``log``
+    (module docstring).
 
     Raises:
         FlightError: the mission could not start.
@@ -404,11 +447,16 @@ async def fly_team_mission(
                 )
             for member in members:
                 member.say("vehicle found; local position received")
-            await _frame_offsets(members, systems)
+            origins = await _frame_offsets(members, systems)
             limits = [await read_limits(system) for system in systems]
-            controller = build(limits)
+            flown_fence = await _sync_fences(members, systems, fence, origins[0])
+            controller = build(limits, flown_fence)
             for member in members:
                 member.attach(controller)
+            if flown_fence is not None:
+                for member, system in zip(members, systems, strict=True):
+                    speed = controller.mission.vehicle_mission(member.index).agent_speed
+                    await say_fence_margin(member, system, speed, flown_fence.margin)
             if lead.log_failed():
                 raise FlightError(
                     f"the mission log cannot be written ({log.stopped}); nothing was flown"
@@ -448,6 +496,8 @@ async def fly_team_mission(
                     max_gap_s=member.max_gap_s,
                     foreign_odometry=member.foreign,
                 )
+            if flown_fence is not None:
+                say_fence_projections(lead, controller)
             intake.stop()
             _say_intake(lead, intake, drops_before, kernel_drops(sock))
             action, confirmed = await _safe_end_all(members, systems, reason, detail, left)
@@ -491,12 +541,13 @@ async def fly_team_mission(
 
 
 def run_team_flight(
-    build: Callable[[list[VehicleLimits]], TeamController],
+    build: Callable[[list[VehicleLimits], FenceSpec | None], TeamController],
     log: MissionLog,
     options: FlightOptions,
     connections: list[str],
     on_status: Callable[[dict], None] = lambda status: None,
     on_message: Callable[[str], None] = lambda text: None,
+    fence: FenceSpec | None = None,
 ) -> FlightResult:
     """`fly_team_mission` in its own event loop; Ctrl-C and SIGTERM end it safely."""
     import signal
@@ -508,7 +559,7 @@ def run_team_flight(
             loop.add_signal_handler(sig, stop.set)
         try:
             return await fly_team_mission(
-                build, log, options, connections, on_status, on_message, stop
+                build, log, options, connections, on_status, on_message, stop, fence
             )
         finally:
             for sig in (signal.SIGINT, signal.SIGTERM):
