@@ -10,11 +10,14 @@ import pytest
 import yaml
 
 from hptrack.interface import CurrentPlan, InputError
+from hptrack.models.measurement import kalman_update
+from hptrack.models.miss_update import miss_update
 from hptrack.registry import make_planner
 from hptrack.runtime.log import MissionLog
 from hptrack.runtime.replay import replay_log
 from hptrack.runtime.simulated import SimulatedFaults, run_simulated
 from hptrack.runtime.team import TeamController, pairwise_minimum, separate
+from hptrack.runtime.worker import InlineRunner
 from hptrack.scenario import load_scenario
 from hptrack.scenario.io import file_data, parse_scenario
 
@@ -115,8 +118,68 @@ def test_a_fenced_team_sends_every_vehicle_s_reference_inside_the_fence():
     assert 6.0 < np.hypot(*(paths - [0.0, 3.0]).T).min() < 8.0
 
 
-def test_a_simulated_team_flight_replays_with_no_mismatch(tmp_path):
+class _Recorder(_Swap):
+    """Holds every UAV where it is and keeps the observations (a planner for the test)."""
+
+    name = "recorder"
+
+    def reset(self, mission, observation, rng):
+        self.observations = []
+
+    def act(self, observation):
+        self.observations.append(observation)
+        return observation.agent_positions.copy()
+
+
+def test_with_negative_information_a_tick_is_every_vehicle_s_look_in_turn():
+    """Tick 0 from (20, 15) and (20, -15) m detects nothing: every target gets vehicle 0's miss
+    update, then vehicle 1's. p2 is detected at 0.3 s, so at tick 1 it gets neither."""
+    data = file_data(load_scenario(EXAMPLE))
+    for agent in data["agents"]:
+        agent.pop("sensor_diameter")
+        agent.pop("measurement_noise_std")
+    data["sensor"] = {
+        "diameter": 20.0,
+        "measurement_noise_std": 1.0,
+        "detection_probability": 0.8,
+        "negative_information": True,
+    }
+    scenario = parse_scenario(data, "team")
+    planner = _Recorder()
+    controller = TeamController(scenario, planner, runner=InlineRunner())
+    here = np.array([[20.0, 15.0], [20.0, -15.0]])
+    controller.prepare(here)
+    controller.detection(0.3, "p2", [31.0, 15.0])
+    for j in (0, 1):
+        controller.odometry(0.5, here[j] + [1.0, 0.0], vehicle=j)
+    controller.setpoint(0.5)
+    first, second = planner.observations
+    table = (np.zeros(1), np.array([0.8]))
+    means, covs = scenario.means(), scenario.covariances()
+    for i in range(4):
+        for x, y in here:
+            miss_update(means[i], covs[i], x, y, 10.0, *table)
+    np.testing.assert_allclose(first.means, means, rtol=1e-12)
+    np.testing.assert_allclose(first.covariances, covs, rtol=1e-12)
+    # p2 on vehicle 0's rim, p3 on vehicle 1's: each miss pushed its belief away east
+    assert np.all(means[1:3, 0] > scenario.means()[1:3, 0] + 0.5)
+    motion, q = scenario.mission_spec().motion, scenario.process_noise()
+    m, c = motion.predict(means, covs, q, np.array([0.5, 0.3, 0.5, 0.5]))
+    kalman_update(m[1].copy(), c[1].copy(), np.array([31.0, 15.0]), np.eye(2), m[1], c[1])
+    m[1], c[1] = (x[0] for x in motion.predict(m[1:2], c[1:2], q[1:2], 0.2))
+    for i in (0, 2, 3):
+        for x, y in here + [1.0, 0.0]:
+            miss_update(m[i], c[i], x, y, 10.0, *table)
+    np.testing.assert_allclose(second.means, m, rtol=1e-10)
+    np.testing.assert_allclose(second.covariances, c, rtol=1e-10, atol=1e-12)
+    controller.close()
+
+
+@pytest.mark.parametrize("misses", [False, True])
+def test_a_simulated_team_flight_replays_with_no_mismatch(tmp_path, misses):
     scenario = load_scenario(EXAMPLE).model_copy(update={"budget": 20.0})
+    if misses:  # each vehicle's miss updates, made again on replay
+        scenario = _team(budget=20.0, sensor={"negative_information": True})
     path = tmp_path / "team.jsonl"
     with MissionLog(path) as log:
         run = run_simulated(scenario, make_planner("team-greedy"), seed=2, log=log)
@@ -139,8 +202,11 @@ def test_the_team_controller_refuses_what_it_cannot_fly_and_unknown_vehicles():
     planner = make_planner("team-greedy")
     with pytest.raises(InputError, match="sensor.labelled: true"):
         TeamController(_team(sensor={"labelled": False}), planner)
-    with pytest.raises(InputError, match="negative_information"):
-        TeamController(_team(sensor={"negative_information": True}), planner)
+    data = file_data(team)
+    data["agents"][1]["sensor_diameter"] = 30.0
+    data["sensor"] = {"negative_information": True, "detection_probability": 0.8}
+    with pytest.raises(InputError, match="negative_information with one footprint"):
+        TeamController(parse_scenario(data, "team"), planner)
     with pytest.raises(InputError, match="--separation"):
         TeamController(team, planner, separation_m=-1.0)
     controller = TeamController(team, planner)

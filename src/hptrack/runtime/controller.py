@@ -15,28 +15,29 @@ the mission start):
 Beliefs are predicted in closed form to each event's time whatever the gaps (`BeliefTimeline`).
 With the scenario's ``sensor.negative_information``, each tick is a look from the latest
 odometry: every target with no detection taken since the previous tick gets the miss update at
-the tick's time (`hptrack.models.miss_update`; a detection of that interval that arrives later
-takes the miss out again). Without identity (``sensor.labelled: false``) the beliefs are the
-simulator's tracker's (`hptrack.runtime.looks.TrackedBeliefs`): each tick is one look, which
-associates the reports stamped since the previous tick with the beliefs (gating, GNN or JPDA,
-tentative tracks and their confirmation: `hptrack.models.tracking.Tracker`) and logs which
-report went to which belief (a ``look`` record); a target is ``detected`` when a report went to
-its belief or a tentative track claimed it. The planner runs on its own step clock: ticks at
-``k tau``. At the first ``setpoint`` call at or after ``k tau`` the controller builds the
-`Observation` of step ``k`` (beliefs at ``k tau`` from the measurements taken up to then, the
-latest odometry) and hands ``act`` to the planner runner (a worker thread in flight); the
-waypoint it returns becomes the setpoint when it arrives. A target is ``detected`` in an
-observation when a measurement of it taken at or before ``k tau`` was accepted since the last
-observation the planner received (so a find is never lost while the planner is busy, and a
-measurement that arrives late counts at the next tick). While a call runs, further ticks are
-skipped. A call that is not back within the deadline is logged as late and replaced at once by a
-fallback decision (greedy on the current beliefs), decided again at each tick until the planner
-answers; the late plan is logged, not flown. A call that fails holds the vehicle where it is
-until a later call succeeds. Each decision is flown as a `Leg` from the odometry of the moment
-it arrives, at the planned speed, shifted by the vehicle's lag behind the reference it was
-flying (``keep_lag``), so that the lag a position loop needs to fly the planned speed is not
-lost at every decision. With a fence, a reference outside its free space (the fence shrunk by
-the margin) is sent projected onto it (`nearest_free`), and logged.
+the tick's time (`hptrack.models.miss_update`; a team's, one from each vehicle's position in
+turn; a detection of that interval that arrives later takes the misses out again). Without
+identity (``sensor.labelled: false``) the beliefs are the simulator's tracker's
+(`hptrack.runtime.looks.TrackedBeliefs`): each tick is one look, which associates the reports
+stamped since the previous tick with the beliefs (gating, GNN or JPDA, tentative tracks and
+their confirmation: `hptrack.models.tracking.Tracker`) and logs which report went to which
+belief (a ``look`` record); a target is ``detected`` when a report went to its belief or a
+tentative track claimed it. The planner runs on its own step clock: ticks at ``k tau``. At the
+first ``setpoint`` call at or after ``k tau`` the controller builds the `Observation` of step
+``k`` (beliefs at ``k tau`` from the measurements taken up to then, the latest odometry) and
+hands ``act`` to the planner runner (a worker thread in flight); the waypoint it returns becomes
+the setpoint when it arrives. A target is ``detected`` in an observation when a measurement of
+it taken at or before ``k tau`` was accepted since the last observation the planner received (so
+a find is never lost while the planner is busy, and a measurement that arrives late counts at
+the next tick). While a call runs, further ticks are skipped. A call that is not back within the
+deadline is logged as late and replaced at once by a fallback decision (greedy on the current
+beliefs), decided again at each tick until the planner answers; the late plan is logged, not
+flown. A call that fails holds the vehicle where it is until a later call succeeds. Each
+decision is flown as a `Leg` from the odometry of the moment it arrives, at the planned speed,
+shifted by the vehicle's lag behind the reference it was flying (``keep_lag``), so that the lag
+a position loop needs to fly the planned speed is not lost at every decision. With a fence, a
+reference outside its free space (the fence shrunk by the margin) is sent projected onto it
+(`nearest_free`), and logged.
 
 Bad input changes nothing; it is counted and logged with its reason: non-finite or malformed
 values, an unknown target id, an event before the start or after the end of the mission, a
@@ -322,7 +323,8 @@ class MissionController:
         recorded = self._recorded(time_k)
         if self._informs and self._odom is not None and time_k >= self._beliefs.horizon_s:
             for i in np.flatnonzero(~recorded):
-                self._beliefs.add_miss(int(i), time_k, self._odom[1])
+                for agent in np.atleast_2d(self._odom[1]):  # a team's vehicles in turn
+                    self._beliefs.add_miss(int(i), time_k, agent)
         means, covs = self._belief_source().at(time_k)
         agent = None if self._odom is None else self._odom[1]
         record: dict[str, Any] = {

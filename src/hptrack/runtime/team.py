@@ -25,8 +25,14 @@ fence shrunk by its margin) as one vehicle's is (`MissionController._inside`: pr
 and logged, with the vehicle's index); the separation is not checked again after a projection,
 and the smallest distance between the references sent says what it left.
 
-Team flights take detections that name their target (``sensor.labelled``, the default) without
-``negative_information`` (`team_flight_problem`).
+Negative information: a tick's look is every vehicle's, one after the other from its latest
+odometry (the simulator's order); a target that no vehicle detected in the tick's interval gets
+each vehicle's miss update, and one that any vehicle detected gets none (a named detection does
+not say which camera took it, so the simulator's miss by one vehicle before another's detection
+in the same step is not made in flight).
+
+Team flights take detections that name their target (``sensor.labelled``, the default) and, with
+``negative_information``, one footprint on every vehicle (`team_flight_problem`).
 """
 
 from __future__ import annotations
@@ -60,8 +66,12 @@ def team_flight_problem(scenario: Scenario) -> str | None:
     sensor = scenario.sensor_spec()
     if not sensor.labelled:
         return "a team flies detections that name their target (sensor.labelled: true)"
-    if sensor.negative_information:
-        return "a team flies without sensor.negative_information (no miss updates in flight)"
+    diameters = {scenario.sensor_spec(j).diameter for j in range(scenario.n_vehicles)}
+    if sensor.negative_information and len(diameters) > 1:
+        return (
+            "a team flies sensor.negative_information with one footprint: give every UAV of "
+            "agents the same sensor_diameter"
+        )
     noises = {
         scenario.sensor_spec(j).noise_covariance().tobytes() for j in range(scenario.n_vehicles)
     }
