@@ -155,6 +155,24 @@ def test_a_confirmed_track_takes_the_state_of_its_filter():
     np.testing.assert_allclose(covs[0], c, rtol=1e-15)
 
 
+def test_a_teams_later_looks_in_a_step_neither_move_the_tentative_tracks_nor_count_a_look():
+    # a report at a step's first look, then a second UAV's look of the same step: the track
+    # stays where the first look put it, at one look; the next step predicts it once
+    tracker = _tracker(1e-6, (3, 5))
+    means, covs = _belief(5000.0, 0.0, 100.0)
+    tracker.look(AGENT, means, covs, np.array([[1.0, -1.0]]))
+    track = tracker.tentative[0]
+    mean, cov = track.mean.copy(), track.covariance.copy()
+    tracker.look(AGENT + 300.0, means, covs, np.empty((0, 2)), new_step=False)
+    assert tracker.tentative == [track] and track.looks == 1 and track.hits == 1
+    np.testing.assert_array_equal(track.mean, mean)
+    np.testing.assert_array_equal(track.covariance, cov)
+    tracker.look(AGENT + 300.0, means, covs, np.empty((0, 2)))
+    predicted = tracker.motion.predict(mean[None], cov[None], 1e-4, tracker.motion.time_step)
+    assert track.looks == 2
+    np.testing.assert_array_equal(track.mean, predicted[0][0])
+
+
 def test_jpda_splits_a_report_between_two_close_beliefs():
     means = np.array([[-3.0, 0.0, 0.0, 0.0], [3.0, 0.0, 0.0, 0.0]])
     covs = np.array([np.diag([50.0, 50.0, 0.01, 0.01])] * 2)

@@ -164,12 +164,20 @@ class Tracker:
         return log_weights(log_likelihoods(nu, s), gated, pd, miss, self.false_alarm_density)
 
     def look(
-        self, agent: np.ndarray, means: np.ndarray, covariances: np.ndarray, reports: np.ndarray
+        self,
+        agent: np.ndarray,
+        means: np.ndarray,
+        covariances: np.ndarray,
+        reports: np.ndarray,
+        new_step: bool = True,
     ) -> TrackerLook:
         """Associate a look's ``reports`` ``(k, 2)`` from ``agent`` with the beliefs ``(n, d)``,
-        ``(n, d, d)`` (predicted to this look) and update them in place."""
+        ``(n, d, d)`` (predicted to this look) and update them in place. ``new_step``: the
+        look's step is new, so the tentative tracks are first predicted one step and count
+        one more look; a team's later UAVs look in the same step (``False``)."""
         n, k = means.shape[0], reports.shape[0]
-        self._predict_tentative()
+        if new_step:
+            self._predict_tentative()
         belief_of, weight = np.full(k, -1), np.zeros(k)
         seen = np.zeros(n, dtype=bool)
         if k:

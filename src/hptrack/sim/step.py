@@ -348,9 +348,11 @@ class World:
         detector, tracker = self._unlabelled
         self.seen[:] = False
         k = self.step_index
-        for agent in self.agents:
+        for j, agent in enumerate(self.agents):  # a team's UAVs in turn, in the same step
             reports = detector.look(agent, positions(self.truth))
-            look = tracker.look(agent, self.means, self.covariances, reports.positions)
+            look = tracker.look(
+                agent, self.means, self.covariances, reports.positions, new_step=j == 0
+            )
             self.seen |= look.seen
             self._rows.append(
                 np.column_stack(
