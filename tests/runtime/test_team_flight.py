@@ -175,6 +175,34 @@ def test_with_negative_information_a_tick_is_every_vehicle_s_look_in_turn():
     controller.close()
 
 
+def test_without_identity_each_vehicle_looks_at_its_own_reports_in_turn():
+    """Reports of one tick from each vehicle's camera: each vehicle's look takes its own (two
+    ``look`` records, vehicle 0 first), the report over the target under it goes to that
+    belief, and the one far from every belief starts a tentative track that the tick's later
+    look does not move. A team's report without its vehicle is refused."""
+    scenario = _team(sensor={"labelled": False})
+    planner = _Recorder()
+    controller = TeamController(scenario, planner, runner=InlineRunner())
+    here = np.array([[30.0, 15.0], [30.0, -15.0]])
+    controller.prepare(here)
+    assert controller.detection(0.4, None, [38.0, 15.0], vehicle=0) is True
+    assert controller.detection(0.4, None, [30.1, -15.1], vehicle=1) is True
+    assert controller.detection(0.4, None, [29.9, 15.2], vehicle=0) is True
+    assert controller.detection(0.4, None, [29.0, 15.0]) is False
+    assert controller.detection(0.4, None, [29.0, 15.0], vehicle=2) is False
+    for j in (0, 1):
+        controller.odometry(0.5, here[j], vehicle=j)
+    controller.setpoint(0.5)
+    looks = [r for r in controller.log.records if r["kind"] == "look" and r["k"] == 1]
+    assert [r["vehicle"] for r in looks] == [0, 1]
+    assert [(r["reports"], r["belief"]) for r in looks] == [([1, 3], [None, "p2"]), ([2], ["p3"])]
+    rejected = {"detection: no vehicle": 1, "detection: unknown vehicle": 1}
+    assert dict(controller.rejected) == rejected
+    assert looks[0]["tentative"] == looks[1]["tentative"] == [[38.0, 15.0, 1, 1]]
+    assert planner.observations[1].detected.tolist() == [False, True, True, False]
+    controller.close()
+
+
 @pytest.mark.parametrize("misses", [False, True])
 def test_a_simulated_team_flight_replays_with_no_mismatch(tmp_path, misses):
     scenario = load_scenario(EXAMPLE).model_copy(update={"budget": 20.0})
@@ -200,8 +228,6 @@ def test_a_simulated_team_flight_replays_with_no_mismatch(tmp_path, misses):
 def test_the_team_controller_refuses_what_it_cannot_fly_and_unknown_vehicles():
     team = load_scenario(EXAMPLE)
     planner = make_planner("team-greedy")
-    with pytest.raises(InputError, match="sensor.labelled: true"):
-        TeamController(_team(sensor={"labelled": False}), planner)
     data = file_data(team)
     data["agents"][1]["sensor_diameter"] = 30.0
     data["sensor"] = {"negative_information": True, "detection_probability": 0.8}
@@ -235,9 +261,12 @@ def test_flight_commands_refuse_a_team_they_cannot_fly_in_one_line(flight_cli, t
     flight_cli("fly", str(path), "--planner", "mcts").refused("planner 'mcts' flies one UAV")
     flight_cli("fly", one, "--separation", "5").refused("--separation 5", "one UAV")
     flight_cli("vehicle-sim", str(path), "--instances", "3").refused("--instances 3", "2 UAVs")
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["agents"][1]["sensor_diameter"] = 30.0
+    data["sensor"] = {"labelled": False}
     unlabelled = tmp_path / "unlabelled.yaml"
-    unlabelled.write_text(EXAMPLE.read_text() + "sensor:\n  labelled: false\n")
-    flight_cli("targets-sim", str(unlabelled)).refused("agents: lists 2 UAVs", "labelled")
+    unlabelled.write_text(yaml.safe_dump(data))
+    flight_cli("targets-sim", str(unlabelled)).refused("labelled false", "same sensor_diameter")
     data = yaml.safe_load(EXAMPLE.read_text())
     data["agents"][1]["sensor_diameter"] = 30.0
     data["sensor"] = {"detection_probability": 0.8}

@@ -222,3 +222,32 @@ def test_a_team_flies_the_fence_both_vehicles_hold(tmp_path):
     )
     replayed = _replay(log, tmp_path)
     assert replayed["mismatches"] == 0, replayed["first_mismatches"]
+
+
+def test_a_team_without_identity_flies_to_its_budget_with_each_camera_s_looks_and_replays(
+    tmp_path,
+):
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["budget"] = BUDGET_S
+    data["sensor"] = {
+        "labelled": False,
+        "detection_probability": 0.8,
+        "false_alarm_density": 2.0e-4,  # per m^2 per look: 0.063 a look in each footprint
+    }
+    fly, log, _ = _fly_team(tmp_path, data)
+    assert fly.returncode == 0, fly.stdout + fly.stderr
+    assert "ended by budget" in " ".join(fly.stdout.split())
+    records = read_log(log).records
+    reports = [r for r in records if r["kind"] == "detection" and r["accepted"]]
+    assert reports and all(r["target"] is None for r in reports)
+    assert {r["vehicle"] for r in reports} == {0, 1}  # each camera's reports name it
+    looks = [r for r in records if r["kind"] == "look"]
+    ticks = round(BUDGET_S / 0.5) + 1
+    assert [r["vehicle"] for r in looks] == [0, 1] * ticks  # every tick, each camera in turn
+    taken = {b for look in looks for b in look["belief"] if b is not None}
+    assert taken & {"p1", "p2"} and taken & {"p3", "p4"}  # both vehicles' targets
+    end = next(r for r in records if r["kind"] == "end")
+    assert end["reason"] == "budget" and end["tracking"]["looks"] == 2 * ticks
+    replayed = _replay(log, tmp_path)
+    assert replayed["mismatches"] == 0, replayed["first_mismatches"]
+    assert replayed["U"] == end["U"]

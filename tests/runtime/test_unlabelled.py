@@ -146,6 +146,11 @@ def test_a_detection_line_without_id_is_a_report():
     )
     refused = parse_detection_line('{"x": 1, "y": 2, "confidence": 1.2}')
     assert isinstance(refused, Refusal) and refused.detail.startswith("confidence:")
+    # a team's report names the vehicle whose camera took it: a whole number in 0..255
+    assert parse_detection_line('{"x": 1, "y": 2, "vehicle": 1}').vehicle == 1
+    for bad in ("1.5", '"1"', "-1", "256", "true"):
+        refused = parse_detection_line(f'{{"x": 1, "y": 2, "vehicle": {bad}}}')
+        assert isinstance(refused, Refusal) and refused.detail.startswith("vehicle:"), bad
 
 
 def _received(sock):

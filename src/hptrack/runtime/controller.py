@@ -254,12 +254,15 @@ class MissionController:
         position: Any,
         covariance: Any = None,
         confidence: Any = None,
+        vehicle: Any = None,
     ) -> bool:
         """Target ``target_id`` was measured at ``position`` (2,) m at mission time ``t`` s,
         with noise ``covariance`` (2, 2) m^2 (default the scenario's ``R``); ``False``
         (logged with the reason) if refused. Without identity ``target_id`` is ``None`` and
         the report waits for its tick's look (numbered ``report`` in its record; a
-        ``confidence`` in ``[0, 1]`` is logged, not used by the association)."""
+        ``confidence`` in ``[0, 1]`` is logged, not used by the association); a team's report
+        names the ``vehicle`` whose camera took it (its look is that vehicle's). A named
+        detection's ``vehicle`` is logged."""
         with self._lock:
             t = log_float(t)
             z = vector(position, (2,))
@@ -273,6 +276,11 @@ class MissionController:
                 record["covariance"] = raw(covariance)
             if confidence is not None:
                 record["confidence"] = raw(confidence)
+            if vehicle is not None:
+                record["vehicle"] = raw(vehicle)
+            problem = self._vehicle_problem(vehicle)
+            if problem is not None:
+                return self.journal.refuse("detection", record, *problem)
             check = self.checks.detection(
                 t, target_id, z, covariance, self.clock.ahead(t), self._ended(),
                 self._belief_source(), confidence,
@@ -281,7 +289,7 @@ class MissionController:
                 return self.journal.refuse("detection", record, *check.problem)
             self._det_seq += 1
             if self._tracked is not None:
-                self._tracked.add(t, z, self._det_seq)
+                self._tracked.add(t, z, self._det_seq, 0 if vehicle is None else vehicle)
                 self.clock.observe(t)
                 self.last_detection = {"target": None, "t": t, "position": z.tolist()}
                 return self.journal.accept("detection", {**record, "report": self._det_seq})
@@ -369,26 +377,45 @@ class MissionController:
         """Fields the ``end`` record adds (none for one UAV; a team's separation)."""
         return {}
 
+    def _vehicle_problem(self, vehicle: Any) -> tuple[str, str] | None:
+        """Why a detection's ``vehicle`` is refused (``(reason, detail)``), or ``None``: one
+        UAV takes none or 0; a team's report without identity must name one of its vehicles,
+        and a team's named detection may."""
+        m = self.mission.n_vehicles
+        if vehicle is None:
+            if self._tracked is not None and m > 1:
+                return "no vehicle", (
+                    "a report without id on a team names the vehicle whose camera took it "
+                    f"(its vehicle field, 0..{m - 1})"
+                )
+            return None
+        if isinstance(vehicle, bool) or not isinstance(vehicle, int) or not 0 <= vehicle < m:
+            return "unknown vehicle", f"vehicle {raw(vehicle)!r} is not one of 0..{m - 1}"
+        return None
+
     def _belief_source(self) -> BeliefTimeline | TrackedBeliefs:
         """Where the beliefs at a time come from: the tracker's without identity."""
         return self._beliefs if self._tracked is None else self._tracked
 
     def _look(self, t: float, k: int, missed: int) -> None:
-        """The tracker's looks of ticks ``k - missed .. k`` (one each) from the latest
-        odometry (the start before any), logged as ``look`` records."""
+        """The tracker's looks of ticks ``k - missed .. k`` (one each; a team's, one per
+        vehicle in turn, each from its own) from the latest odometry (the start before any),
+        logged as ``look`` records (with the ``vehicle`` of a team)."""
         assert self._tracked is not None
-        agent = self._hold_at if self._odom is None else self._odom[1]
+        agents = np.atleast_2d(self._hold_at if self._odom is None else self._odom[1])
+        team = len(agents) > 1
         for j in range(k - missed, k + 1):
-            look = self._tracked.look(j, agent)
-            self._seen_for_planner |= look.seen
-            self._seen_for_record |= look.seen
-            record = look.record
-            self.tracking["looks"] += 1
-            self.tracking["reports"] += len(record["reports"])
-            self.tracking["taken by a belief"] += sum(b is not None for b in record["belief"])
-            self.tracking["claims"] += len(record["claims"])
-            self.tracking["superseded"] += len(record.get("superseded", ()))
-            self.journal.write({**record, "t": t})
+            for vehicle, agent in enumerate(agents):
+                look = self._tracked.look(j, agent, vehicle)
+                self._seen_for_planner |= look.seen
+                self._seen_for_record |= look.seen
+                record = look.record
+                self.tracking["looks"] += 1
+                self.tracking["reports"] += len(record["reports"])
+                self.tracking["taken by a belief"] += sum(b is not None for b in record["belief"])
+                self.tracking["claims"] += len(record["claims"])
+                self.tracking["superseded"] += len(record.get("superseded", ()))
+                self.journal.write({**record, "t": t, **({"vehicle": vehicle} if team else {})})
 
     def _detected(self, time_s: float) -> np.ndarray:
         """The targets detected since the planner's last observation, up to ``time_s``."""

@@ -29,11 +29,13 @@ from hptrack.sim.step import unlabelled_parts
 @dataclass(frozen=True)
 class Report:
     """One accepted detection without identity: its time ``t`` s, number ``seq`` (the
-    controller's count of accepted detections) and position ``z`` (2,) m."""
+    controller's count of accepted detections), position ``z`` (2,) m and the ``vehicle`` of
+    the team whose camera took it."""
 
     t: float
     seq: int
     z: np.ndarray
+    vehicle: int = 0
 
 
 @dataclass(frozen=True)
@@ -92,27 +94,33 @@ class TrackedBeliefs:
         """Whether the same report (time ``t`` s, position ``z``) is already waiting."""
         return (float(t), float(z[0]), float(z[1])) in self._keys
 
-    def add(self, t: float, z: np.ndarray, seq: int) -> None:
-        """Hold report ``z`` (2,) m stamped ``t`` s (checked: not `late`) for its look."""
-        self.pending.append(Report(float(t), int(seq), np.array(z, dtype=float)))
+    def add(self, t: float, z: np.ndarray, seq: int, vehicle: int = 0) -> None:
+        """Hold report ``z`` (2,) m stamped ``t`` s (checked: not `late`) by ``vehicle``'s
+        camera for its look."""
+        self.pending.append(Report(float(t), int(seq), np.array(z, dtype=float), int(vehicle)))
         self._keys.add((float(t), float(z[0]), float(z[1])))
         self.newest_s = max(self.newest_s, float(t))
 
-    def look(self, k: int, agent: np.ndarray) -> Look:
-        """The look of tick ``k`` from ``agent`` (2,) m: its reports associated, the beliefs
-        updated (module docstring)."""
+    def look(self, k: int, agent: np.ndarray, vehicle: int = 0) -> Look:
+        """The look of tick ``k`` from ``agent`` (2,) m by ``vehicle``'s camera (a team's
+        vehicles look in turn, the first first): its reports associated, the beliefs updated
+        (module docstring)."""
         end = k * self._tau
-        mine = [r for r in self.pending if r.t <= end + STEP_TOLERANCE * self._tau]
-        self.pending = [r for r in self.pending if r.t > end + STEP_TOLERANCE * self._tau]
+        due = end + STEP_TOLERANCE * self._tau
+        mine = [r for r in self.pending if r.t <= due and r.vehicle == vehicle]
+        self.pending = [r for r in self.pending if r.t > due or r.vehicle != vehicle]
         self._keys = {(r.t, float(r.z[0]), float(r.z[1])) for r in self.pending}
         self.looked_s = end
         stamp = max((r.t for r in mine), default=end)
         frame = [r for r in mine if abs(r.t - stamp) <= 1e-9]
         superseded = [r.seq for r in mine if abs(r.t - stamp) > 1e-9]
+        stamp = max(stamp, self.time_s)  # a later vehicle's frame may be older than the first's
         means, covs = self.at(stamp)
         self.time_s = stamp
         reports = np.array([r.z for r in frame], dtype=float).reshape(-1, 2)
-        result = self.tracker.look(np.asarray(agent, dtype=float), means, covs, reports)
+        result = self.tracker.look(
+            np.asarray(agent, dtype=float), means, covs, reports, new_step=vehicle == 0
+        )
         self.means, self.covariances = means, covs
         ids = self.target_ids
         record: dict[str, Any] = {

@@ -559,7 +559,7 @@ class _Flight:
             return
         t = received if parsed.stamp is None else parsed.stamp - self.unix0
         controller.detection(
-            t, parsed.target, parsed.position, parsed.covariance, parsed.confidence
+            t, parsed.target, parsed.position, parsed.covariance, parsed.confidence, parsed.vehicle
         )
 
     # --- the mission ----------------------------------------------------------------------

@@ -11,7 +11,7 @@ import socket
 from dataclasses import dataclass
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
 
 from hptrack.interface import InputError, one_line, shown
 
@@ -58,13 +58,15 @@ class DetectionMessage:
     """One detection line, well formed: ``target`` id (``None``: a detection without
     identity), ``position`` (x east, y north) m, ``covariance`` 2x2 m^2 or ``None``, ``stamp``
     Unix time s or ``None`` (time of arrival), ``confidence`` in ``[0, 1]`` or ``None`` (the
-    detector's score, logged)."""
+    detector's score, logged), ``vehicle`` the index of the team's UAV whose camera took it
+    or ``None``."""
 
     target: str | None
     position: tuple[float, float]
     covariance: tuple[tuple[float, float], tuple[float, float]] | None
     stamp: float | None
     confidence: float | None = None
+    vehicle: int | None = None
 
 
 @dataclass(frozen=True)
@@ -87,6 +89,14 @@ class _DetectionFields(BaseModel):
     t: _Number | None = None
     cov: tuple[tuple[_Number, _Number], tuple[_Number, _Number]] | None = None
     confidence: Annotated[_Number, Field(ge=0.0, le=1.0)] | None = None
+    vehicle: Annotated[_Number, Field(ge=0, le=255)] | None = None
+
+    @field_validator("vehicle")
+    @classmethod
+    def _whole(cls, value: float | None) -> float | None:
+        if value is not None and not value.is_integer():
+            raise ValueError("a vehicle index is a whole number")
+        return value
 
 
 def _number_token(text: str) -> float:
@@ -97,9 +107,10 @@ def _number_token(text: str) -> float:
 
 def parse_detection_line(line: str) -> DetectionMessage | Refusal:
     """Parse one JSON detection line (``{"id": "t1", "x": east_m, "y": north_m}`` with optional
-    ``"t"`` Unix time s, ``"cov"`` 2x2 m^2 and ``"confidence"`` in ``[0, 1]``; without ``"id"``
-    a detection without identity, which the controller takes only on a mission whose sensor
-    has ``labelled: false``) without ever raising: anything else is a
+    ``"t"`` Unix time s, ``"cov"`` 2x2 m^2, ``"confidence"`` in ``[0, 1]`` and ``"vehicle"``,
+    the index of the team's UAV whose camera took it; without ``"id"`` a detection without
+    identity, which the controller takes only on a mission whose sensor has ``labelled:
+    false``) without ever raising: anything else is a
     `Refusal` (too long, not JSON, nested, a number too long to be one, a field missing
     or of the wrong type, a non-finite number)."""
     if len(line) > MAX_DETECTION_LINE_CHARS:
@@ -123,7 +134,12 @@ def parse_detection_line(line: str) -> DetectionMessage | Refusal:
         reason = "non-finite" if first["type"] == "finite_number" else "malformed"
         return Refusal(reason, one_line(f"{where}: {first['msg']} ({shown(first['input'])})"))
     return DetectionMessage(
-        fields.id, (fields.x, fields.y), fields.cov, fields.t, fields.confidence
+        fields.id,
+        (fields.x, fields.y),
+        fields.cov,
+        fields.t,
+        fields.confidence,
+        None if fields.vehicle is None else int(fields.vehicle),
     )
 
 

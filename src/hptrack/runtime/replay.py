@@ -247,6 +247,7 @@ def replay_log(path: str | Path) -> ReplayResult:
                     log_array(record["position"]),
                     None if covariance is None else log_array(covariance),
                     None if confidence is None else log_float(confidence),
+                    record.get("vehicle"),
                 )
             elif kind == "plan":
                 runner.release(record["k"])

@@ -12,7 +12,8 @@ autopilot reports on its MAVLink telemetry (a second link, such as PX4's ground-
 14550), so that any SITL flies with synthetic targets.
 
 Detection datagram: JSON lines ``{"t": unix_s, "id": ..., "x": east_m, "y": north_m}`` (no
-``"id"`` without identity), one datagram per look.
+``"id"`` without identity; a team's with the ``"vehicle"`` whose camera looked), one datagram
+per look.
 """
 
 from __future__ import annotations
@@ -40,14 +41,19 @@ PX4_OFFBOARD_MAIN_MODE = 6
 
 
 def detection_datagram(
-    stamp_unix_s: float, detections: list[tuple[str | None, np.ndarray]]
+    stamp_unix_s: float,
+    detections: list[tuple[str | None, np.ndarray]],
+    vehicle: int | None = None,
 ) -> bytes:
     """The detection datagram of measurements ``(id, (x east, y north) m)`` taken at
-    ``stamp_unix_s`` (module docstring; an id ``None``: a line without ``"id"``)."""
+    ``stamp_unix_s`` by the camera of the team's UAV ``vehicle`` (module docstring; an id
+    ``None``: a line without ``"id"``; a ``vehicle`` ``None``: a line without ``"vehicle"``)."""
+    extra = {} if vehicle is None else {"vehicle": vehicle}
     lines = [
         json.dumps(
             {"t": stamp_unix_s, **({} if tid is None else {"id": tid})}
             | {"x": float(z[0]), "y": float(z[1])}
+            | extra
         )
         for tid, z in detections
     ]
@@ -138,9 +144,11 @@ class TargetDetector:
         self.stats.false_alarms += int(np.sum(seen < 0))
         ids = [target_ids[i] if self._labelled else None for i in seen]
         try:
-            self._sock.sendto(
-                detection_datagram(unix_s, list(zip(ids, measured, strict=True))), self._address
+            team = self.mission.n_vehicles > 1
+            datagram = detection_datagram(
+                unix_s, list(zip(ids, measured, strict=True)), vehicle if team else None
             )
+            self._sock.sendto(datagram, self._address)
             self.stats.datagrams += 1
         except OSError as err:  # nobody listening (yet): the next one may arrive
             logger.debug("detection send failed: %s", err)

@@ -31,8 +31,12 @@ each vehicle's miss update, and one that any vehicle detected gets none (a named
 not say which camera took it, so the simulator's miss by one vehicle before another's detection
 in the same step is not made in flight).
 
-Team flights take detections that name their target (``sensor.labelled``, the default) and, with
-``negative_information``, one footprint on every vehicle (`team_flight_problem`).
+Without identity (``sensor.labelled: false``) each report names the vehicle whose camera took it
+(``vehicle``), and a tick's look is every vehicle's in turn, each of its own reports from its
+own odometry, as the simulator's tracker looks (`hptrack.runtime.looks.TrackedBeliefs`).
+
+A team flies with one measurement noise on every vehicle, and with ``negative_information`` one
+footprint (`team_flight_problem`; without identity the scenario itself asks for both).
 """
 
 from __future__ import annotations
@@ -64,8 +68,6 @@ MAX_SEPARATION_M = 1000.0
 def team_flight_problem(scenario: Scenario) -> str | None:
     """Why a team flight cannot fly ``scenario`` (one line), or ``None``."""
     sensor = scenario.sensor_spec()
-    if not sensor.labelled:
-        return "a team flies detections that name their target (sensor.labelled: true)"
     diameters = {scenario.sensor_spec(j).diameter for j in range(scenario.n_vehicles)}
     if sensor.negative_information and len(diameters) > 1:
         return (
