@@ -197,8 +197,8 @@ def test_a_breach_holds_the_vehicle_and_fly_leaves_it_to_the_pilot(tmp_path):
     assert stats["final_mode"] == "hold"
     scenario = load_scenario(run["scenario"])
     fence = scenario.fence.spec()._replace(margin=0.0).compiled()
-    north, east, _ = stats["position_ned"]
-    assert not point_free(fence, east, north)  # it holds where it crossed into the square
+    (breach,) = stats["fence_breaches"]
+    assert not point_free(fence, *breach["position"])  # it crossed into the square
     assert all(point_free(fence, e, n) for _, n, e, _, _ in stats["track"])  # in OFFBOARD
     summary = _replay(run["log"], tmp_path)
     assert summary["ended_by"] == "pilot took over" and summary["mismatches"] == 0

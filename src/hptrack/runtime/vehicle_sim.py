@@ -260,8 +260,8 @@ class VehicleStats:
     """``(t s, north m, east m, v_north m/s, v_east m/s)`` at 10 Hz while in offboard."""
     setpoints: list[tuple[float, float, float]] = field(default_factory=list)
     """``(t s, north m, east m)`` of every position setpoint received."""
-    fence_breaches: list[tuple[float, str]] = field(default_factory=list)
-    """``(t s, action)`` of every fence breach."""
+    fence_breaches: list[tuple[float, str, float, float]] = field(default_factory=list)
+    """``(t s, action, east m, north m)`` of every fence breach (where the vehicle crossed)."""
 
     def as_json(
         self, final_mode: str, armed: bool, position_ned: np.ndarray, detections: dict
@@ -301,7 +301,9 @@ class VehicleStats:
             "position_ned": position_ned.tolist(),
             "track": [list(row) for row in self.track],
             "setpoint_positions": [list(row) for row in self.setpoints],
-            "fence_breaches": [{"t": t, "action": a} for t, a in self.fence_breaches],
+            "fence_breaches": [
+                {"t": t, "action": a, "position": [e, n]} for t, a, e, n in self.fence_breaches
+            ],
         }
 
 
@@ -653,7 +655,8 @@ class VehicleSim:
         if breached and not self._breached:
             action = int(self._params["GF_ACTION"])
             name = FENCE_ACTIONS.get(action, "none")
-            self.stats.fence_breaches.append((self._now(), name))
+            east, north = float(self.position[1]), float(self.position[0])
+            self.stats.fence_breaches.append((self._now(), name, east, north))
             self._say(f"geofence breached: GF_ACTION {action} ({name})")
             self._mav.statustext_send(
                 mavlink.MAV_SEVERITY_CRITICAL, f"Geofence violation, action {name}".encode()
