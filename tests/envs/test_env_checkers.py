@@ -1,4 +1,4 @@
-"""Both environments pass Gymnasium's and stable-baselines3's checkers without a warning
+"""Every environment passes Gymnasium's and stable-baselines3's checkers without a warning
 (warnings are errors in this test suite)."""
 
 import gymnasium as gym
@@ -14,6 +14,9 @@ CASES = [
     ("hptrack/Tracking-v0", {"n_targets": (2, 3), "max_targets": 4}),
     ("hptrack/SubtaskTracking-v0", {}),
     ("hptrack/SubtaskTracking-v0", {"n_targets": (1, 2), "max_targets": 3}),
+    ("hptrack/TeamTracking-v0", {}),
+    ("hptrack/TeamTracking-v0", {"team": 3, "action_type": "box", "n_targets": 2}),
+    ("hptrack/TeamTracking-v0", {"n_targets": (2, 3), "max_targets": 4}),
 ]
 
 
@@ -27,7 +30,9 @@ def test_stable_baselines3_checker(env_id, kwargs):
     sb3_check_env(gym.make(env_id, **kwargs).unwrapped, warn=True)
 
 
-@pytest.mark.parametrize("env_id", ["hptrack/Tracking-v0", "hptrack/SubtaskTracking-v0"])
+@pytest.mark.parametrize(
+    "env_id", ["hptrack/Tracking-v0", "hptrack/SubtaskTracking-v0", "hptrack/TeamTracking-v0"]
+)
 def test_checkers_with_rendering_on(env_id):
     env = gym.make(env_id, n_targets=2, render_mode="rgb_array").unwrapped
     check_env(env)

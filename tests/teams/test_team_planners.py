@@ -66,11 +66,11 @@ def test_a_benchmark_refuses_a_planner_of_one_uav_for_a_team():
     check_team(["mcts"], 1)
 
 
-def test_the_envs_refuse_a_team_in_one_line():
+def test_the_one_uav_env_refuses_a_team_in_one_line():
     from hptrack.envs.tracking import TrackingEnv
 
     env = TrackingEnv(n_targets=3)
-    with pytest.raises(InputError, match="team of 2 UAVs; this env flies one"):
+    with pytest.raises(InputError, match="flies 2 UAVs; this env flies one .TeamTracking-v0"):
         env.reset(options={"scenario": random_scenario(3, 0, team=2)})
 
 

@@ -135,6 +135,8 @@ class MissionEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
+    team_size = 1
+    """The UAVs the environment flies (a team's environment: `hptrack.envs.team`)."""
 
     def __init__(
         self,
@@ -183,7 +185,9 @@ class MissionEnv(gym.Env):
         lo, hi = self._n_range
         n = int(self.np_random.integers(lo, hi + 1))
         seed = int(self.np_random.integers(2**63))
-        return random_scenario(n, seed=seed, homogeneous=self.setting == "homogeneous")
+        return random_scenario(
+            n, seed=seed, homogeneous=self.setting == "homogeneous", team=self.team_size
+        )
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -213,10 +217,12 @@ class MissionEnv(gym.Env):
             scenario = self._draw_scenario()
         elif not isinstance(scenario, Scenario):
             raise InputError(f"reset option scenario must be a Scenario, got {type(scenario)}")
-        if scenario.n_vehicles > 1:
+        if scenario.n_vehicles != self.team_size:
+            flies = "one" if self.team_size == 1 else f"a team of {self.team_size}"
             raise InputError(
-                f"reset option scenario flies a team of {scenario.n_vehicles} UAVs; this env "
-                "flies one (simulate a team with the team planners, docs/teams.md)"
+                f"reset option scenario flies {scenario.n_vehicles} UAV"
+                f"{'s' if scenario.n_vehicles > 1 else ''}; this env flies {flies} "
+                "(TeamTracking-v0 flies a team, docs/envs.md)"
             )
         n = len(scenario.targets)
         if n > self.layout.n_slots or (not self.layout.masked and n != self.layout.n_slots):
@@ -283,7 +289,7 @@ class MissionEnv(gym.Env):
             w = self._world()
             self._history.append(
                 (
-                    w.agent.copy(),
+                    (w.agent if self.team_size == 1 else w.agents).copy(),
                     w.truth.copy(),
                     w.seen.copy(),
                     w.means.copy(),
