@@ -46,6 +46,13 @@ def test_a_later_vehicle_yields_on_its_own_side_and_the_first_never_does():
     assert pairwise_minimum(np.array([[0.0, 0.0], [3.0, 4.0], [30.0, 0.0]])) == 5.0
 
 
+HEAD_ON = [
+    {"position": [-40.0, 0.0], "speed": 8.0, "sensor_diameter": 20.0},
+    {"position": [40.0, 0.0], "speed": 8.0, "sensor_diameter": 20.0},
+]
+"""Two UAVs 80 m apart on the x axis."""
+
+
 class _Swap:
     """Each UAV flies to the other's start: a head-on course (a planner for the test)."""
 
@@ -71,10 +78,7 @@ class _Swap:
 
 def test_a_head_on_team_keeps_the_separation_and_the_first_flies_straight():
     scenario = _team(
-        agents=[
-            {"position": [-40.0, 0.0], "speed": 8.0, "sensor_diameter": 20.0},
-            {"position": [40.0, 0.0], "speed": 8.0, "sensor_diameter": 20.0},
-        ],
+        agents=HEAD_ON,
         budget=15.0,
     )
     run = run_simulated(scenario, _Swap(), seed=1, separation_m=12.0)
@@ -96,10 +100,7 @@ def test_a_head_on_team_keeps_the_separation_and_the_first_flies_straight():
 def test_a_fenced_team_sends_every_vehicle_s_reference_inside_the_fence():
     # a no-fly circle on the head-on course: neither vehicle's reference enters it (margin kept)
     scenario = _team(
-        agents=[
-            {"position": [-40.0, 0.0], "speed": 8.0, "sensor_diameter": 20.0},
-            {"position": [40.0, 0.0], "speed": 8.0, "sensor_diameter": 20.0},
-        ],
+        agents=HEAD_ON,
         budget=15.0,
         fence={"exclusions": [{"circle": [0.0, 3.0, 6.0]}], "margin": 2.0},
     )

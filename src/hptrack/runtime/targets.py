@@ -102,6 +102,8 @@ class TargetDetector:
         self._sensor_rng = np.random.default_rng(sensor_seq)
         self._detector = synthetic_detector(scenario, seed)
         self._labelled = scenario.sensor_spec().labelled
+        self._team = scenario.n_vehicles > 1
+        """Whether each line names the UAV whose camera looked (``"vehicle"``)."""
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._lock = threading.Lock()  # a team's stubs sense from their own threads
         self.stats = DetectorStats()
@@ -144,9 +146,8 @@ class TargetDetector:
         self.stats.false_alarms += int(np.sum(seen < 0))
         ids = [target_ids[i] if self._labelled else None for i in seen]
         try:
-            team = self.mission.n_vehicles > 1
             datagram = detection_datagram(
-                unix_s, list(zip(ids, measured, strict=True)), vehicle if team else None
+                unix_s, list(zip(ids, measured, strict=True)), vehicle if self._team else None
             )
             self._sock.sendto(datagram, self._address)
             self.stats.datagrams += 1
